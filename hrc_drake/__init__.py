@@ -1,0 +1,1 @@
+"""Task-and-motion stack on Drake for human-robot collaborative assembly."""

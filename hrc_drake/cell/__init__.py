@@ -1,0 +1,1 @@
+"""The Drake cell: diagram builder, SlotMonitor and Supervisor systems."""

@@ -1,0 +1,1 @@
+"""The operator side of the human-robot interface: scripted, stochastic, following."""

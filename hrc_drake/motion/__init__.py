@@ -1,0 +1,1 @@
+"""Grasp/place poses, inverse kinematics, collision-free trajectories, plan validation."""

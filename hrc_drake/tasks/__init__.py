@@ -1,0 +1,1 @@
+"""Assembly specs, state graphs, MDP, exact and learned policies. Imports no Drake."""
