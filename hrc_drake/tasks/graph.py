@@ -1,0 +1,387 @@
+"""From an assembly spec to its states: every feasible sequence of tasks.
+
+States are generated breadth-first, one depth at a time, with the configuration of each state
+held as a bitmask over the spec's placement tokens, so that a level of any size is expanded by a
+few numpy operations per token. The result is a `StateSpace` of flat arrays (what solvers and
+learners use at scale); `StateSpace.to_networkx()` gives the graph users see and plot.
+
+State ids are canonical: by depth, then by parent, then by task in the spec's token order.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import networkx as nx
+import numpy as np
+
+from hrc_drake.tasks.spec import BASE, AssemblySpec, SpecError
+from hrc_drake.tasks.tokens import UNDO
+
+MAX_TOKENS = 64
+
+
+class StateKind(enum.IntEnum):
+    """What a state is, in the paper's terms."""
+
+    START = 0
+    NORMAL = 1
+    TERMINAL = 2  # complete and correct
+    WRONG = 3  # complete, a part in a wrong place: only disassembly
+    DEAD_END = 4  # incomplete, no assembly task left: only disassembly
+
+    @property
+    def label(self) -> str:
+        """Lower-case name used in tables and JSON."""
+        return self.name.lower().replace("_", " ")
+
+
+@dataclass(frozen=True)
+class TokenTable:
+    """Per-token bitmasks that decide which tasks are feasible from a configuration."""
+
+    tokens: tuple[str, ...]
+    part: np.ndarray  # index of the token's part type
+    mount: np.ndarray  # index of the token's mount (part on base / on a host)
+    slots: tuple[tuple[int, ...], ...]
+    bit: np.ndarray  # uint64, 1 << i
+    conflict: np.ndarray  # tokens that use the same slot or seat (itself included)
+    requires: np.ndarray  # host tokens one of which must be present (0: none needed)
+    mount_mask: np.ndarray  # per mount: tokens of that mount
+    mount_count: np.ndarray
+    part_mask: np.ndarray  # per part type: its tokens
+    part_count: np.ndarray
+
+
+def _token_table(spec: AssemblySpec) -> TokenTable:
+    placements = spec.placements()
+    if len(placements) > MAX_TOKENS:
+        raise SpecError(
+            f"assembly spec {spec.source}: {len(placements)} placement tasks; at most "
+            f"{MAX_TOKENS} are supported (fewer slots or fewer mounts)"
+        )
+    n = len(placements)
+    symbols = [p.symbol for p in spec.parts]
+    mounts = list(spec.mounts)
+    part = np.array([symbols.index(m.part) for _, m, _ in placements], dtype=np.int64)
+    mount = np.array([mounts.index(m) for _, m, _ in placements], dtype=np.int64)
+    bit = np.array([1 << i for i in range(n)], dtype=np.uint64)
+    conflict = np.zeros(n, dtype=np.uint64)
+    requires = np.zeros(n, dtype=np.uint64)
+    for i, (_, mi, si) in enumerate(placements):
+        for j, (_, mj, sj) in enumerate(placements):
+            on_base = mi.on == BASE and mj.on == BASE
+            same_seat = mi.on != BASE and mi.on == mj.on and si == sj
+            if (on_base and set(si) & set(sj)) or same_seat:
+                conflict[i] |= bit[j]
+            if mi.on != BASE and mj.on == BASE and mj.part == mi.on and si[0] in sj:
+                requires[i] |= bit[j]
+    mount_mask = np.zeros(len(mounts), dtype=np.uint64)
+    part_mask = np.zeros(len(symbols), dtype=np.uint64)
+    for i in range(n):
+        mount_mask[mount[i]] |= bit[i]
+        part_mask[part[i]] |= bit[i]
+    return TokenTable(
+        tokens=tuple(t for t, _, _ in placements),
+        part=part,
+        mount=mount,
+        slots=tuple(s for _, _, s in placements),
+        bit=bit,
+        conflict=conflict,
+        requires=requires,
+        mount_mask=mount_mask,
+        mount_count=np.array([m.count for m in mounts], dtype=np.int64),
+        part_mask=part_mask,
+        part_count=np.array([p.count for p in spec.parts], dtype=np.int64),
+    )
+
+
+def _popcount(x: np.ndarray) -> np.ndarray:
+    return np.bitwise_count(x).astype(np.int64)
+
+
+def _feasible(spec: AssemblySpec, table: TokenTable, masks: np.ndarray) -> np.ndarray:
+    """Boolean (len(masks), n_tokens): which placement tasks are feasible from each mask."""
+    n = len(table.tokens)
+    mount_full = np.stack(
+        [_popcount(masks & table.mount_mask[g]) >= table.mount_count[g] for g in
+         range(len(table.mount_count))],
+        axis=1,
+    )
+    part_done = np.stack(
+        [_popcount(masks & table.part_mask[p]) >= table.part_count[p] for p in
+         range(len(table.part_count))],
+        axis=1,
+    )
+    # Sub-assemblies to complete first: seats on a placed host that still await their parts.
+    pending = np.zeros_like(masks)
+    symbols = [p.symbol for p in spec.parts]
+    for host in spec.complete_first:
+        h = symbols.index(host)
+        per_instance = sum(m.count for m in spec.mounts if m.on == host) // spec.parts[h].count
+        for i in np.flatnonzero(table.part == h):
+            seats = np.uint64(0)
+            for j in range(n):
+                if table.requires[j] & table.bit[i]:
+                    seats |= table.bit[j]
+            waiting = ((masks & table.bit[i]) != 0) & (_popcount(masks & seats) < per_instance)
+            pending |= np.where(waiting, seats, np.uint64(0))
+    feasible = np.empty((len(masks), n), dtype=bool)
+    for t in range(n):
+        ok = (masks & table.conflict[t]) == 0
+        if table.requires[t]:
+            ok &= (masks & table.requires[t]) != 0
+        ok &= ~mount_full[:, table.mount[t]]
+        ok &= (pending == 0) | ((pending & table.bit[t]) != 0)
+        for a, b in spec.before:
+            if spec.parts[table.part[t]].symbol == b:
+                ok &= part_done[:, symbols.index(a)]
+        feasible[:, t] = ok
+    return feasible
+
+
+def _kinds(spec: AssemblySpec, table: TokenTable, masks: np.ndarray, has_task: np.ndarray):
+    complete = _popcount(masks) == spec.total_parts
+    correct = np.ones(len(masks), dtype=bool)
+    symbols = [p.symbol for p in spec.parts]
+    for rule in spec.goal.min_gap:
+        a, b = (symbols.index(x) for x in rule.parts)
+        for i in np.flatnonzero(table.part == a):
+            near = np.uint64(0)
+            for j in np.flatnonzero(table.part == b):
+                gap = min(abs(x - y) for x in table.slots[i] for y in table.slots[j])
+                if i != j and gap < rule.slots:
+                    near |= table.bit[j]
+            correct &= ~(((masks & table.bit[i]) != 0) & ((masks & near) != 0))
+    if spec.goal.correct is not None:
+        index = {t: i for i, t in enumerate(table.tokens)}
+        allowed = np.array(
+            [sum(int(table.bit[index[t]]) for t in c) for c in spec.goal.correct],
+            dtype=np.uint64,
+        )
+        correct &= np.isin(masks, allowed)
+    kind = np.full(len(masks), StateKind.NORMAL, dtype=np.int8)
+    kind[complete & correct] = StateKind.TERMINAL
+    kind[complete & ~correct] = StateKind.WRONG
+    kind[~complete & ~has_task] = StateKind.DEAD_END
+    kind[0] = StateKind.START
+    return kind
+
+
+@dataclass(frozen=True, eq=False)
+class StateSpace:
+    """Every state of an assembly, as flat arrays indexed by state id (0 = start).
+
+    Children of a state are contiguous ids ``first_child[s] : first_child[s] + n_children[s]``.
+    """
+
+    spec: AssemblySpec
+    table: TokenTable
+    parent: np.ndarray  # int64, -1 for the start
+    last: np.ndarray  # int64 token index of the last task, -1 for the start
+    depth: np.ndarray
+    mask: np.ndarray  # uint64 configuration
+    kind: np.ndarray  # int8 StateKind
+    first_child: np.ndarray
+    n_children: np.ndarray
+    _index: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def n_states(self) -> int:
+        """Number of states."""
+        return len(self.parent)
+
+    @property
+    def tokens(self) -> tuple[str, ...]:
+        """Placement tokens in canonical order."""
+        return self.table.tokens
+
+    def sequence(self, state: int) -> tuple[str, ...]:
+        """The tasks done so far in `state`, in order."""
+        out = []
+        while state > 0:
+            out.append(self.table.tokens[self.last[state]])
+            state = int(self.parent[state])
+        return tuple(reversed(out))
+
+    @cached_property
+    def _sequence_index(self) -> dict[tuple[str, ...], int]:
+        return {self.sequence(s): s for s in range(self.n_states)}
+
+    def index(self, sequence: tuple[str, ...] | list[str]) -> int:
+        """State id of a task sequence; UnknownStateError if the sequence is not a state."""
+        seq = tuple(sequence)
+        if self.n_states <= 200_000:
+            found = self._sequence_index.get(seq)
+            if found is not None:
+                return found
+            raise UnknownStateError(self.spec, seq)
+        state = 0
+        for token in seq:
+            lo = int(self.first_child[state])
+            kids = range(lo, lo + int(self.n_children[state]))
+            match = [c for c in kids if self.table.tokens[self.last[c]] == token]
+            if not match:
+                raise UnknownStateError(self.spec, seq)
+            state = match[0]
+        return state
+
+    def configuration(self, state: int) -> frozenset[str]:
+        """The tokens in place in `state`, order ignored."""
+        m = int(self.mask[state])
+        return frozenset(t for i, t in enumerate(self.table.tokens) if m >> i & 1)
+
+    def state_kind(self, state: int) -> StateKind:
+        """The kind of `state`."""
+        return StateKind(int(self.kind[state]))
+
+    def name(self, state: int) -> str:
+        """The state's label from the spec's `state_names`, else its 1-based id."""
+        return self.spec.state_names.get(" ".join(self.sequence(state)), str(state + 1))
+
+    def tasks(self, state: int) -> list[tuple[str, int]]:
+        """Feasible tasks from `state` as (task, next state): placements, then undo.
+
+        Every state but the start may undo its last task (a terminal one too: the graph has a
+        reverse for every edge; the MDP ends episodes there). Wrong and dead-end states offer
+        only undo.
+        """
+        lo = int(self.first_child[state])
+        out = [(self.table.tokens[self.last[c]], c) for c in range(lo, lo + self.n_children[state])]
+        if state > 0:
+            out.append((UNDO, int(self.parent[state])))
+        return out
+
+    def action_label(self, task: str, state: int | None = None) -> str:
+        """The paper's name of a task: 'ass' + part symbol, or 'disass'."""
+        if task == UNDO:
+            return "disass"
+        return "ass" + self.spec.parts[self.table.part[self.tokens.index(task)]].symbol
+
+    def configurations(self) -> list[frozenset[str]]:
+        """Distinct configurations, in order of first appearance."""
+        _, first = np.unique(self.mask, return_index=True)
+        return [self.configuration(int(s)) for s in sorted(first)]
+
+    def to_networkx(self) -> nx.DiGraph:
+        """The state graph: node = task sequence, with kind, configuration, name, depth; edges
+        carry the task, the paper's action label and whether it is an undo."""
+        graph = nx.DiGraph(assembly=self.spec.name)
+        for s in range(self.n_states):
+            graph.add_node(
+                self.sequence(s),
+                id=s,
+                kind=self.state_kind(s).label,
+                configuration=self.configuration(s),
+                name=self.name(s),
+                depth=int(self.depth[s]),
+            )
+        for s in range(self.n_states):
+            for task, nxt in self.tasks(s):
+                graph.add_edge(
+                    self.sequence(s),
+                    self.sequence(nxt),
+                    task=task,
+                    action=self.action_label(task),
+                    undo=task == UNDO,
+                )
+        return graph
+
+    def to_merged_networkx(self) -> nx.DiGraph:
+        """The configuration graph: states with the same configuration merged into one node.
+
+        An edge adds or removes one part. Right when only what is in place matters (what the
+        SlotMonitor sees); the sequence graph is right when the order matters (undo = last task).
+        """
+        graph = nx.DiGraph(assembly=self.spec.name)
+        for s in range(self.n_states):
+            config = self.configuration(s)
+            if config not in graph:
+                graph.add_node(config, kind=self.state_kind(s).label, names=[])
+            graph.nodes[config]["names"].append(self.name(s))
+        for s in range(1, self.n_states):
+            parent, child = self.configuration(int(self.parent[s])), self.configuration(s)
+            token = self.table.tokens[self.last[s]]
+            graph.add_edge(parent, child, task=token, action=self.action_label(token), undo=False)
+            graph.add_edge(child, parent, task=f"remove {token}", action="disass", undo=True)
+        return graph
+
+
+class UnknownStateError(KeyError):
+    """A task sequence that is not a state of the assembly."""
+
+    def __init__(self, spec: AssemblySpec, sequence: tuple[str, ...]):
+        self.sequence = sequence
+        super().__init__(
+            f"{list(sequence)} is not a state of assembly {spec.name!r} ({spec.source}): "
+            "check the task sequence, or pass the --assembly it belongs to"
+        )
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
+def generate_states(spec: AssemblySpec) -> StateSpace:
+    """Every feasible task sequence of `spec`, level by level from the empty base."""
+    table = _token_table(spec)
+    parents, lasts, depths, masks = [np.array([-1])], [np.array([-1])], [np.array([0])], []
+    level = np.zeros(1, dtype=np.uint64)
+    masks.append(level)
+    first_child_parts, n_children_parts = [], []
+    offset, next_id, depth = 0, 1, 0
+    while len(level):
+        feasible = _feasible(spec, table, level)
+        n_kids = feasible.sum(axis=1)
+        starts = next_id + np.concatenate(([0], np.cumsum(n_kids)[:-1]))
+        first_child_parts.append(starts)
+        n_children_parts.append(n_kids)
+        rows, cols = np.nonzero(feasible)
+        if len(rows) == 0:
+            break
+        depth += 1
+        parents.append(offset + rows)
+        lasts.append(cols)
+        depths.append(np.full(len(rows), depth))
+        level = level[rows] | table.bit[cols]
+        masks.append(level)
+        offset = next_id
+        next_id += len(rows)
+    parent = np.concatenate(parents).astype(np.int64)
+    mask = np.concatenate(masks)
+    n = len(parent)
+    first_child = np.concatenate(first_child_parts).astype(np.int64)
+    n_children = np.concatenate(n_children_parts).astype(np.int64)
+    if len(first_child) < n:  # the last level had no children
+        pad = n - len(first_child)
+        first_child = np.concatenate([first_child, np.full(pad, n)])
+        n_children = np.concatenate([n_children, np.zeros(pad, dtype=np.int64)])
+    if n_children[0] == 0:
+        raise SpecError(f"assembly spec {spec.source}: no task is feasible from the empty base")
+    kind = _kinds(spec, table, mask, n_children > 0)
+    if not np.any(kind == StateKind.TERMINAL):
+        raise SpecError(
+            f"assembly spec {spec.source}: goal: no complete configuration satisfies the goal; "
+            "relax `min_gap` or fix `correct`"
+        )
+    space = StateSpace(
+        spec=spec,
+        table=table,
+        parent=parent,
+        last=np.concatenate(lasts).astype(np.int64),
+        depth=np.concatenate(depths).astype(np.int64),
+        mask=mask,
+        kind=kind,
+        first_child=first_child,
+        n_children=n_children,
+    )
+    if spec.state_names and n <= 200_000:
+        for key in spec.state_names:
+            seq = tuple(key.split())
+            if seq not in space._sequence_index:
+                raise SpecError(
+                    f"assembly spec {spec.source}: state_names: {key!r} is not a state of the "
+                    "assembly; fix or remove the label"
+                )
+    return space

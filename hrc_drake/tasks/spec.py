@@ -1,0 +1,415 @@
+"""Declarative assembly specs: parse, validate, and describe where parts may go.
+
+An assembly spec is a YAML file (see `models/assemblies/flange.yaml`) with these keys:
+
+- ``name``: the assembly's name.
+- ``base``: ``symbol`` and number of ``slots`` of the fixture everything is built on.
+- ``parts``: symbol -> ``name``, ``count``, ``footprint`` (base slots it covers, adjacent) and,
+  for a part others sit on, ``host: {tag}`` (the tag written in tokens of parts on it). A host
+  offers one seat over each base slot it covers.
+- ``mounts``: list of ``{part, to, count}``: how many of a part go on the base or on a host part.
+  The counts of a part add up to its ``count``.
+- ``precedence`` (optional): ``complete_first: [H, ...]`` — once a host H is placed, the parts
+  that go on it come next; ``before: [[A, B], ...]`` — every A is placed before any B.
+- ``goal``: which complete configurations are correct; ``min_gap: [{parts: [A, B], slots: g}]``
+  (any A and B at least g slots apart) and/or ``correct: [[token, ...], ...]`` (explicit list).
+  Complete configurations that fail the goal are *wrong* (a mistake that breaks no constraint).
+- ``mistakes`` (optional): ``[{part, to}]`` placements the operator may confuse with another
+  free seat of the same kind.
+- ``state_names`` (optional): labels for states, keyed by their space-separated task sequence.
+
+Nothing here is specific to the flange case: another base or product is another file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from hrc_drake.resources import default_assembly
+from hrc_drake.tasks.tokens import UNDO, placement_token
+
+BASE = "base"
+_SYMBOL = re.compile(r"^[A-Z][A-Za-z]*$")
+
+
+class SpecError(ValueError):
+    """An assembly spec that cannot be used; the message names the key and the fix."""
+
+
+@dataclass(frozen=True)
+class PartType:
+    """A kind of part: its symbol, how many there are, how many slots it covers."""
+
+    symbol: str
+    name: str
+    count: int
+    footprint: int
+    host_tag: str | None = None
+
+    @property
+    def is_host(self) -> bool:
+        """Whether other parts can be mounted on this one."""
+        return self.host_tag is not None
+
+
+@dataclass(frozen=True)
+class Mount:
+    """`count` parts of type `part` go on `on` (the base, or a host part's symbol)."""
+
+    part: str
+    on: str
+    count: int
+
+
+@dataclass(frozen=True)
+class GapRule:
+    """Correctness rule: any two parts of types `parts` sit at least `slots` slots apart."""
+
+    parts: tuple[str, str]
+    slots: int
+
+
+@dataclass(frozen=True)
+class Goal:
+    """Which complete configurations are correct."""
+
+    min_gap: tuple[GapRule, ...] = ()
+    correct: tuple[frozenset[str], ...] | None = None
+
+
+@dataclass(frozen=True)
+class AssemblySpec:
+    """A validated assembly spec."""
+
+    name: str
+    base_symbol: str
+    slots: int
+    parts: tuple[PartType, ...]
+    mounts: tuple[Mount, ...]
+    complete_first: tuple[str, ...]
+    before: tuple[tuple[str, str], ...]
+    goal: Goal
+    mistakes: tuple[tuple[str, str], ...]
+    state_names: Mapping[str, str]
+    source: str = "<memory>"
+
+    def part(self, symbol: str) -> PartType:
+        """The part type with this symbol; SpecError if there is none."""
+        for part in self.parts:
+            if part.symbol == symbol:
+                return part
+        raise SpecError(f"{self.source}: unknown part {symbol!r}; parts are {self._symbols()}")
+
+    def _symbols(self) -> list[str]:
+        return [p.symbol for p in self.parts]
+
+    @property
+    def total_parts(self) -> int:
+        """How many parts a complete assembly holds."""
+        return sum(p.count for p in self.parts)
+
+    def semantic_dict(self) -> dict[str, Any]:
+        """The content that determines states and rewards (no labels, no file name)."""
+        return {
+            "base": {"symbol": self.base_symbol, "slots": self.slots},
+            "parts": [
+                [p.symbol, p.count, p.footprint, p.host_tag] for p in self.parts
+            ],
+            "mounts": [[m.part, m.on, m.count] for m in self.mounts],
+            "complete_first": list(self.complete_first),
+            "before": [list(pair) for pair in self.before],
+            "goal": {
+                "min_gap": [[list(r.parts), r.slots] for r in self.goal.min_gap],
+                "correct": None
+                if self.goal.correct is None
+                else sorted(sorted(c) for c in self.goal.correct),
+            },
+            "mistakes": [list(m) for m in self.mistakes],
+        }
+
+    @property
+    def spec_hash(self) -> str:
+        """A hash of the semantic content: policies record it to refuse a mismatched spec."""
+        text = json.dumps(self.semantic_dict(), sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    def placements(self) -> list[tuple[str, Mount, tuple[int, ...]]]:
+        """Every placement token the spec allows, in canonical order, with its mount and slots.
+
+        Canonical order: parts in spec order, then mounts in spec order, then slots ascending.
+        Ties between equally good tasks are broken in this order.
+        """
+        out: list[tuple[str, Mount, tuple[int, ...]]] = []
+        seen: set[str] = set()
+        for part in self.parts:
+            for mount in self.mounts:
+                if mount.part != part.symbol:
+                    continue
+                if mount.on == BASE:
+                    windows = [
+                        tuple(range(s, s + part.footprint))
+                        for s in range(1, self.slots - part.footprint + 2)
+                    ]
+                    tag = None
+                else:
+                    windows = [(k,) for k in range(1, self.slots + 1)]
+                    tag = self.part(mount.on).host_tag
+                for slots in windows:
+                    token = placement_token(part.symbol, slots, tag)
+                    if token in seen or token == UNDO:
+                        raise SpecError(
+                            f"{self.source}: token {token!r} is produced twice; give the hosts "
+                            "distinct `host.tag` values and parts distinct symbols"
+                        )
+                    seen.add(token)
+                    out.append((token, mount, slots))
+        return out
+
+
+def _fail(source: str, key: str, problem: str) -> SpecError:
+    return SpecError(f"assembly spec {source}: {key}: {problem}")
+
+
+def _require(mapping: Mapping[str, Any], key: str, source: str, where: str) -> Any:
+    if key not in mapping:
+        raise _fail(source, f"{where}{key}", "missing; add it (see models/assemblies/flange.yaml)")
+    return mapping[key]
+
+
+def _positive_int(value: Any, source: str, key: str, minimum: int = 1) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise _fail(source, key, f"must be a whole number >= {minimum}, got {value!r}")
+    return value
+
+
+def _check_keys(mapping: Any, allowed: set[str], source: str, where: str) -> None:
+    if not isinstance(mapping, Mapping):
+        raise _fail(source, where or "<top>", f"must be a mapping, got {type(mapping).__name__}")
+    unknown = sorted(set(mapping) - allowed)
+    if unknown:
+        raise _fail(
+            source,
+            f"{where}{unknown[0]}",
+            f"unknown key; allowed keys are {sorted(allowed)}",
+        )
+
+
+def parse_spec(data: Any, source: str = "<memory>") -> AssemblySpec:
+    """Validate a spec given as parsed YAML; SpecError naming the key and problem if invalid."""
+    _check_keys(
+        data,
+        {"name", "base", "parts", "mounts", "precedence", "goal", "mistakes", "state_names"},
+        source,
+        "",
+    )
+    name = _require(data, "name", source, "")
+    if not isinstance(name, str) or not name:
+        raise _fail(source, "name", "must be a non-empty string")
+
+    base = _require(data, "base", source, "")
+    _check_keys(base, {"symbol", "slots"}, source, "base.")
+    base_symbol = str(base.get("symbol", "B"))
+    slots = _positive_int(_require(base, "slots", source, "base."), source, "base.slots")
+
+    raw_parts = _require(data, "parts", source, "")
+    if not isinstance(raw_parts, Mapping) or not raw_parts:
+        raise _fail(source, "parts", "must be a non-empty mapping of part symbol -> description")
+    parts: list[PartType] = []
+    for symbol, desc in raw_parts.items():
+        key = f"parts.{symbol}"
+        if not isinstance(symbol, str) or not _SYMBOL.match(symbol) or symbol == base_symbol:
+            raise _fail(
+                source, key, "a part symbol is a capital letter and letters, not the base's"
+            )
+        _check_keys(desc, {"name", "count", "footprint", "host"}, source, key + ".")
+        count = _positive_int(_require(desc, "count", source, key + "."), source, key + ".count")
+        footprint = _positive_int(desc.get("footprint", 1), source, key + ".footprint")
+        if footprint > slots:
+            raise _fail(
+                source,
+                key + ".footprint",
+                f"slot out of range: covers {footprint} slots but the base has {slots}",
+            )
+        host_tag = None
+        if "host" in desc:
+            _check_keys(desc["host"], {"tag"}, source, key + ".host.")
+            host_tag = str(desc["host"].get("tag", symbol))
+            if not host_tag or not re.fullmatch(r"[0-9A-Za-z]+", host_tag):
+                raise _fail(source, key + ".host.tag", "must be letters or digits")
+        parts.append(PartType(symbol, str(desc.get("name", symbol)), count, footprint, host_tag))
+    by_symbol = {p.symbol: p for p in parts}
+
+    raw_mounts = _require(data, "mounts", source, "")
+    if not isinstance(raw_mounts, list) or not raw_mounts:
+        raise _fail(source, "mounts", "must be a non-empty list of {part, to, count}")
+    mounts: list[Mount] = []
+    for i, m in enumerate(raw_mounts):
+        key = f"mounts[{i}]"
+        _check_keys(m, {"part", "to", "count"}, source, key + ".")
+        part = _require(m, "part", source, key + ".")
+        on = str(m.get("to", BASE))
+        if part not in by_symbol:
+            raise _fail(source, key + ".part", f"unknown part {part!r}; parts are {list(by_symbol)}")
+        if on != BASE:
+            if on not in by_symbol:
+                raise _fail(source, key + ".to", f"unknown part {on!r}; use 'base' or a part")
+            if not by_symbol[on].is_host:
+                raise _fail(source, key + ".to", f"part {on!r} has no `host` entry to mount on")
+            if on == part:
+                raise _fail(source, key + ".to", f"part {part!r} cannot be mounted on itself")
+            if by_symbol[part].footprint != 1:
+                raise _fail(source, key + ".part", "a part on a host must have footprint 1")
+        if any(x.part == part and x.on == on for x in mounts):
+            raise _fail(source, key, f"{part} on {on} is listed twice; merge the counts")
+        mounts.append(Mount(part, on, _positive_int(m.get("count"), source, key + ".count")))
+    for p in parts:
+        placed = sum(m.count for m in mounts if m.part == p.symbol)
+        if placed != p.count:
+            raise _fail(
+                source,
+                f"parts.{p.symbol}.count",
+                f"is {p.count} but the mounts place {placed}; make them agree",
+            )
+    for p in parts:
+        if p.is_host:
+            hosted = sum(m.count for m in mounts if m.on == p.symbol)
+            if hosted > p.count * p.footprint:
+                raise _fail(
+                    source,
+                    f"mounts (on {p.symbol})",
+                    f"{hosted} parts go on {p.symbol} but it offers {p.count * p.footprint} seats",
+                )
+    hosts_below: dict[str, set[str]] = {p.symbol: set() for p in parts}
+    for m in mounts:
+        if m.on != BASE:
+            hosts_below[m.part].add(m.on)
+
+    precedence = data.get("precedence") or {}
+    _check_keys(precedence, {"complete_first", "before"}, source, "precedence.")
+    complete_first = []
+    for i, h in enumerate(precedence.get("complete_first") or []):
+        key = f"precedence.complete_first[{i}]"
+        if h not in by_symbol:
+            raise _fail(source, key, f"unknown part {h!r}")
+        hosted = sum(m.count for m in mounts if m.on == h)
+        if hosted == 0:
+            raise _fail(source, key, f"contradictory precedence: nothing is mounted on {h!r}")
+        if hosted % by_symbol[h].count:
+            raise _fail(
+                source, key, f"{hosted} parts on {by_symbol[h].count} {h!r} do not split evenly"
+            )
+        complete_first.append(h)
+    before = []
+    for i, pair in enumerate(precedence.get("before") or []):
+        key = f"precedence.before[{i}]"
+        if not isinstance(pair, list) or len(pair) != 2:
+            raise _fail(source, key, "must be a pair [A, B]: every A before any B")
+        a, b = pair
+        for x in (a, b):
+            if x not in by_symbol:
+                raise _fail(source, key, f"unknown part {x!r}")
+        if a == b:
+            raise _fail(source, key, f"contradictory precedence: {a!r} before itself")
+        if b in hosts_below[a] and not any(m.part == a and m.on == BASE for m in mounts):
+            raise _fail(source, key, f"contradictory precedence: {a!r} sits on {b!r}")
+        before.append((a, b))
+    _check_precedence_cycles(before, source)
+
+    goal_data = _require(data, "goal", source, "")
+    _check_keys(goal_data, {"min_gap", "correct"}, source, "goal.")
+    rules = []
+    for i, r in enumerate(goal_data.get("min_gap") or []):
+        key = f"goal.min_gap[{i}]"
+        _check_keys(r, {"parts", "slots"}, source, key + ".")
+        pair = _require(r, "parts", source, key + ".")
+        if not isinstance(pair, list) or len(pair) != 2 or any(x not in by_symbol for x in pair):
+            raise _fail(source, key + ".parts", f"must name two known parts, got {pair!r}")
+        gap = _positive_int(_require(r, "slots", source, key + "."), source, key + ".slots")
+        if gap > slots:
+            raise _fail(source, key + ".slots", f"slot out of range: gap {gap} > {slots} slots")
+        rules.append(GapRule((pair[0], pair[1]), gap))
+    correct = None
+    if goal_data.get("correct") is not None:
+        correct = tuple(frozenset(c) for c in goal_data["correct"])
+    if not rules and not correct:
+        raise _fail(source, "goal", "no goal: give `min_gap` rules and/or `correct` configurations")
+
+    mistakes = []
+    for i, m in enumerate(data.get("mistakes") or []):
+        key = f"mistakes[{i}]"
+        _check_keys(m, {"part", "to"}, source, key + ".")
+        pair = (m.get("part"), str(m.get("to", BASE)))
+        if not any(x.part == pair[0] and x.on == pair[1] for x in mounts):
+            raise _fail(source, key, f"no mount places {pair[0]!r} on {pair[1]!r}")
+        mistakes.append(pair)
+
+    names = data.get("state_names") or {}
+    if not isinstance(names, Mapping):
+        raise _fail(source, "state_names", "must map 'T1 T2 ...' sequences to labels")
+
+    spec = AssemblySpec(
+        name=name,
+        base_symbol=base_symbol,
+        slots=slots,
+        parts=tuple(parts),
+        mounts=tuple(mounts),
+        complete_first=tuple(complete_first),
+        before=tuple(before),
+        goal=Goal(tuple(rules), correct),
+        mistakes=tuple(mistakes),
+        state_names={str(k or "").strip(): str(v) for k, v in names.items()},
+        source=source,
+    )
+    tokens = {t for t, _, _ in spec.placements()}
+    for i, config in enumerate(correct or ()):
+        for token in sorted(config):
+            if token not in tokens:
+                raise _fail(
+                    source,
+                    f"goal.correct[{i}]",
+                    f"unknown task {token!r} (slot out of range or part unknown); "
+                    f"tasks are {sorted(tokens)}",
+                )
+        if len(config) != spec.total_parts:
+            raise _fail(
+                source,
+                f"goal.correct[{i}]",
+                f"has {len(config)} parts but a complete assembly has {spec.total_parts}",
+            )
+    return spec
+
+
+def _check_precedence_cycles(before: list[tuple[str, str]], source: str) -> None:
+    graph: dict[str, list[str]] = {}
+    for a, b in before:
+        graph.setdefault(a, []).append(b)
+
+    def visit(node: str, path: list[str]) -> None:
+        if node in path:
+            cycle = " before ".join([*path[path.index(node) :], node])
+            raise _fail(source, "precedence.before", f"contradictory precedence: {cycle}")
+        for nxt in graph.get(node, []):
+            visit(nxt, [*path, node])
+
+    for start in graph:
+        visit(start, [])
+
+
+def load_spec(path: str | Path | None = None) -> AssemblySpec:
+    """Load and validate an assembly spec file (default: the flange case)."""
+    path = Path(path) if path is not None else default_assembly()
+    if not path.is_file():
+        raise SpecError(f"assembly spec {path}: file not found; pass --assembly PATH to a .yaml")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as err:
+        raise SpecError(f"assembly spec {path}: bad YAML: {err}") from err
+    return parse_spec(data, source=str(path))
