@@ -6,10 +6,14 @@ import math
 
 import numpy as np
 import pytest
-from pydrake.multibody.plant import MultibodyPlant
+from pydrake.geometry import Cylinder, Role
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
+from pydrake.systems.framework import DiagramBuilder
 
 from hrc_drake.resources import package_uri
 from hrc_drake.robot_models import (
+    RG2_FINGER_JOINTS,
+    RG2_MAX_OPENING,
     UR3_EFFORT_LIMITS,
     UR3_JOINTS,
     UR3_VELOCITY_LIMITS,
@@ -136,3 +140,148 @@ def test_ur3_masses_as_published() -> None:
     masses = [plant.GetBodyByName(name).default_mass() for name in UR3_LINKS]
     assert masses == pytest.approx(UR3_LINK_MASSES)
     assert sum(masses) == pytest.approx(10.63)
+
+
+class RobotScene:
+    """UR3 + RG2 from the directives in a diagram with a SceneGraph."""
+
+    def __init__(self) -> None:
+        builder = DiagramBuilder()
+        self.plant, self.scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+        self.ur3, self.rg2 = add_robot(self.plant)
+        self.plant.Finalize()
+        self.diagram = builder.Build()
+        self.context = self.diagram.CreateDefaultContext()
+        self.plant_context = self.plant.GetMyContextFromRoot(self.context)
+        self.inspector = self.scene_graph.model_inspector()
+
+    def set(self, q: np.ndarray, finger: float = RG2_MAX_OPENING / 2) -> None:
+        self.plant.SetPositions(self.plant_context, self.ur3, q)
+        self.plant.SetPositions(self.plant_context, self.rg2, [finger, finger])
+
+    def colliding_pairs(self) -> list[tuple[str, str]]:
+        query = self.scene_graph.get_query_output_port().Eval(
+            self.scene_graph.GetMyContextFromRoot(self.context)
+        )
+        frame_name = self.inspector.GetName
+        return [
+            (
+                frame_name(self.inspector.GetFrameId(p.id_A)),
+                frame_name(self.inspector.GetFrameId(p.id_B)),
+            )
+            for p in query.ComputePointPairPenetration()
+        ]
+
+
+@pytest.fixture(scope="module")
+def scene() -> RobotScene:
+    return RobotScene()
+
+
+def test_both_models_parse_offline_with_their_actuators(scene: RobotScene) -> None:
+    plant = scene.plant
+    assert plant.num_actuators(scene.ur3) == 6
+    assert plant.num_actuators(scene.rg2) == 2
+    assert plant.num_positions() == 8
+    for name in RG2_FINGER_JOINTS:
+        joint = plant.GetJointByName(name, scene.rg2)
+        np.testing.assert_allclose(joint.position_lower_limits(), [0.0])
+        np.testing.assert_allclose(joint.position_upper_limits(), [RG2_MAX_OPENING / 2])
+        actuator = plant.GetJointActuatorByName(name, scene.rg2)
+        assert actuator.effort_limit() == pytest.approx(40.0)
+
+
+def test_gripper_mass_and_frames(scene: RobotScene) -> None:
+    plant, context = scene.plant, scene.plant_context
+    rg2_mass = sum(
+        plant.get_body(index).default_mass() for index in plant.GetBodyIndices(scene.rg2)
+    )
+    assert rg2_mass == pytest.approx(0.78)
+    scene.set(HOME)
+    X_tool0_tcp = plant.CalcRelativeTransform(
+        context, plant.GetFrameByName("tool0", scene.ur3), plant.GetFrameByName("tcp", scene.rg2)
+    )
+    np.testing.assert_allclose(X_tool0_tcp.translation(), [0.0, 0.0, 0.19], atol=1e-12)
+    np.testing.assert_allclose(X_tool0_tcp.rotation().matrix(), np.eye(3), atol=1e-12)
+
+
+def test_finger_insides_open_by_the_sum_of_the_joints(scene: RobotScene) -> None:
+    plant, inspector = scene.plant, scene.inspector
+    pads = {}
+    for name in ("left_finger", "right_finger"):
+        body = plant.GetBodyByName(name, scene.rg2)
+        for geometry in plant.GetCollisionGeometriesForBody(body):
+            if inspector.GetName(geometry).endswith("pad"):
+                pads[name] = geometry
+    tcp = plant.GetFrameByName("tcp", scene.rg2)
+    for q_left, q_right in [(0.0, 0.0), (0.02, 0.035), (0.055, 0.055)]:
+        scene.set(HOME)
+        plant.SetPositions(scene.plant_context, scene.rg2, [q_left, q_right])
+        inside_y = []
+        for name, sign in (("left_finger", 1.0), ("right_finger", -1.0)):
+            body = plant.GetBodyByName(name, scene.rg2)
+            X_tcp_body = plant.CalcRelativeTransform(scene.plant_context, tcp, body.body_frame())
+            X_body_pad = inspector.GetPoseInFrame(pads[name])
+            half_width = inspector.GetShape(pads[name]).size()[1] / 2
+            centre = (X_tcp_body @ X_body_pad).translation()
+            inside_y.append(centre[1] - sign * half_width)
+            assert abs(centre[2]) < 1e-12
+        assert inside_y[0] - inside_y[1] == pytest.approx(q_left + q_right, abs=1e-12)
+
+
+def test_every_collision_geometry_has_friction(scene: RobotScene) -> None:
+    inspector = scene.inspector
+    ids = inspector.GetAllGeometryIds(Role.kProximity)
+    assert len(ids) >= 14
+    for geometry in ids:
+        props = inspector.GetProximityProperties(geometry)
+        assert props.HasProperty("material", "coulomb_friction"), inspector.GetName(geometry)
+
+
+def test_base_collision_clears_the_table(scene: RobotScene) -> None:
+    plant, inspector = scene.plant, scene.inspector
+    for link in ("base_link", "base_link_inertia"):
+        body = plant.GetBodyByName(link, scene.ur3)
+        for geometry in plant.GetCollisionGeometriesForBody(body):
+            shape = inspector.GetShape(geometry)
+            assert isinstance(shape, Cylinder)
+            X_W_G = plant.CalcRelativeTransform(
+                scene.plant_context, plant.world_frame(), body.body_frame()
+            ) @ inspector.GetPoseInFrame(geometry)
+            np.testing.assert_allclose(X_W_G.rotation().col(2), [0, 0, 1], atol=1e-12)
+            assert X_W_G.translation()[2] - shape.length() / 2 >= 0.005 - 1e-12
+
+
+def test_wrist_links_are_filtered_from_each_other(scene: RobotScene) -> None:
+    plant, inspector = scene.plant, scene.inspector
+
+    def geometries(link: str) -> list:
+        return plant.GetCollisionGeometriesForBody(plant.GetBodyByName(link, scene.ur3))
+
+    for a, b in [("wrist_1_link", "wrist_3_link"), ("wrist_1_link", "wrist_2_link")]:
+        assert all(inspector.CollisionFiltered(g, h) for g in geometries(a) for h in geometries(b))
+    assert not any(
+        inspector.CollisionFiltered(g, h)
+        for g in geometries("shoulder_link")
+        for h in geometries("wrist_2_link")
+    )
+
+
+@pytest.mark.parametrize(
+    "q",
+    [np.zeros(6), HOME, TOOL_DOWN, np.array([0.5, -2.0, 2.2, -1.8, -1.57, 0.3])],
+    ids=["zero", "home", "tool_down", "reach_over_plate"],
+)
+@pytest.mark.parametrize("finger", [0.0, RG2_MAX_OPENING / 2], ids=["closed", "open"])
+def test_no_self_collision_at_typical_configurations(
+    scene: RobotScene, q: np.ndarray, finger: float
+) -> None:
+    scene.set(q, finger)
+    assert scene.colliding_pairs() == []
+
+
+def test_folded_elbow_does_collide(scene: RobotScene) -> None:
+    # Guards the test above against filters that hide everything.
+    scene.set(np.array([0.0, -math.pi / 2, 2.6, 0.0, 0.0, 0.0]))
+    pairs = {frozenset(pair) for pair in scene.colliding_pairs()}
+    assert frozenset({"ur3::shoulder_link", "ur3::wrist_2_link"}) in pairs
