@@ -106,13 +106,17 @@ def _feasible(spec: AssemblySpec, table: TokenTable, masks: np.ndarray) -> np.nd
     """Boolean (len(masks), n_tokens): which placement tasks are feasible from each mask."""
     n = len(table.tokens)
     mount_full = np.stack(
-        [_popcount(masks & table.mount_mask[g]) >= table.mount_count[g] for g in
-         range(len(table.mount_count))],
+        [
+            _popcount(masks & table.mount_mask[g]) >= table.mount_count[g]
+            for g in range(len(table.mount_count))
+        ],
         axis=1,
     )
     part_done = np.stack(
-        [_popcount(masks & table.part_mask[p]) >= table.part_count[p] for p in
-         range(len(table.part_count))],
+        [
+            _popcount(masks & table.part_mask[p]) >= table.part_count[p]
+            for p in range(len(table.part_count))
+        ],
         axis=1,
     )
     # Sub-assemblies to complete first: seats on a placed host that still await their parts.

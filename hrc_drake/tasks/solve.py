@@ -75,9 +75,9 @@ def state_values(mdp: SequenceMDP, q: np.ndarray) -> np.ndarray:
 def greedy_choice(mdp: SequenceMDP, q: np.ndarray, tie_tolerance: float = 1e-9) -> np.ndarray:
     """Per state, the first edge (canonical task order) whose value is within tolerance of best."""
     values = state_values(mdp, q)
-    near_best = q >= values[mdp.edge_src] - tie_tolerance * np.maximum(1.0, np.abs(values))[
-        mdp.edge_src
-    ]
+    near_best = (
+        q >= values[mdp.edge_src] - tie_tolerance * np.maximum(1.0, np.abs(values))[mdp.edge_src]
+    )
     candidates = np.flatnonzero(near_best)
     states, first = np.unique(mdp.edge_src[candidates], return_index=True)
     choice = np.full(mdp.space.n_states, -1, dtype=np.int64)
@@ -90,11 +90,13 @@ def solve_exact(
 ) -> Solution:
     """Optimal values and the greedy policy by value iteration; RuntimeError if it stalls."""
     values = np.zeros(mdp.space.n_states)
-    for iteration in range(1, max_iterations + 1):
+    iterations = 0
+    for _ in range(max_iterations):
         q = q_from_values(mdp, values)
         new = state_values(mdp, q)
         change = float(np.max(np.abs(new - values))) if len(new) else 0.0
         values = new
+        iterations += 1
         if change < tolerance:
             break
     else:
@@ -104,4 +106,4 @@ def solve_exact(
             "gamma < 1 or check the spec for states that cannot finish"
         )
     q = q_from_values(mdp, values)
-    return Solution(mdp, values, q, greedy_choice(mdp, q), iteration)
+    return Solution(mdp, values, q, greedy_choice(mdp, q), iterations)

@@ -120,9 +120,7 @@ class AssemblySpec:
         """The content that determines states and rewards (no labels, no file name)."""
         return {
             "base": {"symbol": self.base_symbol, "slots": self.slots},
-            "parts": [
-                [p.symbol, p.count, p.footprint, p.host_tag] for p in self.parts
-            ],
+            "parts": [[p.symbol, p.count, p.footprint, p.host_tag] for p in self.parts],
             "mounts": [[m.part, m.on, m.count] for m in self.mounts],
             "complete_first": list(self.complete_first),
             "before": [list(pair) for pair in self.before],
@@ -257,7 +255,9 @@ def parse_spec(data: Any, source: str = "<memory>") -> AssemblySpec:
         part = _require(m, "part", source, key + ".")
         on = str(m.get("to", BASE))
         if part not in by_symbol:
-            raise _fail(source, key + ".part", f"unknown part {part!r}; parts are {list(by_symbol)}")
+            raise _fail(
+                source, key + ".part", f"unknown part {part!r}; parts are {list(by_symbol)}"
+            )
         if on != BASE:
             if on not in by_symbol:
                 raise _fail(source, key + ".to", f"unknown part {on!r}; use 'base' or a part")

@@ -1,0 +1,225 @@
+"""Tabular Q-learning of the assembly MDP, with the paper's schedule and one that explores enough.
+
+- `PaperSchedule`: every episode starts from the empty base; epsilon-greedy with epsilon 0.9
+  decaying by 0.005 per episode; training stops on the 20-episode moving average of the return
+  (once epsilon has decayed, when that average moved less than `stop_tolerance` over the last
+  window). Learning rate and discount are not published: ours are parameters.
+- `FullSchedule`: exploring starts — each sweep starts one episode from every (state, action)
+  pair of every non-terminal state, in a seeded random order; per-pair learning rate 1/n**0.6
+  so that the estimates settle under the operator's random mistakes; stops when the greedy
+  values move less than `stop_tolerance` over a sweep.
+
+Both are seeded (same seed, same Q-table) and return the learning curve.
+"""
+
+from __future__ import annotations
+
+import random
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from hrc_drake.tasks.mdp import SequenceMDP
+from hrc_drake.tasks.solve import greedy_choice, state_values
+
+Progress = Callable[[int, int, float], None]  # (episode, total or 0, last return)
+
+
+@dataclass(frozen=True)
+class PaperSchedule:
+    """The published schedule (section 6) plus our choices where the paper is silent."""
+
+    epsilon0: float = 0.9
+    epsilon_decay: float = 0.005
+    epsilon_min: float = 0.0
+    alpha: float = 0.1
+    window: int = 20
+    stop_tolerance: float = 0.05
+    max_episodes: int = 5000
+    max_steps: int = 100
+    name: str = "paper"
+
+
+@dataclass(frozen=True)
+class FullSchedule:
+    """Exploring starts from every non-terminal (state, action) pair, sweep after sweep."""
+
+    epsilon: float = 0.1
+    alpha_power: float = 0.6
+    min_sweeps: int = 30
+    max_sweeps: int = 2000
+    stop_tolerance: float = 0.01
+    max_steps: int = 100
+    name: str = "full"
+
+
+@dataclass(frozen=True, eq=False)
+class LearningResult:
+    """The learned Q-table (one value per MDP edge), its greedy choices and learning curve."""
+
+    q: np.ndarray
+    choice: np.ndarray
+    returns: np.ndarray  # return of every episode
+    episodes: int
+    steps: int
+    wall_time: float
+    schedule: str
+    seed: int
+
+    def moving_average(self, window: int = 20) -> np.ndarray:
+        """Mean return over the last `window` episodes, at every episode."""
+        r = self.returns
+        c = np.cumsum(np.insert(r, 0, 0.0))
+        lo = np.maximum(np.arange(1, len(r) + 1) - window, 0)
+        return (c[1:] - c[lo]) / (np.arange(1, len(r) + 1) - lo)
+
+
+class _Simulator:
+    """Samples the MDP: operator overrides, then the outcome (mistakes) of the task performed."""
+
+    def __init__(self, mdp: SequenceMDP, rng: random.Random):
+        self.rng = rng
+        self.edge_start = mdp.edge_start.tolist()
+        self.out_start = mdp.out_start.tolist()
+        self.out_dst = mdp.out_dst.tolist()
+        self.out_cum = []
+        for e in range(mdp.n_edges):
+            lo, hi = self.out_start[e], self.out_start[e + 1]
+            self.out_cum.append(np.cumsum(mdp.out_prob[lo:hi]).tolist())
+        self.out_reward = mdp.out_reward.tolist()
+        self.override = mdp.config.override_prob
+
+    def step(self, state: int, edge: int) -> tuple[int, float]:
+        rng = self.rng
+        lo, hi = self.edge_start[state], self.edge_start[state + 1]
+        if self.override > 0 and hi - lo > 1 and rng.random() < self.override:
+            other = lo + rng.randrange(hi - lo - 1)
+            edge = other + 1 if other >= edge else other
+        u = rng.random()
+        cum = self.out_cum[edge]
+        k = 0
+        while k < len(cum) - 1 and u >= cum[k]:
+            k += 1
+        o = self.out_start[edge] + k
+        return self.out_dst[o], self.out_reward[o]
+
+
+def _greedy_edge(q: list[float], lo: int, hi: int, rng: random.Random) -> int:
+    best = max(q[lo:hi])
+    ties = [e for e in range(lo, hi) if q[e] == best]
+    return ties[0] if len(ties) == 1 else rng.choice(ties)
+
+
+def train(
+    mdp: SequenceMDP,
+    schedule: PaperSchedule | FullSchedule,
+    seed: int = 0,
+    progress: Progress | None = None,
+) -> LearningResult:
+    """Learn a Q-table for `mdp` with `schedule`; seeded, so the same seed gives the same table."""
+    rng = random.Random(seed)
+    start = time.perf_counter()
+    if isinstance(schedule, PaperSchedule):
+        q, returns, steps = _train_paper(mdp, schedule, rng, progress)
+    else:
+        q, returns, steps = _train_full(mdp, schedule, rng, progress)
+    q_arr = np.array(q)
+    return LearningResult(
+        q=q_arr,
+        choice=greedy_choice(mdp, q_arr, tie_tolerance=0.0),
+        returns=np.array(returns),
+        episodes=len(returns),
+        steps=steps,
+        wall_time=time.perf_counter() - start,
+        schedule=schedule.name,
+        seed=seed,
+    )
+
+
+def _episode(
+    mdp: SequenceMDP,
+    sim: _Simulator,
+    q: list[float],
+    state: int,
+    first_edge: int | None,
+    epsilon: float,
+    alpha: Callable[[int], float],
+    max_steps: int,
+) -> tuple[float, int]:
+    gamma = mdp.config.gamma
+    edge_start = sim.edge_start
+    rng = sim.rng
+    total, discount, steps = 0.0, 1.0, 0
+    while steps < max_steps:
+        lo, hi = edge_start[state], edge_start[state + 1]
+        if hi == lo:
+            break  # terminal: the episode ends
+        if first_edge is not None:
+            edge, first_edge = first_edge, None
+        elif rng.random() < epsilon:
+            edge = lo + rng.randrange(hi - lo)
+        else:
+            edge = _greedy_edge(q, lo, hi, rng)
+        nxt, reward = sim.step(state, edge)
+        nlo, nhi = edge_start[nxt], edge_start[nxt + 1]
+        target = reward + (gamma * max(q[nlo:nhi]) if nhi > nlo else 0.0)
+        q[edge] += alpha(edge) * (target - q[edge])
+        total += discount * reward
+        discount *= gamma
+        state = nxt
+        steps += 1
+    return total, steps
+
+
+def _train_paper(mdp, schedule: PaperSchedule, rng, progress):
+    sim = _Simulator(mdp, rng)
+    q = [0.0] * mdp.n_edges
+    returns: list[float] = []
+    epsilon, steps = schedule.epsilon0, 0
+    w = schedule.window
+    for episode in range(1, schedule.max_episodes + 1):
+        ret, n = _episode(
+            mdp, sim, q, 0, None, epsilon, lambda _e: schedule.alpha, schedule.max_steps
+        )
+        returns.append(ret)
+        steps += n
+        epsilon = max(schedule.epsilon_min, epsilon - schedule.epsilon_decay)
+        if progress:
+            progress(episode, 0, ret)
+        if epsilon <= schedule.epsilon_min and len(returns) >= 2 * w:
+            recent = sum(returns[-w:]) / w
+            before = sum(returns[-2 * w : -w]) / w
+            if abs(recent - before) < schedule.stop_tolerance:
+                break
+    return q, returns, steps
+
+
+def _train_full(mdp, schedule: FullSchedule, rng, progress):
+    sim = _Simulator(mdp, rng)
+    q = [0.0] * mdp.n_edges
+    visits = [0] * mdp.n_edges
+
+    def alpha(edge: int) -> float:
+        visits[edge] += 1
+        return 1.0 / visits[edge] ** schedule.alpha_power
+
+    pairs = [(int(mdp.edge_src[e]), e) for e in range(mdp.n_edges)]
+    returns: list[float] = []
+    steps = 0
+    previous = None
+    for sweep in range(1, schedule.max_sweeps + 1):
+        rng.shuffle(pairs)
+        for state, edge in pairs:
+            ret, n = _episode(mdp, sim, q, state, edge, schedule.epsilon, alpha, schedule.max_steps)
+            returns.append(ret)
+            steps += n
+        if progress:
+            progress(sweep, schedule.max_sweeps, returns[-1])
+        values = state_values(mdp, np.array(q))
+        settled = previous is not None and sweep >= schedule.min_sweeps
+        if settled and float(np.max(np.abs(values - previous))) < schedule.stop_tolerance:
+            break
+        previous = values
+    return q, returns, steps

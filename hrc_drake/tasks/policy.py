@@ -1,0 +1,191 @@
+"""Policies: state -> next task, with versioned, checksummed, atomically written files.
+
+A policy file is JSON::
+
+    {"format": "hrc_drake.policy", "version": 1,
+     "spec": {"name": ..., "hash": ...},          # the assembly it was made for
+     "method": "exact" | "q-learning/paper" | ..., "meta": {...},
+     "entries": [[[task, ...], next_task], ...],  # every non-terminal state
+     "checksum": sha256 of the canonical JSON of everything above}
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hrc_drake.tasks.graph import StateSpace, UnknownStateError
+from hrc_drake.tasks.mdp import SequenceMDP
+from hrc_drake.tasks.spec import AssemblySpec
+
+FORMAT = "hrc_drake.policy"
+VERSION = 1
+
+
+class PolicyFileError(ValueError):
+    """A policy file that cannot be used: corrupted, of another version, or another spec."""
+
+
+@dataclass(frozen=True)
+class Policy:
+    """The robot's proposal for every state of one assembly."""
+
+    spec_name: str
+    spec_hash: str
+    method: str
+    table: Mapping[tuple[str, ...], str]
+    meta: Mapping[str, Any] = field(default_factory=dict)
+    terminal: frozenset[tuple[str, ...]] = frozenset()
+
+    def next_task(self, state: tuple[str, ...]) -> str | None:
+        """The task to propose in `state`; None in a terminal state.
+
+        Raises UnknownStateError (a KeyError) if `state` is not a state of this assembly.
+        """
+        try:
+            return self.table[state]
+        except KeyError:
+            if state in self.terminal:
+                return None
+            raise UnknownStateError(_NamedSpec(self.spec_name), tuple(state)) from None
+
+    def matches(self, spec: AssemblySpec) -> None:
+        """Raise PolicyFileError unless this policy was made for `spec`."""
+        if spec.spec_hash != self.spec_hash:
+            raise PolicyFileError(
+                f"policy was made for assembly {self.spec_name!r} (spec hash {self.spec_hash}), "
+                f"not for {spec.name!r} from {spec.source} (hash {spec.spec_hash}); make a new "
+                f"one with `hrc-drake solve --assembly {spec.source} --out FILE` or `train`"
+            )
+
+
+@dataclass(frozen=True)
+class _NamedSpec:
+    name: str
+    source: str = "the policy file"
+
+
+def policy_from_choices(
+    mdp: SequenceMDP, choice: np.ndarray, method: str, meta: Mapping[str, Any] | None = None
+) -> Policy:
+    """A Policy from one chosen edge per state (-1 where the episode ends)."""
+    space = mdp.space
+    table, terminal = {}, set()
+    for s in range(space.n_states):
+        seq = space.sequence(s)
+        if choice[s] >= 0:
+            table[seq] = mdp.task_name(int(choice[s]))
+        else:
+            terminal.add(seq)
+    return Policy(
+        spec_name=space.spec.name,
+        spec_hash=space.spec.spec_hash,
+        method=method,
+        table=table,
+        meta=dict(meta or {}),
+        terminal=frozenset(terminal),
+    )
+
+
+def _payload(policy: Policy) -> dict[str, Any]:
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "spec": {"name": policy.spec_name, "hash": policy.spec_hash},
+        "method": policy.method,
+        "meta": dict(policy.meta),
+        "entries": sorted([list(k), v] for k, v in policy.table.items()),
+        "terminal": sorted(list(t) for t in policy.terminal),
+    }
+
+
+def _checksum(payload: Mapping[str, Any]) -> str:
+    text = json.dumps(payload, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write a text file so that readers see the old or the new content, never a partial one."""
+    atomic_write_bytes(path, text.encode())
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write a file via a temporary file in the same folder and an atomic rename."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def save_policy(policy: Policy, path: str | Path) -> None:
+    """Save atomically, with the spec hash and a checksum of the content."""
+    payload = _payload(policy)
+    payload["checksum"] = _checksum(payload)
+    atomic_write_text(Path(path), json.dumps(payload, indent=1, sort_keys=True) + "\n")
+
+
+def load_policy(path: str | Path, space: StateSpace) -> Policy:
+    """Load a policy file made for `space`'s spec; PolicyFileError with the fix if unusable."""
+    path = Path(path)
+    fix = f"make a new one with `hrc-drake solve --out {path}` (or `hrc-drake train`)"
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise PolicyFileError(f"policy file {path} not found; {fix}") from None
+    try:
+        payload = json.loads(text)
+    except json.JSONDecodeError as err:
+        raise PolicyFileError(f"policy file {path} is corrupted (not JSON: {err}); {fix}") from None
+    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
+        raise PolicyFileError(f"{path} is not an hrc_drake policy file; {fix}")
+    if payload.get("version") != VERSION:
+        raise PolicyFileError(
+            f"policy file {path} has format version {payload.get('version')!r}; this hrc_drake "
+            f"reads version {VERSION}; {fix}"
+        )
+    checksum = payload.pop("checksum", None)
+    if checksum != _checksum(payload):
+        raise PolicyFileError(f"policy file {path} is corrupted (checksum mismatch); {fix}")
+    try:
+        policy = Policy(
+            spec_name=payload["spec"]["name"],
+            spec_hash=payload["spec"]["hash"],
+            method=payload["method"],
+            table={tuple(k): v for k, v in payload["entries"]},
+            meta=payload.get("meta", {}),
+            terminal=frozenset(tuple(t) for t in payload.get("terminal", [])),
+        )
+    except (KeyError, TypeError, ValueError) as err:
+        raise PolicyFileError(
+            f"policy file {path} is corrupted (bad entry: {err}); {fix}"
+        ) from None
+    policy.matches(space.spec)
+    for seq, task in policy.table.items():
+        try:
+            state = space.index(seq)
+        except UnknownStateError:
+            raise PolicyFileError(
+                f"policy file {path} names {list(seq)}, not a state of {space.spec.name!r}; {fix}"
+            ) from None
+        if task not in {t for t, _ in space.tasks(state)}:
+            raise PolicyFileError(
+                f"policy file {path} proposes {task!r} in {list(seq)}, where it is not "
+                f"feasible; {fix}"
+            )
+    return policy
