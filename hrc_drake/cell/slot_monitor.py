@@ -1,0 +1,372 @@
+"""SlotMonitor: which part sits in which seat, read from the physics of the cell.
+
+A part is in a seat iff it touches that seat's floor geometry (`slot_k_seat` on the plate,
+`row_j_seat` on a host part) and its pose is within a tolerance of the seat frame. Nothing else
+counts: not the script that placed it, not a commanded pose.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.geometry import GeometryId, SceneGraph
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import ContactResults, MultibodyPlant
+from pydrake.multibody.tree import ModelInstanceIndex
+from pydrake.systems.framework import LeafSystem
+
+from hrc_drake.tasks.tokens import placement_token
+
+DEFAULT_PART_SYMBOLS: Mapping[str, str] = {
+    "oval_flange_1": "F",
+    "oval_flange_2": "F",
+    "square_flange": "S",
+}
+DEFAULT_HOST_TAGS: Mapping[str, str] = {"square_flange": "0"}
+PLATE = "base_plate"
+TRAY = "tray"
+GRIPPER = "rg2"
+
+
+class PartStatus(enum.Enum):
+    """Where a part is, as the SlotMonitor sees it."""
+
+    SEATED = "seated"  # in a seat of the plate or of a host part
+    HELD = "held"  # in the gripper, in no seat
+    MISPLACED = "misplaced"  # on the plate or a host part, in no seat
+    TRAY = "tray"  # at rest at a tray home frame
+    TRANSIT = "transit"  # anywhere else (moving, or lying elsewhere)
+
+
+@dataclass(frozen=True)
+class PartPlacement:
+    """One part's placement. `slots` are the base slots under it (empty unless seated)."""
+
+    status: PartStatus
+    seats: tuple[str, ...] = ()  # seat frames it sits in, e.g. ("slot_1", "slot_2") or ("row_2",)
+    slots: tuple[int, ...] = ()
+    host: str | None = None  # model instance of the host part, for a part on another part
+    token: str | None = None  # task token, e.g. "F3", "S12", "F01"; None unless seated in place
+
+
+@dataclass(frozen=True)
+class CellConfiguration:
+    """The placement of every part, sorted by model instance name."""
+
+    placements: tuple[tuple[str, PartPlacement], ...] = ()
+
+    def placement(self, instance: str) -> PartPlacement:
+        """The placement of the part `instance`; KeyError naming the known parts if unknown."""
+        for name, placement in self.placements:
+            if name == instance:
+                return placement
+        known = ", ".join(name for name, _ in self.placements)
+        raise KeyError(f"no part {instance!r} in the cell configuration (parts: {known})")
+
+    def status(self, instance: str) -> PartStatus:
+        """The status of the part `instance`."""
+        return self.placement(instance).status
+
+    def tokens(self) -> frozenset[str]:
+        """The task-layer configuration: the tokens of the seated parts, e.g. {"F3","S12","F01"}."""
+        return frozenset(p.token for _, p in self.placements if p.token is not None)
+
+
+@dataclass(frozen=True)
+class SlotTolerances:
+    """How close to a frame a part must be. Seat tolerances exceed the pocket clearance (1.5 mm)."""
+
+    seat_xy: float = 0.003
+    seat_z: float = 0.002
+    seat_angle: float = 0.06  # rad, tilt and yaw (yaw modulo pi: the flanges are symmetric)
+    held_position: float = 0.005
+    held_angle: float = 0.1
+    tray_position: float = 0.01
+    tray_angle: float = 0.2
+    host_over_slot: float = 0.01  # a host's row frame over a base slot frame, horizontally
+
+
+@dataclass(frozen=True)
+class _Seat:
+    name: str  # frame name, e.g. "slot_2", "row_1"
+    body_index: object  # BodyIndex of the body that carries it
+    X_BS: RigidTransform  # seat frame in that body
+    floor: GeometryId
+
+
+def _pose_error(X_ref: RigidTransform, X: RigidTransform) -> tuple[float, float, float, float]:
+    """(horizontal, vertical, tilt, yaw modulo pi) of X relative to X_ref, in X_ref's frame."""
+    X_rel = X_ref.InvertAndCompose(X)
+    p = X_rel.translation()
+    R = X_rel.rotation().matrix()
+    tilt = math.acos(float(np.clip(R[2, 2], -1.0, 1.0)))
+    yaw = math.atan2(R[1, 0], R[0, 0])
+    yaw_mod = abs((yaw + math.pi / 2) % math.pi - math.pi / 2)
+    return float(math.hypot(p[0], p[1])), abs(float(p[2])), tilt, yaw_mod
+
+
+def _rotation_angle(X_ref: RigidTransform, X: RigidTransform) -> tuple[float, float]:
+    X_rel = X_ref.InvertAndCompose(X)
+    angle = X_rel.rotation().ToAngleAxis().angle()
+    return float(np.linalg.norm(X_rel.translation())), float(angle)
+
+
+class SlotMonitor(LeafSystem):
+    """Reports the placement of every part from contact results and body poses.
+
+    Input ports: `contact_results` (ContactResults), `body_poses` (list of RigidTransform, by
+    BodyIndex), both from the MultibodyPlant. Output port: `slot_configuration`
+    (CellConfiguration).
+
+    Args:
+        plant: the finalized cell plant.
+        scene_graph: its SceneGraph (for geometry names).
+        part_symbols: model instance -> spec part symbol; default the flange case.
+        host_tags: model instance of a host part -> its tag in tokens (``F01``: tag ``0``).
+        tolerances: pose tolerances.
+    """
+
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        scene_graph: SceneGraph,
+        part_symbols: Mapping[str, str] = DEFAULT_PART_SYMBOLS,
+        host_tags: Mapping[str, str] = DEFAULT_HOST_TAGS,
+        tolerances: SlotTolerances | None = None,
+    ):
+        super().__init__()
+        self._tol = tolerances if tolerances is not None else SlotTolerances()
+        self._symbols = dict(part_symbols)
+        inspector = scene_graph.model_inspector()
+
+        def instance(name: str, role: str):
+            if not plant.HasModelInstanceNamed(name):
+                known = ", ".join(
+                    plant.GetModelInstanceName(ModelInstanceIndex(i))
+                    for i in range(plant.num_model_instances())
+                )
+                raise ValueError(
+                    f"SlotMonitor: {role} {name!r} is not a model instance of the plant "
+                    f"(instances: {known}); pass part_symbols/host_tags naming existing instances"
+                )
+            return plant.GetModelInstanceByName(name)
+
+        def geometries(body) -> dict[str, GeometryId]:
+            return {
+                inspector.GetName(g).split("::")[-1]: g
+                for g in plant.GetCollisionGeometriesForBody(body)
+            }
+
+        def seats_of(model, body) -> list[_Seat]:
+            names = geometries(body)
+            seats = []
+            for geometry_name, gid in sorted(names.items()):
+                if not geometry_name.endswith("_seat"):
+                    continue
+                frame_name = geometry_name.removesuffix("_seat")
+                frame = plant.GetFrameByName(frame_name, model)
+                seats.append(_Seat(frame_name, body.index(), frame.GetFixedPoseInBodyFrame(), gid))
+            return seats
+
+        plate = instance(PLATE, "the base plate")
+        plate_body = plant.GetBodyByName(PLATE, plate)
+        self._slots = {int(s.name.removeprefix("slot_")): s for s in seats_of(plate, plate_body)}
+        if not self._slots:
+            raise ValueError("SlotMonitor: the base plate has no slot_k_seat collision geometry")
+        self._plate_geometries = set(plant.GetCollisionGeometriesForBody(plate_body))
+
+        self._parts: dict[str, object] = {}  # instance -> body
+        self._part_geometries: dict[str, set[GeometryId]] = {}
+        self._span: dict[str, int] = {}
+        self._X_BG: dict[str, RigidTransform] = {}  # grasp frame in the part body
+        self._owner: dict[GeometryId, str] = {}
+        for name in sorted(self._symbols):
+            model = instance(name, "part")
+            bodies = plant.GetBodyIndices(model)
+            body = plant.get_body(bodies[0])
+            self._parts[name] = body
+            geoms = geometries(body)
+            self._part_geometries[name] = set(geoms.values())
+            self._span[name] = max(1, sum(1 for g in geoms if g.startswith("boss")))
+            if plant.HasFrameNamed("grasp", model):
+                self._X_BG[name] = plant.GetFrameByName("grasp", model).GetFixedPoseInBodyFrame()
+            for gid in geoms.values():
+                self._owner[gid] = name
+        self._host_tags = dict(host_tags)
+        self._host_seats: dict[str, list[_Seat]] = {}
+        for name in self._host_tags:
+            instance(name, "host part")
+            if name not in self._parts:
+                raise ValueError(f"SlotMonitor: host {name!r} is not in part_symbols")
+            self._host_seats[name] = seats_of(plant.GetModelInstanceByName(name), self._parts[name])
+
+        self._homes: list[tuple[str, RigidTransform]] = []  # (symbol, X_W_home) — tray is welded
+        plant_context = plant.CreateDefaultContext()
+        if plant.HasModelInstanceNamed(TRAY):
+            tray = plant.GetModelInstanceByName(TRAY)
+            for part in self._parts:
+                frame_name = f"home_{part}"
+                if plant.HasFrameNamed(frame_name, tray):
+                    X_WH = plant.GetFrameByName(frame_name, tray).CalcPoseInWorld(plant_context)
+                    self._homes.append((self._symbols[part], X_WH))
+
+        self._tcp = None
+        self._finger_geometries: list[set[GeometryId]] = []
+        if plant.HasModelInstanceNamed(GRIPPER):
+            rg2 = plant.GetModelInstanceByName(GRIPPER)
+            tcp = plant.GetFrameByName("tcp", rg2)
+            self._tcp = (tcp.body().index(), tcp.GetFixedPoseInBodyFrame())
+            for body_index in plant.GetBodyIndices(rg2):
+                body = plant.get_body(body_index)
+                if "finger" in body.name():
+                    self._finger_geometries.append(set(plant.GetCollisionGeometriesForBody(body)))
+
+        self.DeclareAbstractInputPort("contact_results", AbstractValue.Make(ContactResults()))
+        self.DeclareAbstractInputPort("body_poses", AbstractValue.Make([RigidTransform()]))
+        self.DeclareAbstractOutputPort(
+            "slot_configuration",
+            lambda: AbstractValue.Make(CellConfiguration()),
+            self._calc_configuration,
+        )
+
+    @property
+    def part_symbols(self) -> dict[str, str]:
+        """Model instance -> spec part symbol."""
+        return dict(self._symbols)
+
+    def _touches(self, contacts: ContactResults) -> dict[str, set[GeometryId]]:
+        touching: dict[str, set[GeometryId]] = {p: set() for p in self._parts}
+
+        def note(a: GeometryId, b: GeometryId) -> None:
+            # Either geometry may be the part's (and both, for two parts touching).
+            if a in self._owner:
+                touching[self._owner[a]].add(b)
+            if b in self._owner:
+                touching[self._owner[b]].add(a)
+
+        for i in range(contacts.num_hydroelastic_contacts()):
+            surface = contacts.hydroelastic_contact_info(i).contact_surface()
+            note(surface.id_M(), surface.id_N())
+        for i in range(contacts.num_point_pair_contacts()):
+            pair = contacts.point_pair_contact_info(i).point_pair()
+            note(pair.id_A, pair.id_B)
+        return touching
+
+    def _within_seat(self, X_W_seat: RigidTransform, X_W_part: RigidTransform) -> bool:
+        xy, z, tilt, yaw = _pose_error(X_W_seat, X_W_part)
+        t = self._tol
+        return xy <= t.seat_xy and z <= t.seat_z and tilt <= t.seat_angle and yaw <= t.seat_angle
+
+    def _base_placement(self, part, X_WP, X_W_plate, touching) -> PartPlacement | None:
+        span = self._span[part]
+        slots = sorted(self._slots)
+        for start in range(len(slots) - span + 1):
+            run = tuple(slots[start : start + span])
+            if run[-1] - run[0] != span - 1:
+                continue
+            seats = [self._slots[k] for k in run]
+            if not all(s.floor in touching for s in seats):
+                continue
+            X_W_seats = [X_W_plate @ s.X_BS for s in seats]
+            centre = np.mean([X.translation() for X in X_W_seats], axis=0)
+            X_W_nominal = RigidTransform(X_W_seats[0].rotation(), centre)
+            if self._within_seat(X_W_nominal, X_WP):
+                return PartPlacement(
+                    PartStatus.SEATED,
+                    seats=tuple(s.name for s in seats),
+                    slots=run,
+                    token=placement_token(self._symbols[part], run),
+                )
+        return None
+
+    def _host_placement(self, part, X_WP, poses, X_W_plate, touching, base) -> PartPlacement | None:
+        if self._span[part] != 1:
+            return None
+        for host, seats in self._host_seats.items():
+            if host == part:
+                continue
+            X_W_host = poses[int(self._parts[host].index())]
+            for seat in seats:
+                if seat.floor not in touching:
+                    continue
+                X_W_seat = X_W_host @ seat.X_BS
+                if not self._within_seat(X_W_seat, X_WP):
+                    continue
+                token = None
+                slots: tuple[int, ...] = ()
+                host_placement = base.get(host)
+                if host_placement is not None:
+                    # The base slot under this row: the host may sit either way round.
+                    for k, slot in self._slots.items():
+                        p_slot = (X_W_plate @ slot.X_BS).translation()
+                        d = np.linalg.norm((X_W_seat.translation() - p_slot)[:2])
+                        if d <= self._tol.host_over_slot:
+                            slots = (k,)
+                            token = placement_token(
+                                self._symbols[part], slots, self._host_tags[host]
+                            )
+                return PartPlacement(
+                    PartStatus.SEATED, seats=(seat.name,), slots=slots, host=host, token=token
+                )
+        return None
+
+    def _held(self, part, X_WP, poses, touching) -> bool:
+        if self._tcp is None:
+            return False
+        if self._finger_geometries and all(f & touching for f in self._finger_geometries):
+            return True
+        if part not in self._X_BG:
+            return False
+        body_index, X_BT = self._tcp
+        X_W_tcp = poses[int(body_index)] @ X_BT
+        distance, angle = _rotation_angle(X_W_tcp, X_WP @ self._X_BG[part])
+        if distance > self._tol.held_position:
+            return False
+        # The flanges are symmetric under a half turn about the approach axis.
+        return angle <= self._tol.held_angle or abs(angle - math.pi) <= self._tol.held_angle
+
+    def _in_tray(self, part, X_WP) -> bool:
+        for symbol, X_WH in self._homes:
+            if symbol != self._symbols[part]:
+                continue
+            xy, z, tilt, yaw = _pose_error(X_WH, X_WP)
+            if math.hypot(xy, z) <= self._tol.tray_position and max(tilt, yaw) <= (
+                self._tol.tray_angle
+            ):
+                return True
+        return False
+
+    def _calc_configuration(self, context, output) -> None:
+        contacts = self.get_input_port(0).Eval(context)
+        poses = self.get_input_port(1).Eval(context)
+        touching = self._touches(contacts)
+        X_W_plate = poses[int(next(iter(self._slots.values())).body_index)]
+        placements: dict[str, PartPlacement] = {}
+        for part, body in self._parts.items():
+            found = self._base_placement(part, poses[int(body.index())], X_W_plate, touching[part])
+            if found is not None:
+                placements[part] = found
+        for part, body in self._parts.items():
+            if part in placements:
+                continue
+            X_WP = poses[int(body.index())]
+            mine = touching[part]
+            found = self._host_placement(part, X_WP, poses, X_W_plate, mine, placements)
+            if found is not None:
+                placements[part] = found
+            elif self._held(part, X_WP, poses, mine):
+                placements[part] = PartPlacement(PartStatus.HELD)
+            elif mine & self._plate_geometries or any(
+                mine & self._part_geometries[h] for h in self._host_seats if h != part
+            ):
+                placements[part] = PartPlacement(PartStatus.MISPLACED)
+            elif self._in_tray(part, X_WP):
+                placements[part] = PartPlacement(PartStatus.TRAY)
+            else:
+                placements[part] = PartPlacement(PartStatus.TRANSIT)
+        output.set_value(CellConfiguration(tuple(sorted(placements.items()))))

@@ -1,0 +1,286 @@
+"""The cell in Drake: models, diagram, and the SlotMonitor read from physics."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
+from pydrake.multibody.inverse_kinematics import InverseKinematics
+from pydrake.multibody.parsing import PackageMap
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.solvers import Solve
+
+from hrc_drake.cell import (
+    CellScenario,
+    PartStatus,
+    build_cell,
+    load_scenario,
+    simulate_cell,
+)
+from hrc_drake.cell.builder import UR3_READY
+from hrc_drake.resources import models_dir
+from hrc_drake.robot_models import add_robot, make_parser
+from hrc_drake.tasks.graph import generate_states
+from hrc_drake.tasks.spec import load_spec
+
+PARTS = ("oval_flange_1", "oval_flange_2", "square_flange")
+SETTLE = 0.5
+
+# Table 1 of the paper, one row per distinct configuration (flange-case.md; states 17-20 repeat
+# 11, 12, 9, 10 in another order).
+TABLE_1_CONFIGURATIONS = [
+    frozenset(c)
+    for c in (
+        (),
+        ("F1",),
+        ("F2",),
+        ("F3",),
+        ("S12",),
+        ("S23",),
+        ("F1", "S23"),
+        ("F3", "S12"),
+        ("F1", "S23", "F02"),
+        ("F1", "S23", "F03"),
+        ("F3", "S12", "F01"),
+        ("F3", "S12", "F02"),
+        ("S12", "F01"),
+        ("S12", "F02"),
+        ("S23", "F02"),
+        ("S23", "F03"),
+    )
+]
+
+
+@pytest.fixture(scope="module")
+def workcell():
+    return build_cell(CellScenario(include_robot=False))
+
+
+@pytest.fixture(scope="module")
+def cell():
+    return build_cell(CellScenario())
+
+
+def _assign(configuration: frozenset[str]) -> dict[str, str]:
+    """Part instance per token: the base F is oval_flange_1, the F on the square oval_flange_2."""
+    placements = {}
+    for token in sorted(configuration):
+        if token.startswith("S"):
+            placements["square_flange"] = token
+        elif len(token) == 3:
+            placements["oval_flange_2"] = token
+        else:
+            placements["oval_flange_1"] = token
+    return placements
+
+
+def _perturbed(X: RigidTransform, rng: np.random.Generator, lift: float) -> RigidTransform:
+    """A few mm above the seat, under 1 mm off, tilted under 1°: a part let go near its seat."""
+    dx, dy = rng.uniform(-0.0008, 0.0008, size=2)
+    roll, pitch, yaw = rng.uniform(-math.radians(1), math.radians(1), size=3)
+    return X @ RigidTransform(RollPitchYaw(roll, pitch, yaw), [dx, dy, lift])
+
+
+def _set_parts(station, context, poses: dict[str, RigidTransform]) -> None:
+    plant_context = station.plant.GetMyContextFromRoot(context)
+    for part, X_WP in poses.items():
+        station.plant.SetFreeBodyPose(plant_context, station.part_body(part), X_WP)
+
+
+def test_every_model_parses_offline():
+    files = sorted((models_dir() / "cell").glob("*.sdf"))
+    assert {f.name for f in files} >= {
+        "table.sdf",
+        "base_plate.sdf",
+        "tray.sdf",
+        "oval_flange.sdf",
+        "square_flange.sdf",
+    }
+    for path in files:
+        plant = MultibodyPlant(0.0)
+        parser = make_parser(plant)
+        assert isinstance(parser.package_map(), PackageMap)
+        assert parser.AddModels(str(path)), path
+
+
+def test_models_carry_the_convention_frames(workcell):
+    plant = workcell.plant
+    for k in (1, 2, 3):
+        assert plant.HasFrameNamed(f"slot_{k}", workcell.instances["base_plate"])
+    for j in (1, 2):
+        assert plant.HasFrameNamed(f"row_{j}", workcell.instances["square_flange"])
+    for part in PARTS:
+        assert plant.HasFrameNamed("grasp", workcell.instances[part])
+        assert plant.HasFrameNamed(f"home_{part}", workcell.instances["tray"])
+
+
+def test_whole_cell_builds_with_ports_and_constraints(cell):
+    diagram = cell.diagram
+    for name in ("ur3.desired_state", "rg2.desired_opening"):
+        assert diagram.HasInputPort(name)
+    assert diagram.GetInputPort("ur3.desired_state").size() == 12
+    assert diagram.GetInputPort("rg2.desired_opening").size() == 1
+    for name in ("plant_state", "contact_results", "body_poses", "slot_configuration"):
+        assert diagram.HasOutputPort(name)
+    assert set(cell.grasp_constraints) == set(PARTS)
+    assert set(cell.bolt_constraints) == {
+        *((oval, key) for oval in PARTS[:2] for key in ("F1", "F2", "F3", "row_1", "row_2")),
+        ("square_flange", "S12"),
+        ("square_flange", "S23"),
+    }
+    context = cell.create_default_context()
+    plant_context = cell.plant.GetMyContextFromRoot(context)
+    for cid in [*cell.grasp_constraints.values(), *cell.bolt_constraints.values()]:
+        assert not cell.plant.GetConstraintActiveStatus(plant_context, cid)
+
+
+def test_no_penetration_at_the_initial_state(cell):
+    context = cell.create_default_context()
+    query = cell.diagram.GetOutputPort("query_object").Eval(context)
+    inspector = cell.scene_graph.model_inspector()
+
+    def model(gid):
+        return inspector.GetName(gid).split("::")[0]
+
+    unexpected = []
+    for pair in query.ComputePointPairPenetration():
+        models = {model(pair.id_A), model(pair.id_B)}
+        resting = "tray" in models and models & set(PARTS)
+        if not (resting and pair.depth < 1e-4):
+            unexpected.append(
+                (inspector.GetName(pair.id_A), inspector.GetName(pair.id_B), pair.depth)
+            )
+    assert unexpected == []
+    configuration = cell.configuration(context)
+    assert all(configuration.status(p) is PartStatus.TRAY for p in PARTS)
+    assert configuration.tokens() == frozenset()
+
+
+def test_the_sixteen_configurations_are_those_of_table_1():
+    assert sorted(map(sorted, generate_states(load_spec()).configurations())) == sorted(
+        map(sorted, TABLE_1_CONFIGURATIONS)
+    )
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "configuration", TABLE_1_CONFIGURATIONS, ids=lambda c: "+".join(sorted(c)) or "empty"
+)
+def test_settled_configuration_is_read_from_physics(workcell, configuration):
+    rng = np.random.default_rng(sorted(TABLE_1_CONFIGURATIONS, key=sorted).index(configuration))
+    placements = _assign(configuration)
+    seated = workcell.placement_poses(placements)
+    poses = {
+        part: _perturbed(X, rng, lift=0.006 if len(placements[part]) == 3 else 0.003)
+        for part, X in seated.items()
+    }
+    context = workcell.create_default_context()
+    _set_parts(workcell, context, poses)
+    simulate_cell(workcell, context, SETTLE)
+    reading = workcell.configuration(context)
+    assert reading.tokens() == configuration
+    for part in PARTS:
+        expected = PartStatus.SEATED if part in placements else PartStatus.TRAY
+        assert reading.status(part) is expected, part
+
+
+@pytest.mark.slow
+def test_straddling_flange_is_misplaced(workcell):
+    X_W_slot1, X_W_slot2 = (
+        workcell.plant.GetFrameByName(f"slot_{k}").CalcPoseInWorld(
+            workcell.plant.CreateDefaultContext()
+        )
+        for k in (1, 2)
+    )
+    between = RigidTransform(
+        X_W_slot1.rotation(), (X_W_slot1.translation() + X_W_slot2.translation()) / 2
+    )
+    context = workcell.create_default_context()
+    _set_parts(
+        workcell, context, {"oval_flange_1": _perturbed(between, np.random.default_rng(7), 0.003)}
+    )
+    simulate_cell(workcell, context, SETTLE)
+    reading = workcell.configuration(context)
+    assert reading.status("oval_flange_1") is PartStatus.MISPLACED
+    assert reading.tokens() == frozenset()
+
+
+def _arm_posture_with_tcp_at(X_W_tcp: RigidTransform) -> np.ndarray:
+    """UR3 joint positions putting the gripper's tcp at `X_W_tcp` (IK on the robot alone)."""
+    plant = MultibodyPlant(0.0)
+    _ur3, rg2 = add_robot(plant)
+    plant.Finalize()
+    ik = InverseKinematics(plant)
+    tcp = plant.GetFrameByName("tcp", rg2)
+    p = X_W_tcp.translation()
+    ik.AddPositionConstraint(tcp, np.zeros(3), plant.world_frame(), p, p)
+    ik.AddOrientationConstraint(
+        tcp, RotationMatrix(), plant.world_frame(), X_W_tcp.rotation(), 1e-4
+    )
+    ik.get_mutable_prog().SetInitialGuess(ik.q(), np.concatenate([UR3_READY, [0.04, 0.04]]))
+    result = Solve(ik.prog())
+    assert result.is_success()
+    return result.GetSolution(ik.q())[:6]
+
+
+@pytest.mark.slow
+def test_held_flange_above_the_plate_is_held_not_seated(cell):
+    plant = cell.plant
+    part = "oval_flange_1"
+    default = plant.CreateDefaultContext()
+    X_W_slot2 = plant.GetFrameByName("slot_2").CalcPoseInWorld(default)
+    X_PG = plant.GetFrameByName("grasp", cell.instances[part]).GetFixedPoseInBodyFrame()
+    # 1.5 mm above its seat, boss inside the pocket: within the seat's pose tolerance, so only
+    # the missing contact with the seat floor tells that it is not seated.
+    X_W_part = X_W_slot2 @ RigidTransform([0, 0, 0.0015])
+    q = _arm_posture_with_tcp_at(X_W_part @ X_PG)
+
+    context = cell.create_default_context()
+    plant_context = plant.GetMyContextFromRoot(context)
+    plant.SetPositions(plant_context, cell.instances["ur3"], q)
+    width = 0.045
+    plant.SetPositions(plant_context, cell.instances["rg2"], [width / 2, width / 2])
+    plant.SetFreeBodyPose(plant_context, cell.part_body(part), X_W_part)
+    plant.SetConstraintActiveStatus(plant_context, cell.grasp_constraints[part], True)
+    cell.hold_robot(context, opening=width - 0.002)
+    simulate_cell(cell, context, SETTLE)
+
+    reading = cell.configuration(context)
+    assert reading.status(part) is PartStatus.HELD
+    assert reading.tokens() == frozenset()
+    drift = X_W_part.InvertAndCompose(
+        plant.EvalBodyPoseInWorld(plant_context, cell.part_body(part))
+    )
+    assert np.linalg.norm(drift.translation()) < 0.001
+
+
+def test_scenario_yaml_is_typed_and_checked():
+    scenario = load_scenario(text="include_robot: false\nplant_config: {time_step: 0.002}\n")
+    assert scenario.plant_config.time_step == 0.002
+    assert scenario.plant_config.discrete_contact_approximation == "sap"
+    with pytest.raises(RuntimeError, match="include_robt"):
+        load_scenario(text="include_robt: false\n")
+    with pytest.raises(ValueError, match="SAP-family"):
+        build_cell(load_scenario(text="plant_config: {discrete_contact_approximation: tamsi}\n"))
+    with pytest.raises(ValueError, match="not a part"):
+        build_cell(CellScenario(include_robot=False, initial_placements={"flange_9": "F1"}))
+
+
+def test_initial_placements_seat_the_parts(workcell):
+    station = build_cell(
+        CellScenario(
+            include_robot=False,
+            initial_placements={
+                "square_flange": "S23",
+                "oval_flange_2": "F03",
+                "oval_flange_1": "F1",
+            },
+        )
+    )
+    context = station.create_default_context()
+    simulate_cell(station, context, 0.1)
+    assert station.configuration(context).tokens() == {"S23", "F03", "F1"}
+    with pytest.raises(ValueError, match="needs its host"):
+        workcell.placement_poses({"oval_flange_1": "F01"})
