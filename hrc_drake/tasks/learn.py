@@ -84,10 +84,10 @@ class _Simulator:
         self.edge_start = mdp.edge_start.tolist()
         self.out_start = mdp.out_start.tolist()
         self.out_dst = mdp.out_dst.tolist()
-        self.out_cum = []
-        for e in range(mdp.n_edges):
-            lo, hi = self.out_start[e], self.out_start[e + 1]
-            self.out_cum.append(np.cumsum(mdp.out_prob[lo:hi]).tolist())
+        # Cumulative outcome probabilities within each edge, for inverse-CDF sampling.
+        cum = np.cumsum(mdp.out_prob)
+        before = np.concatenate(([0.0], cum))[mdp.out_start[:-1]]
+        self.out_cum = (cum - np.repeat(before, np.diff(mdp.out_start))).tolist()
         self.out_reward = mdp.out_reward.tolist()
         self.override = mdp.config.override_prob
 
@@ -98,11 +98,9 @@ class _Simulator:
             other = lo + rng.randrange(hi - lo - 1)
             edge = other + 1 if other >= edge else other
         u = rng.random()
-        cum = self.out_cum[edge]
-        k = 0
-        while k < len(cum) - 1 and u >= cum[k]:
-            k += 1
-        o = self.out_start[edge] + k
+        o, last = self.out_start[edge], self.out_start[edge + 1] - 1
+        while o < last and u >= self.out_cum[o]:
+            o += 1
         return self.out_dst[o], self.out_reward[o]
 
 

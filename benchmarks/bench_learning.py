@@ -1,0 +1,114 @@
+"""The paper's Q-learning schedule against ours, over many seeds, on the flange case.
+
+Run: python benchmarks/bench_learning.py [--seeds N]
+For each Table 2 row: how often the learned policy gives the published sequence, the
+minimum-effort one, another equally short one, or a longer one / none. For each schedule: how
+many seeds give a policy that is minimum-effort from every non-terminal state, with episodes and
+wall time. "script n/a": the policy took another, equally short route on which the scripted
+deviation (e.g. F02 at step 3) is not a feasible task. Writes benchmarks/reports/learning.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+from collections import Counter
+from pathlib import Path
+
+from hrc_drake.hri.operator import ScriptedOperator
+from hrc_drake.hri.scenario import table2_scenarios
+from hrc_drake.progress import ProgressLine
+from hrc_drake.tasks.decide import DecisionError, minimum_effort_violations, run_decisions
+from hrc_drake.tasks.graph import generate_states
+from hrc_drake.tasks.learn import FullSchedule, PaperSchedule, train
+from hrc_drake.tasks.mdp import build_mdp
+from hrc_drake.tasks.policy import atomic_write_text, policy_from_choices
+from hrc_drake.tasks.spec import load_spec
+
+HERE = Path(__file__).resolve().parent
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--seeds", type=int, default=100)
+    parser.add_argument("--out", type=Path, default=HERE / "reports" / "learning.md")
+    args = parser.parse_args()
+    space = generate_states(load_spec())
+    mdp = build_mdp(space)
+    rows = table2_scenarios()
+    lines = [
+        "# Q-learning on the flange case: the paper's schedule and ours",
+        "",
+        f"Command: `python benchmarks/bench_learning.py --seeds {args.seeds}` "
+        "(seeds 0 .. N-1; mistake probability 0.05, gamma 0.95).",
+        "",
+    ]
+    for schedule in (PaperSchedule(), FullSchedule()):
+        outcome = {r.table2_row: Counter() for r in rows}
+        episodes, steps, walls, good = [], [], [], 0
+        bad_states = Counter()
+        with ProgressLine(f"{schedule.name} schedule", "seed") as bar:
+            for seed in range(args.seeds):
+                result = train(mdp, schedule, seed=seed)
+                policy = policy_from_choices(mdp, result.choice, schedule.name)
+                episodes.append(result.episodes)
+                steps.append(result.steps)
+                walls.append(result.wall_time)
+                violations = minimum_effort_violations(space, policy)
+                good += not violations
+                bad_states.update(" ".join(s) or "(start)" for s in violations)
+                for row in rows:
+                    try:
+                        states, _ = run_decisions(space, policy, ScriptedOperator(row.script))
+                        names = tuple(space.name(space.index(s)) for s in states)
+                    except DecisionError as err:
+                        names = ("n/a",) if "not feasible" in str(err) else ()
+                    if names == ("n/a",):
+                        key = "script n/a"
+                    elif names == row.published:
+                        key = "published"
+                    elif names == row.minimum_effort:
+                        key = "minimum effort"
+                    elif names and len(names) == len(row.minimum_effort):
+                        key = "other, equally short"
+                    else:
+                        key = "longer or none"
+                    outcome[row.table2_row][key] += 1
+                bar.update(seed + 1, args.seeds)
+        n = args.seeds
+        lines += [
+            f"## {schedule.name} schedule",
+            "",
+            f"- minimum-effort from every non-terminal state: **{good}/{n} seeds**",
+            f"- episodes: median {statistics.median(episodes):.0f}, max {max(episodes)}; "
+            f"steps: median {statistics.median(steps):.0f}; wall time: median "
+            f"{1e3 * statistics.median(walls):.1f} ms, max {1e3 * max(walls):.1f} ms",
+        ]
+        if bad_states:
+            worst = ", ".join(f"{s} ({c})" for s, c in bad_states.most_common(6))
+            lines.append(f"- states where some seeds are not minimum-effort: {worst}")
+        lines += [
+            "",
+            "| row | published | minimum effort | published seq. | min-effort seq. |"
+            " other, equally short | longer or none | script n/a |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
+        for row in rows:
+            c = outcome[row.table2_row]
+            same = row.published == row.minimum_effort
+            min_effort = "(same)" if same else f"{100 * c['minimum effort'] / n:.0f} %"
+            lines.append(
+                f"| {row.table2_row} | {' '.join(row.published)} | "
+                f"{' '.join(row.minimum_effort)} | {100 * c['published'] / n:.0f} % | "
+                f"{min_effort} | "
+                f"{100 * c['other, equally short'] / n:.0f} % | "
+                f"{100 * c['longer or none'] / n:.0f} % | {100 * c['script n/a'] / n:.0f} % |"
+            )
+        lines.append("")
+    atomic_write_text(args.out, "\n".join(lines))
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
