@@ -1,0 +1,354 @@
+"""Plan a task of the flange case: which part moves, where, along which collision-free path."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.trajectories import PiecewisePolynomial
+
+from hrc_drake.motion.ik import solve_ik
+from hrc_drake.motion.options import MotionOptions
+from hrc_drake.motion.plan import CheckPhase, MotionTiming, Plan, Segment, Stage
+from hrc_drake.motion.poses import (
+    CellFrames,
+    assign_instances,
+    offset_along_approach,
+    parse_token,
+    part_pose,
+    tcp_pose,
+)
+from hrc_drake.motion.scene import (
+    GRIPPER,
+    MAX_OPENING,
+    PLATE,
+    TRAY,
+    Layout,
+    PlanningScene,
+    SceneModel,
+    load_cell_frames,
+)
+from hrc_drake.motion.trajectory import (
+    JointLimits,
+    Retimed,
+    free_path,
+    retime,
+    spline_through,
+    straight_waypoints,
+)
+from hrc_drake.tasks.tokens import UNDO
+
+# The UR3 "ready" posture family (ROS joint conventions): elbow up, tool pointing down.
+_READY = np.array([0.0, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0])
+# Where home puts the tcp: above the work, between plate and tray [m above the seats].
+_HOME_HEIGHT = 0.20
+
+
+@dataclass(frozen=True)
+class TaskMove:
+    """What a task moves: the part instance, from where to where (None = its tray home)."""
+
+    task: str
+    instance: str
+    source: str | None
+    target: str | None
+    before: Mapping[str, str]
+    after: Mapping[str, str]
+
+
+def resolve_task(
+    frames: CellFrames, configuration: Iterable[str], task: str, last_token: str | None = None
+) -> TaskMove:
+    """Which instance `task` moves from `configuration`, and the token assignments around it.
+
+    An assembly token takes a part of its symbol from the tray (the lowest-numbered free one);
+    `undo` returns the part at `last_token` (the task done last) to its tray home.
+    """
+    configuration = frozenset(configuration)
+    before = assign_instances(frames, configuration, last_token)
+    if task == UNDO:
+        if last_token is None or last_token not in configuration:
+            raise ValueError(f"undo needs the last task placed (last_token), got {last_token!r}")
+        instance = before[last_token]
+        after = {t: i for t, i in before.items() if t != last_token}
+        return TaskMove(task, instance, last_token, None, before, after)
+    if task in configuration:
+        raise ValueError(f"task {task} is already in place in {sorted(configuration)}")
+    symbol = parse_token(task, frames.host_tags).part
+    used = set(before.values())
+    free = [i for i in frames.part_instances.get(symbol, ()) if i not in used]
+    if not free:
+        raise ValueError(f"task {task}: no {symbol} left in the tray in {sorted(configuration)}")
+    after = dict(before)
+    after[task] = free[0]
+    return TaskMove(task, free[0], None, task, before, after)
+
+
+class _Timeline:
+    """Accumulates arm motions and still intervals into one trajectory."""
+
+    def __init__(self, q0: np.ndarray, rate: float, opening: float):
+        self.t = 0.0
+        self.times = [0.0]
+        self.q = [np.asarray(q0, dtype=float)]
+        self.qdot = [np.zeros(len(q0))]
+        self.rate = rate
+        self.segments: list[Segment] = []
+        self.phases: list[CheckPhase] = []
+        self.motions: list[MotionTiming] = []
+        self.gripper_times = [0.0]
+        self.gripper_values = [opening]
+
+    def move(self, name: str, retimed: Retimed, kto: float | None) -> None:
+        n = max(2, int(np.ceil(retimed.duration * self.rate)) + 1)
+        for t in np.linspace(0.0, retimed.duration, n)[1:]:
+            q, qdot = retimed.sample(t)
+            self.times.append(self.t + t)
+            self.q.append(q)
+            self.qdot.append(qdot)
+        self.q[-1] = retimed.end
+        self.qdot[-1] = np.zeros(len(self.q[-1]))
+        self.t += retimed.duration
+        self.motions.append(MotionTiming(name, kto, retimed.optimal_duration, retimed.duration))
+
+    def wait(self, duration: float) -> None:
+        if duration <= 0.0:
+            return
+        self.t += duration
+        self.times.append(self.t)
+        self.q.append(self.q[-1].copy())
+        self.qdot.append(np.zeros(len(self.q[-1])))
+
+    def gripper(self, opening: float, duration: float) -> None:
+        self.gripper_times.append(self.t)
+        self.gripper_values.append(self.gripper_values[-1])
+        self.wait(duration)
+        self.gripper_times.append(self.t)
+        self.gripper_values.append(opening)
+
+    def stage(self, stage: Stage, start: float) -> None:
+        self.segments.append(Segment(stage, start, self.t))
+
+    def phase(self, start: float, layout: Layout, allowed: tuple[tuple[str, str], ...]) -> None:
+        self.phases.append(CheckPhase(start, self.t, layout, allowed))
+
+    def trajectory(self) -> PiecewisePolynomial:
+        return PiecewisePolynomial.CubicHermite(
+            np.array(self.times), np.column_stack(self.q), np.column_stack(self.qdot)
+        )
+
+    def gripper_trajectory(self) -> PiecewisePolynomial:
+        times = [*self.gripper_times, self.t]
+        values = [*self.gripper_values, self.gripper_values[-1]]
+        keep = [0] + [i for i in range(1, len(times)) if times[i] > times[i - 1] + 1e-9]
+        return PiecewisePolynomial.FirstOrderHold(
+            np.array([times[i] for i in keep]), np.array([[values[i] for i in keep]])
+        )
+
+
+class MotionPlanner:
+    """Plans the robot's motion for tasks of the flange case, caching scenes and plans.
+
+    Plans start and end at the home posture `q_home`. Scenes are cached by layout; plans by
+    (configuration, task, last_token for undo).
+    """
+
+    def __init__(self, options: MotionOptions | None = None, frames: CellFrames | None = None):
+        self.options = options or MotionOptions()
+        self.frames = frames or load_cell_frames()
+        self._models: dict[str | None, SceneModel] = {}
+        self._scenes: dict[Layout, PlanningScene] = {}
+        self._plans: dict[tuple, Plan] = {}
+        empty = self.scene(Layout.of({}, None, MAX_OPENING))
+        self.limits = JointLimits.of(empty, self.options)
+        self._rng = np.random.default_rng(self.options.seed)
+        self.q_home = self._home(empty)
+
+    def scene(self, layout: Layout) -> PlanningScene:
+        """The planning scene of a layout (built once)."""
+        if layout not in self._scenes:
+            if layout.carried not in self._models:
+                self._models[layout.carried] = SceneModel(self.frames, layout.carried)
+            self._scenes[layout] = PlanningScene(self._models[layout.carried], layout)
+        return self._scenes[layout]
+
+    def _down_rotation(self) -> RotationMatrix:
+        instance = next(iter(self.frames.grasps))
+        return tcp_pose(self.frames, instance, self.frames.homes[instance]).rotation()
+
+    def _toward(self, scene: PlanningScene, p_W: np.ndarray) -> np.ndarray:
+        """The ready posture with the shoulder pan turned toward a point."""
+        p0 = scene.tcp_pose(_READY).translation()
+        q = _READY.copy()
+        q[0] = np.arctan2(p_W[1], p_W[0]) - np.arctan2(p0[1], p0[0])
+        return q
+
+    def _home(self, scene: PlanningScene) -> np.ndarray:
+        seats = np.array([X.translation() for X in self.frames.seats.values()])
+        homes = np.array([X.translation() for X in self.frames.homes.values()])
+        p = 0.5 * (seats.mean(axis=0) + homes.mean(axis=0))
+        p[2] = float(np.max(seats[:, 2])) + _HOME_HEIGHT
+        nominal = self._toward(scene, p)
+        X = RigidTransform(self._down_rotation(), p)
+        return solve_ik(
+            scene, X, [nominal], nominal, min_distance=0.012, task="home", waypoint="home"
+        )
+
+    def _seeds(self, scene: PlanningScene, X: RigidTransform, previous: np.ndarray) -> list:
+        nominal = self._toward(scene, X.translation())
+        seeds = [previous, nominal, self.q_home]
+        for _ in range(3):
+            seeds.append(nominal + self._rng.normal(0.0, 0.3, size=len(nominal)))
+        return seeds
+
+    def _ik(self, scene, X, previous, task, waypoint, min_distance=None) -> np.ndarray:
+        opts = self.options
+        nominal = self._toward(scene, X.translation())
+        return solve_ik(
+            scene,
+            X,
+            self._seeds(scene, X, previous),
+            nominal,
+            min_distance=opts.clearance + opts.clearance_margin
+            if min_distance is None
+            else min_distance,
+            task=task,
+            waypoint=waypoint,
+        )
+
+    def _support(self, token: str | None, tokens: Iterable[str]) -> str:
+        """The model instance a part rests on at `token` (None: the tray)."""
+        if token is None:
+            return TRAY
+        placement = parse_token(token, self.frames.host_tags)
+        if placement.host is None:
+            return PLATE
+        return self.frames.part_instances[placement.host][0]
+
+    def plan_task(
+        self, configuration: Iterable[str], task: str, *, last_token: str | None = None
+    ) -> Plan:
+        """The plan of `task` from `configuration` (the tokens in place), home to home.
+
+        `last_token` is the task done last; `undo` needs it (the part placed last goes back to
+        its tray home). Raises UnreachableError (naming the task and the violated constraint) when
+        a pose is out of reach, PlanningError when no path is found.
+        """
+        configuration = frozenset(configuration)
+        key = (configuration, task, last_token if task == UNDO else None)
+        if key not in self._plans:
+            self._rng = np.random.default_rng(self.options.seed)
+            self._plans[key] = self._plan(configuration, task, last_token)
+        return self._plans[key]
+
+    def _plan(self, configuration: frozenset[str], task: str, last_token: str | None) -> Plan:
+        opts, frames = self.options, self.frames
+        move = resolve_task(frames, configuration, task, last_token)
+        part = move.instance
+        width = frames.widths[part]
+        opening = float(min(MAX_OPENING, width + 2.0 * opts.finger_gap))
+        X_src = (
+            frames.homes[part]
+            if move.source is None
+            else part_pose(frames, move.source, move.before.keys())
+        )
+        X_dst = (
+            frames.homes[part]
+            if move.target is None
+            else part_pose(frames, move.target, move.after.keys())
+        )
+        X_grasp = tcp_pose(frames, part, X_src)
+        X_place = tcp_pose(frames, part, X_dst)
+        X_pregrasp = offset_along_approach(X_grasp, opts.approach_distance)
+        X_preplace = offset_along_approach(X_place, opts.approach_distance)
+
+        pick = self.scene(Layout.of(move.before, None, opening))
+        carry = self.scene(Layout.of(move.before, part, width))
+        placed = self.scene(Layout.of(move.after, None, opening))
+        # Near the grasp and place instants the fingertips come within a few mm of the surface
+        # the part rests on (they hold a 10 mm part), and the part touches it.
+        source = self._support(move.source, move.before)
+        target = self._support(move.target, move.after)
+        hand = ((GRIPPER, part), (GRIPPER, source))
+        lift_allowed = ((part, source), (GRIPPER, source))
+        place_allowed = ((part, target), (GRIPPER, target))
+        release = ((GRIPPER, part), (GRIPPER, target))
+
+        q_home = self.q_home
+        pick.set_allowed_contacts(())
+        q_pregrasp = self._ik(pick, X_pregrasp, q_home, task, "pre-grasp")
+        approach = free_path(pick, q_home, q_pregrasp, self.limits, opts)
+        pick.set_allowed_contacts(hand)
+        down = straight_waypoints(pick, q_pregrasp, X_grasp, opts, task=task, waypoint="grasp")
+        pick.set_allowed_contacts(())
+
+        carry.set_allowed_contacts(())
+        q_preplace = self._ik(carry, X_preplace, q_pregrasp, task, "pre-place")
+        transfer = free_path(carry, q_pregrasp, q_preplace, self.limits, opts)
+        carry.set_allowed_contacts(place_allowed)
+        lower = straight_waypoints(carry, q_preplace, X_place, opts, task=task, waypoint="place")
+        carry.set_allowed_contacts(())
+        placed.set_allowed_contacts(())
+        back = free_path(placed, q_preplace, q_home, self.limits, opts)
+
+        def timed(scene: PlanningScene, path) -> Retimed:
+            return retime(scene, path, self.limits, opts)
+
+        line = _Timeline(q_home, 2.0 * opts.validation_rate, opening)
+        t0 = line.t
+        line.move("home to pre-grasp", timed(pick, approach), approach.end_time())
+        line.phase(t0, pick.layout, ())
+        t1 = line.t
+        descend = timed(pick, spline_through(down))
+        line.move("down to grasp", descend, None)
+        line.phase(t1, pick.layout, hand)
+        line.stage(Stage.APPROACH, t0)
+
+        t0 = line.t
+        line.gripper(width, opts.gripper_time)
+        line.phase(t0, pick.layout, hand)
+        line.stage(Stage.GRASP, t0)
+
+        t0 = line.t
+        line.move("lift", descend.reversed(), None)
+        line.phase(t0, carry.layout, lift_allowed)
+        t1 = line.t
+        line.move("carry to pre-place", timed(carry, transfer), transfer.end_time())
+        line.phase(t1, carry.layout, ())
+        line.stage(Stage.CARRY, t0)
+
+        t0 = line.t
+        lowering = timed(carry, spline_through(lower))
+        line.move("down to place", lowering, None)
+        line.stage(Stage.PLACE, t0)
+        t_in_place = line.t
+        line.wait(opts.undo_hold_time if task == UNDO else opts.hold_time)
+        line.phase(t0, carry.layout, place_allowed)
+        line.stage(Stage.HOLD, t_in_place)
+
+        t_release = line.t
+        line.gripper(opening, opts.gripper_time)
+        line.stage(Stage.RELEASE, t_release)
+        t0 = line.t
+        line.move("retreat up", lowering.reversed(), None)
+        line.phase(t_release, placed.layout, release)
+        t1 = line.t
+        line.move("pre-place to home", timed(placed, back), back.end_time())
+        line.phase(t1, placed.layout, ())
+        line.stage(Stage.RETREAT, t0)
+
+        return Plan(
+            task=task,
+            instance=part,
+            configuration=configuration,
+            trajectory=line.trajectory(),
+            gripper=line.gripper_trajectory(),
+            t_in_place=t_in_place,
+            t_release=t_release,
+            duration=line.t,
+            segments=tuple(line.segments),
+            phases=tuple(line.phases),
+            motions=tuple(line.motions),
+        )

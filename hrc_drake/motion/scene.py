@@ -1,0 +1,385 @@
+"""Planning scenes: the cell as a MultibodyPlant + SceneGraph for one layout of the parts.
+
+A planning scene has no simulation: every part is welded where the layout puts it (the tray home,
+a seat, or the gripper's tcp at its grasp pose, so a carried part is robot geometry), the fingers
+are welded at one opening, and the only degrees of freedom are the six UR3 joints.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.geometry import (
+    Box,
+    Capsule,
+    CollisionFilterDeclaration,
+    Convex,
+    Cylinder,
+    Ellipsoid,
+    GeometrySet,
+    Mesh,
+    Sphere,
+)
+from pydrake.math import RigidTransform
+from pydrake.multibody.parsing import (
+    LoadModelDirectives,
+    Parser,
+    ProcessModelDirectives,
+)
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
+from pydrake.multibody.tree import FixedOffsetFrame
+from pydrake.systems.framework import DiagramBuilder
+
+from hrc_drake import resources
+from hrc_drake.motion.poses import PART_INSTANCES, CellFrames, part_pose
+
+ROBOT = "ur3"
+GRIPPER = "rg2"
+TCP = "tcp"
+UR3_JOINTS = (
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+)
+FINGER_JOINTS = ("left_finger_joint", "right_finger_joint")
+MAX_OPENING = 0.110
+PLATE = "base_plate"
+TRAY = "tray"
+# Wrist links sit right against the gripper mount; their capsules may touch it (calibration).
+_WRIST_LINKS = ("wrist_1_link", "wrist_2_link", "wrist_3_link")
+
+
+def make_parser(plant: MultibodyPlant) -> Parser:
+    """The models package's parser (the robot engineer's, when it is there)."""
+    try:
+        from hrc_drake.robot_models import make_parser as robot_parser
+    except ImportError:
+        parser = Parser(plant)
+        parser.package_map().AddPackageXml(str(resources.models_dir() / "package.xml"))
+        return parser
+    return robot_parser(plant)
+
+
+def _directive_files() -> list[Path]:
+    models = resources.models_dir()
+    return [models / "cell.dmd.yaml", models / "cell" / "robot.dmd.yaml"]
+
+
+def add_cell(plant: MultibodyPlant) -> None:
+    """Add the cell's models (robot, gripper, table, plate, tray, parts) from the directives."""
+    parser = make_parser(plant)
+    cell, robot = _directive_files()
+    ProcessModelDirectives(LoadModelDirectives(str(cell)), plant, parser)
+    if not plant.HasModelInstanceNamed(ROBOT):
+        ProcessModelDirectives(LoadModelDirectives(str(robot)), plant, parser)
+
+
+def part_body(plant: MultibodyPlant, instance: str):
+    """The body of a one-body part model."""
+    model = plant.GetModelInstanceByName(instance)
+    bodies = plant.GetBodyIndices(model)
+    if len(bodies) != 1:
+        raise ValueError(f"part model {instance!r} has {len(bodies)} bodies; expected one")
+    return plant.get_body(bodies[0])
+
+
+def _free_finger(plant: MultibodyPlant, joint_name: str) -> FixedOffsetFrame:
+    """Replace a prismatic finger joint by a weld to a frame whose pose sets the opening."""
+    gripper = plant.GetModelInstanceByName(GRIPPER)
+    joint = plant.GetJointByName(joint_name, gripper)
+    for index in plant.GetJointActuatorIndices():
+        actuator = plant.get_joint_actuator(index)
+        if actuator.joint().index() == joint.index():
+            plant.RemoveJointActuator(actuator)
+    parent, child = joint.frame_on_parent(), joint.frame_on_child()
+    plant.RemoveJoint(joint)
+    frame = plant.AddFrame(FixedOffsetFrame(f"{joint_name}_weld", parent, RigidTransform()))
+    plant.WeldFrames(frame, child, RigidTransform())
+    return frame
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where each part is in a scene, hashable (the scene cache key).
+
+    Attributes:
+        placed: (instance, token) for each part on the plate or a host; the rest are in the tray.
+        carried: the instance welded to the gripper at its grasp pose, if any.
+        opening: finger opening [m] (between the finger insides).
+    """
+
+    placed: tuple[tuple[str, str], ...]
+    carried: str | None
+    opening: float
+
+    @staticmethod
+    def of(assignment: Mapping[str, str], carried: str | None, opening: float) -> Layout:
+        """From token -> instance; a carried instance is taken out of `assignment`."""
+        placed = tuple(sorted((inst, tok) for tok, inst in assignment.items() if inst != carried))
+        return Layout(placed, carried, round(float(opening), 6))
+
+    @property
+    def configuration(self) -> frozenset[str]:
+        """The tokens in place."""
+        return frozenset(tok for _, tok in self.placed)
+
+
+class SceneModel:
+    """The cell's diagram with one part (or none) welded to the gripper.
+
+    Everything else that a layout changes is a parameter: each other part is welded to a
+    world-fixed frame, each finger to a frame on the gripper, whose poses a PlanningScene sets in
+    its own context. So one parse serves every layout with the same carried part.
+    """
+
+    def __init__(self, frames: CellFrames, carried: str | None):
+        self.frames = frames
+        self.carried = carried
+        builder = DiagramBuilder()
+        plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
+        add_cell(plant)
+        gripper = plant.GetModelInstanceByName(GRIPPER)
+        self.finger_axes = {
+            name: np.asarray(plant.GetJointByName(name, gripper).translation_axis())
+            for name in FINGER_JOINTS
+        }
+        self.finger_frames = {name: _free_finger(plant, name) for name in FINGER_JOINTS}
+        self.part_frames: dict[str, FixedOffsetFrame] = {}
+        world = plant.world_frame()
+        for instances in frames.part_instances.values():
+            for instance in instances:
+                body = part_body(plant, instance)
+                if instance == carried:
+                    X_tcp_part = frames.grasps[instance].inverse()
+                    plant.WeldFrames(self._tcp_frame(plant), body.body_frame(), X_tcp_part)
+                    continue
+                frame = plant.AddFrame(
+                    FixedOffsetFrame(f"{instance}_pose", world, frames.homes[instance])
+                )
+                plant.WeldFrames(frame, body.body_frame(), RigidTransform())
+                self.part_frames[instance] = frame
+        plant.Finalize()
+        if plant.num_positions() != len(UR3_JOINTS):
+            raise ValueError(
+                f"planning plant has {plant.num_positions()} positions; expected the UR3's 6 "
+                "(is a part or the gripper left free in the directives?)"
+            )
+        self.plant = plant
+        self.scene_graph = scene_graph
+        self._filter_permanent()
+        self.diagram = builder.Build()
+        self.tcp_frame = self._tcp_frame(plant)
+        self.robot_bodies = {
+            int(b)
+            for name in (ROBOT, GRIPPER)
+            for b in plant.GetBodyIndices(plant.GetModelInstanceByName(name))
+        }
+        if carried is not None:
+            self.robot_bodies.add(int(part_body(plant, carried).index()))
+
+    @staticmethod
+    def _tcp_frame(plant: MultibodyPlant):
+        return plant.GetFrameByName(TCP, plant.GetModelInstanceByName(GRIPPER))
+
+    def geometries(self, instance: str) -> GeometrySet:
+        """Collision geometries of every body of a model instance."""
+        plant = self.plant
+        model = plant.GetModelInstanceByName(instance)
+        bodies = [plant.get_body(b) for b in plant.GetBodyIndices(model)]
+        ids = [g for b in bodies for g in plant.GetCollisionGeometriesForBody(b)]
+        return GeometrySet(ids)
+
+    def _body_geometries(self, model: str, names: Iterable[str]) -> GeometrySet:
+        plant = self.plant
+        instance = plant.GetModelInstanceByName(model)
+        ids = [
+            g
+            for n in names
+            if plant.HasBodyNamed(n, instance)
+            for g in plant.GetCollisionGeometriesForBody(plant.GetBodyByName(n, instance))
+        ]
+        return GeometrySet(ids)
+
+    def _filter_permanent(self) -> None:
+        manager = self.scene_graph.collision_filter_manager()
+        declaration = CollisionFilterDeclaration().ExcludeBetween(
+            self._body_geometries(ROBOT, _WRIST_LINKS), self.geometries(GRIPPER)
+        )
+        if self.carried is not None:
+            # The carried part touches the fingers that hold it.
+            declaration.ExcludeBetween(self.geometries(self.carried), self.geometries(GRIPPER))
+        manager.Apply(declaration)
+
+
+class PlanningScene:
+    """The cell in one layout, with its own diagram context (the optimisers' collision queries)."""
+
+    def __init__(self, model: SceneModel, layout: Layout):
+        if model.carried != layout.carried:
+            raise ValueError(f"scene model carries {model.carried}, layout {layout.carried}")
+        self.model = model
+        self.layout = layout
+        self.plant = model.plant
+        self.scene_graph = model.scene_graph
+        self.tcp_frame = model.tcp_frame
+        self.context = model.diagram.CreateDefaultContext()
+        self.plant_context = self.plant.GetMyMutableContextFromRoot(self.context)
+        self.sg_context = self.scene_graph.GetMyMutableContextFromRoot(self.context)
+        for name, frame in model.finger_frames.items():
+            X = RigidTransform(0.5 * layout.opening * model.finger_axes[name])
+            frame.SetPoseInParentFrame(self.plant_context, X)
+        placed = dict(layout.placed)
+        tokens = layout.configuration
+        frames = model.frames
+        for instance, frame in model.part_frames.items():
+            X_W_part = (
+                part_pose(frames, placed[instance], tokens)
+                if instance in placed
+                else frames.homes[instance]
+            )
+            frame.SetPoseInParentFrame(self.plant_context, X_W_part)
+        self._transient: list = []
+
+    def geometries(self, instance: str) -> GeometrySet:
+        """Collision geometries of every body of a model instance."""
+        return self.model.geometries(instance)
+
+    def set_allowed_contacts(self, pairs: Iterable[tuple[str, str]]) -> None:
+        """Ignore collisions between these model instances until the next call.
+
+        Used near the grasp and place instants: the gripper around the part it grasps, the
+        carried part on its seat or host, or in its tray home.
+        """
+        manager = self.scene_graph.collision_filter_manager(self.sg_context)
+        for declaration_id in self._transient:
+            manager.RemoveDeclaration(declaration_id)
+        self._transient = []
+        pairs = tuple(pairs)
+        if pairs:
+            declaration = CollisionFilterDeclaration()
+            for a, b in pairs:
+                declaration.ExcludeBetween(self.geometries(a), self.geometries(b))
+            self._transient.append(manager.ApplyTransient(declaration))
+
+    def set_positions(self, q: np.ndarray) -> None:
+        """Put the UR3 at q."""
+        self.plant.SetPositions(self.plant_context, q)
+
+    def tcp_pose(self, q: np.ndarray) -> RigidTransform:
+        """X_W_tcp at q."""
+        self.set_positions(q)
+        return self.tcp_frame.CalcPoseInWorld(self.plant_context)
+
+    def min_distance(self, q: np.ndarray, max_distance: float = 0.1) -> tuple[float, str]:
+        """Smallest signed distance between the robot (+ carried part) and anything else at q.
+
+        Returns (distance, "a vs b" with body names); (max_distance, "") when nothing is closer.
+        """
+        self.set_positions(q)
+        query = self.scene_graph.get_query_output_port().Eval(self.sg_context)
+        inspector = query.inspector()
+        best, pair = max_distance, ""
+        for p in query.ComputeSignedDistancePairwiseClosestPoints(max_distance):
+            if p.distance >= best:
+                continue
+            body_a = self.plant.GetBodyFromFrameId(inspector.GetFrameId(p.id_A))
+            body_b = self.plant.GetBodyFromFrameId(inspector.GetFrameId(p.id_B))
+            robot = self.model.robot_bodies
+            if int(body_a.index()) not in robot and int(body_b.index()) not in robot:
+                continue
+            best, pair = (
+                p.distance,
+                f"{_scoped(self.plant, body_a)} vs {_scoped(self.plant, body_b)}",
+            )
+        return best, pair
+
+
+def _scoped(plant: MultibodyPlant, body) -> str:
+    return f"{plant.GetModelInstanceName(body.model_instance())}::{body.name()}"
+
+
+def _support(shape, direction: np.ndarray) -> float:
+    """max over the shape of direction · p, p in the shape's frame (direction a unit vector)."""
+    d = np.asarray(direction, dtype=float)
+    if isinstance(shape, Box):
+        return float(np.abs(d) @ (0.5 * np.array([shape.width(), shape.depth(), shape.height()])))
+    if isinstance(shape, Sphere):
+        return shape.radius()
+    if isinstance(shape, Cylinder):
+        return shape.radius() * float(np.hypot(d[0], d[1])) + 0.5 * shape.length() * abs(d[2])
+    if isinstance(shape, Capsule):
+        return shape.radius() + 0.5 * shape.length() * abs(d[2])
+    if isinstance(shape, Ellipsoid):
+        return float(np.linalg.norm(np.array([shape.a(), shape.b(), shape.c()]) * d))
+    if isinstance(shape, Convex | Mesh):
+        vertices = np.asarray(shape.GetConvexHull().vertices())
+        return float(np.max(np.asarray(vertices).reshape(-1, 3) @ d))
+    raise TypeError(f"no support function for {type(shape).__name__}")
+
+
+def load_cell_frames() -> CellFrames:
+    """Read seat, tray and part frames (and the parts' grasp widths) from the cell's models."""
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
+    add_cell(plant)
+    plant.Finalize()
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    plant_context = plant.GetMyContextFromRoot(context)
+
+    def world_pose(model: str, frame: str) -> RigidTransform:
+        instance = plant.GetModelInstanceByName(model)
+        return plant.GetFrameByName(frame, instance).CalcPoseInWorld(plant_context)
+
+    plate = plant.GetModelInstanceByName(PLATE)
+    seats = {}
+    k = 1
+    while plant.HasFrameNamed(f"slot_{k}", plate):
+        seats[k] = world_pose(PLATE, f"slot_{k}")
+        k += 1
+    homes, rows, grasps, widths = {}, {}, {}, {}
+    finger_axis = _finger_axis_in_tcp(plant, plant_context)
+    inspector = scene_graph.model_inspector()
+    for instances in PART_INSTANCES.values():
+        for instance in instances:
+            homes[instance] = world_pose(TRAY, f"home_{instance}")
+            model = plant.GetModelInstanceByName(instance)
+            body = part_body(plant, instance)
+            grasp = plant.GetFrameByName("grasp", model)
+            if grasp.body().index() != body.index():
+                raise ValueError(f"{instance}::grasp is not on the part's body")
+            X_part_grasp = grasp.GetFixedPoseInBodyFrame()
+            grasps[instance] = X_part_grasp
+            rows[instance] = {
+                j: plant.GetFrameByName(f"row_{j}", model).GetFixedPoseInBodyFrame()
+                for j in (1, 2, 3, 4, 5, 6, 7, 8, 9)
+                if plant.HasFrameNamed(f"row_{j}", model)
+            }
+            axis_part = X_part_grasp.rotation() @ finger_axis
+            hi, lo = -np.inf, np.inf
+            for g in plant.GetCollisionGeometriesForBody(body):
+                X_body_g = inspector.GetPoseInFrame(g)
+                R = X_body_g.rotation().inverse()
+                offset = float(axis_part @ (X_body_g.translation() - X_part_grasp.translation()))
+                shape = inspector.GetShape(g)
+                hi = np.maximum(hi, offset + _support(shape, R @ axis_part))
+                lo = np.minimum(lo, offset - _support(shape, R @ -axis_part))
+            widths[instance] = float(hi - lo)
+    return CellFrames(seats, homes, rows, grasps, widths)
+
+
+def _finger_axis_in_tcp(plant: MultibodyPlant, plant_context) -> np.ndarray:
+    """Unit direction the left finger opens along, in the tcp frame."""
+    gripper = plant.GetModelInstanceByName(GRIPPER)
+    joint = plant.GetJointByName(FINGER_JOINTS[0], gripper)
+    X_W_J = joint.frame_on_parent().CalcPoseInWorld(plant_context)
+    X_W_tcp = plant.GetFrameByName(TCP, gripper).CalcPoseInWorld(plant_context)
+    axis_W = X_W_J.rotation() @ np.asarray(joint.translation_axis())
+    axis = X_W_tcp.rotation().inverse() @ axis_W
+    return axis / np.linalg.norm(axis)

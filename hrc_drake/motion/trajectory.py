@@ -1,0 +1,235 @@
+"""Joint-space paths (KTO through free space, IK along straight lines) and their retiming."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from pydrake.math import BsplineBasis, KnotVectorType, RigidTransform
+from pydrake.multibody.inverse_kinematics import MinimumDistanceLowerBoundConstraint
+from pydrake.multibody.optimization import CalcGridPointsOptions, Toppra
+from pydrake.planning import KinematicTrajectoryOptimization
+from pydrake.solvers import SnoptSolver
+from pydrake.trajectories import BsplineTrajectory, PiecewisePolynomial, Trajectory
+
+from hrc_drake.motion.ik import solve_ik
+from hrc_drake.motion.options import MotionOptions
+from hrc_drake.motion.scene import PlanningScene
+
+
+class PlanningError(RuntimeError):
+    """A path between two reachable postures could not be found or retimed."""
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """The UR3's joint limits used by the optimisers and the validator."""
+
+    lower: np.ndarray
+    upper: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+
+    @staticmethod
+    def of(scene: PlanningScene, options: MotionOptions) -> JointLimits:
+        """From the model (positions, velocities) and the options (acceleration)."""
+        plant = scene.plant
+        velocity = np.asarray(plant.GetVelocityUpperLimits(), dtype=float)
+        if not np.all(np.isfinite(velocity)):
+            raise ValueError("the UR3 model gives no velocity limits")
+        n = plant.num_positions()
+        return JointLimits(
+            np.asarray(plant.GetPositionLowerLimits(), dtype=float),
+            np.asarray(plant.GetPositionUpperLimits(), dtype=float),
+            velocity,
+            np.full(n, options.joint_acceleration_limit),
+        )
+
+
+def path_clearance(scene: PlanningScene, path: Trajectory, samples: int) -> tuple[float, str]:
+    """Smallest robot distance along `path` at `samples` evenly spaced times, with its pair."""
+    worst, pair = np.inf, ""
+    for t in np.linspace(path.start_time(), path.end_time(), samples):
+        d, p = scene.min_distance(path.value(t).ravel())
+        if d < worst:
+            worst, pair = d, p
+    return worst, pair
+
+
+def free_path(
+    scene: PlanningScene,
+    q_start: np.ndarray,
+    q_end: np.ndarray,
+    limits: JointLimits,
+    options: MotionOptions,
+) -> BsplineTrajectory:
+    """A collision-free KTO path between two postures at rest.
+
+    Solved with SNOPT first without collision constraints; when that path comes closer than the
+    clearance plus margin, solved again from it with minimum-distance constraints sampled densely.
+    """
+    n = len(q_start)
+    order = 4
+    trajopt = KinematicTrajectoryOptimization(n, options.kto_control_points, spline_order=order)
+    prog = trajopt.get_mutable_prog()
+    trajopt.AddDurationCost(1.0)
+    trajopt.AddPathLengthCost(1.0)
+    trajopt.AddPositionBounds(limits.lower, limits.upper)
+    trajopt.AddVelocityBounds(-limits.velocity, limits.velocity)
+    trajopt.AddAccelerationBounds(-limits.acceleration, limits.acceleration)
+    trajopt.AddDurationConstraint(0.05, 30.0)
+    trajopt.AddPathPositionConstraint(q_start, q_start, 0.0)
+    trajopt.AddPathPositionConstraint(q_end, q_end, 1.0)
+    zero = np.zeros(n)
+    trajopt.AddPathVelocityConstraint(zero, zero, 0.0)
+    trajopt.AddPathVelocityConstraint(zero, zero, 1.0)
+    guess_duration = float(np.max(np.abs(q_end - q_start) / limits.velocity)) * 2.0 + 0.5
+    basis = BsplineBasis(
+        order, options.kto_control_points, KnotVectorType.kClampedUniform, 0.0, guess_duration
+    )
+    control = [
+        (q_start + (q_end - q_start) * a).reshape(n, 1)
+        for a in np.linspace(0.0, 1.0, options.kto_control_points)
+    ]
+    trajopt.SetInitialGuess(BsplineTrajectory(basis, control))
+    solver = SnoptSolver()
+    result = solver.Solve(prog)
+    if not result.is_success():
+        raise PlanningError(f"KTO without collisions failed: {result.get_solution_result()}")
+    path = trajopt.ReconstructTrajectory(result)
+    target = options.clearance + options.clearance_margin
+    worst, pair = path_clearance(scene, path, options.check_samples)
+    if worst >= target:
+        return path
+    samples = options.collision_samples
+    for _ in range(2):
+        constraint = MinimumDistanceLowerBoundConstraint(
+            scene.plant, target, scene.plant_context, None, 0.02
+        )
+        for s in np.linspace(0.0, 1.0, samples):
+            trajopt.AddPathPositionConstraint(constraint, s)
+        trajopt.SetInitialGuess(path)
+        result = solver.Solve(prog)
+        if result.is_success():
+            path = trajopt.ReconstructTrajectory(result)
+            worst, pair = path_clearance(scene, path, options.check_samples)
+            if worst >= options.clearance:
+                return path
+        samples *= 2
+    raise PlanningError(
+        f"KTO with collision constraints failed ({result.get_solution_result()}); "
+        f"closest pair {pair} at {worst:.4f} m"
+    )
+
+
+def straight_waypoints(
+    scene: PlanningScene,
+    q_start: np.ndarray,
+    X_W_end: RigidTransform,
+    options: MotionOptions,
+    *,
+    task: str,
+    waypoint: str,
+) -> list[np.ndarray]:
+    """Postures moving the tcp on a straight line from its pose at q_start to X_W_end.
+
+    Each IK waypoint is seeded with, and pulled towards, the previous one.
+    """
+    X_W_start = scene.tcp_pose(q_start)
+    p0, p1 = X_W_start.translation(), X_W_end.translation()
+    qs = [np.asarray(q_start, dtype=float)]
+    for a in np.linspace(0.0, 1.0, options.straight_steps + 1)[1:]:
+        X = RigidTransform(X_W_end.rotation(), p0 + a * (p1 - p0))
+        qs.append(
+            solve_ik(
+                scene,
+                X,
+                [qs[-1]],
+                qs[-1],
+                min_distance=options.clearance,
+                task=task,
+                waypoint=waypoint,
+            )
+        )
+    return qs
+
+
+def spline_through(qs: list[np.ndarray]) -> PiecewisePolynomial:
+    """A cubic path over s ∈ [0, 1] through postures, at rest at both ends (so reversing the
+    postures reverses the path)."""
+    breaks = np.linspace(0.0, 1.0, len(qs))
+    zero = np.zeros(len(qs[0]))
+    return PiecewisePolynomial.CubicWithContinuousSecondDerivatives(
+        breaks, np.column_stack(qs), zero, zero
+    )
+
+
+@dataclass(frozen=True)
+class Retimed:
+    """A path with Toppra's time-optimal parameterisation, slowed to `fraction` of the limits.
+
+    Attributes:
+        path: the geometric path q(s).
+        s_of_t: Toppra's time-optimal s(t) over [0, optimal_duration].
+        fraction: the plan runs at time t = t_optimal / fraction.
+        reverse: run the path backwards (symmetric limits: the reversed time-optimal motion is
+            the time-optimal motion of the reversed path).
+    """
+
+    path: Trajectory
+    s_of_t: PiecewisePolynomial
+    fraction: float
+    reverse: bool = False
+
+    @property
+    def optimal_duration(self) -> float:
+        """Toppra's time-optimal duration under the full limits."""
+        return self.s_of_t.end_time() - self.s_of_t.start_time()
+
+    @property
+    def duration(self) -> float:
+        """The duration the plan uses."""
+        return self.optimal_duration / self.fraction
+
+    @property
+    def end(self) -> np.ndarray:
+        """The posture at the end of the motion."""
+        s = self.path.start_time() if self.reverse else self.path.end_time()
+        return np.asarray(self.path.value(s)).ravel()
+
+    def reversed(self) -> Retimed:
+        """The same motion run backwards."""
+        return replace(self, reverse=not self.reverse)
+
+    def sample(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(q, q̇) at plan time t ∈ [0, duration]."""
+        if self.reverse:
+            q, q_dot = replace(self, reverse=False).sample(self.duration - t)
+            return q, -q_dot
+        t_opt = self.s_of_t.start_time() + float(
+            np.clip(t * self.fraction, 0, self.optimal_duration)
+        )
+        s = float(self.s_of_t.value(t_opt)[0, 0])
+        s = float(np.clip(s, self.path.start_time(), self.path.end_time()))
+        s_dot = float(self.s_of_t.EvalDerivative(t_opt, 1)[0, 0])
+        q = self.path.value(s).ravel()
+        q_dot = self.path.EvalDerivative(s, 1).ravel() * s_dot * self.fraction
+        return q, q_dot
+
+
+def retime(
+    scene: PlanningScene, path: Trajectory, limits: JointLimits, options: MotionOptions
+) -> Retimed:
+    """Toppra's time-optimal parameterisation under joint velocity and acceleration limits and
+    the tcp speed limit; the plan then runs it uniformly slower by `options.limit_fraction`."""
+    grid_options = CalcGridPointsOptions()
+    grid_options.min_points = 40
+    grid = Toppra.CalcGridPoints(path, grid_options)
+    toppra = Toppra(path, scene.plant, grid)
+    toppra.AddJointVelocityLimit(-limits.velocity, limits.velocity)
+    toppra.AddJointAccelerationLimit(-limits.acceleration, limits.acceleration)
+    toppra.AddFrameTranslationalSpeedLimit(scene.tcp_frame, options.tcp_speed_limit)
+    s_of_t = toppra.SolvePathParameterization()
+    if s_of_t is None:
+        raise PlanningError("Toppra found no time parameterisation of the path")
+    return Retimed(path, s_of_t, options.limit_fraction)
