@@ -316,10 +316,13 @@ def square_sdf() -> str:
 
 
 # Tray layout, tray frame at its underside centre: (name, x, y, yaw, boss x offsets in the part).
+# The fingers close along each part's y, i.e. the tray's x: the square has one half to itself and
+# the two ovals lie end to end on the other, so each part leaves room for the 18 mm fingers and
+# the opening gap on both sides (the motion layer's tray_workaround.ROOMY_TRAY_XY).
 TRAY_HOMES = [
-    ("home_square_flange", -0.090, 0.0, math.pi / 2, [-SLOT_PITCH / 2, SLOT_PITCH / 2]),
-    ("home_oval_flange_1", 0.0, 0.0, math.pi / 2, [0.0]),
-    ("home_oval_flange_2", 0.090, 0.0, math.pi / 2, [0.0]),
+    ("home_square_flange", -0.070, 0.0, math.pi / 2, [-SLOT_PITCH / 2, SLOT_PITCH / 2]),
+    ("home_oval_flange_1", 0.060, -0.040, math.pi / 2, [0.0]),
+    ("home_oval_flange_2", 0.060, 0.040, math.pi / 2, [0.0]),
 ]
 TRAY_RIM = 0.006
 

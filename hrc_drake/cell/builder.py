@@ -12,14 +12,28 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.common.yaml import yaml_load_typed
-from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role, RoleAssign
-from pydrake.math import RigidTransform
+from pydrake.geometry import (
+    ClippingRange,
+    ColorRenderCamera,
+    DepthRange,
+    DepthRenderCamera,
+    MakeRenderEngineVtk,
+    Meshcat,
+    MeshcatVisualizer,
+    MeshcatVisualizerParams,
+    RenderCameraCore,
+    RenderEngineVtkParams,
+    Role,
+    RoleAssign,
+)
+from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.parsing import LoadModelDirectives, ProcessModelDirectives
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
 from pydrake.multibody.tree import JointActuatorIndex, MultibodyConstraintId, PdControllerGains
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import MatrixGain, Saturation
+from pydrake.systems.sensors import CameraInfo, RgbdSensor
 
 from hrc_drake.cell.slot_monitor import (
     DEFAULT_HOST_TAGS,
@@ -74,6 +88,8 @@ class CellScenario:
         ur3_initial_positions: the arm's initial joint positions (UR3_JOINTS order) [rad].
         rg2_initial_opening: the gripper's initial opening between the finger insides [m].
         meshcat: start a Meshcat and add a visualizer.
+        camera: add a VTK renderer and an RGB camera looking at the cell from the operator's
+            side; its image is the exported output `camera.rgb_image`.
         recording_path: if set (and meshcat), `simulate_cell` saves the run there as HTML.
         simulation_duration: default duration of `simulate_cell` [s].
     """
@@ -86,6 +102,7 @@ class CellScenario:
     ur3_initial_positions: list[float] = field(default_factory=lambda: list(UR3_READY))
     rg2_initial_opening: float = 0.08
     meshcat: bool = False
+    camera: bool = False
     recording_path: str | None = None
     simulation_duration: float = 0.5
 
@@ -425,6 +442,8 @@ def build_cell(scenario: CellScenario | None = None) -> CellStation:
         builder.ExportOutput(plant.get_state_output_port(ur3), "ur3.state")
         builder.ExportOutput(plant.get_state_output_port(rg2), "rg2.state")
 
+    if scenario.camera:
+        _add_camera(builder, scene_graph)
     meshcat = visualizer = None
     if scenario.meshcat:
         meshcat = Meshcat()
@@ -449,6 +468,41 @@ def build_cell(scenario: CellScenario | None = None) -> CellStation:
         visualizer=visualizer,
         part_symbols=symbols,
     )
+
+
+CAMERA_POSITION = (0.95, -0.75, 0.80)
+CAMERA_TARGET = (0.17, -0.06, 0.14)
+
+
+def _look_at(position, target) -> RigidTransform:
+    # Camera frame of RgbdSensor: +z forward, +x right, +y down in the image.
+    p, t = np.asarray(position), np.asarray(target)
+    z = (t - p) / np.linalg.norm(t - p)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return RigidTransform(RotationMatrix(np.column_stack([x, y, z])), p)
+
+
+def _add_camera(builder: DiagramBuilder, scene_graph, width: int = 1024, height: int = 640):
+    scene_graph.AddRenderer("vtk", MakeRenderEngineVtk(RenderEngineVtkParams()))
+    core = RenderCameraCore(
+        "vtk",
+        CameraInfo(width=width, height=height, fov_y=np.radians(40)),
+        ClippingRange(0.05, 5.0),
+        RigidTransform(),
+    )
+    sensor = builder.AddNamedSystem(
+        "camera",
+        RgbdSensor(
+            scene_graph.world_frame_id(),
+            _look_at(CAMERA_POSITION, CAMERA_TARGET),
+            ColorRenderCamera(core),
+            DepthRenderCamera(core, DepthRange(0.06, 4.9)),
+        ),
+    )
+    builder.Connect(scene_graph.get_query_output_port(), sensor.query_object_input_port())
+    builder.ExportOutput(sensor.color_image_output_port(), "camera.rgb_image")
 
 
 def _actuators(plant: MultibodyPlant, model) -> list:
@@ -508,6 +562,7 @@ def _atomic_write(path: Path, text: str) -> Path:
     try:
         with os.fdopen(fd, "w") as f:
             f.write(text)
+        os.chmod(tmp, 0o644)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -1,0 +1,154 @@
+"""Benchmark of the cell: build time and real-time factor of a settling run, settings side by side.
+
+    python benchmarks/bench_cell.py [--duration 1.0] [--repeats 2]
+
+Run on demand (not part of pytest). The settling run drops the three parts of state 11 (F3, S12,
+F01) a few mm above their seats and simulates `duration` seconds; the arm, when present, is held
+by its PD actuators. Writes benchmarks/reports/cell.md.
+"""
+
+import argparse
+import importlib.metadata
+import os
+import platform
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import MultibodyPlantConfig
+
+from hrc_drake.cell import CellScenario, build_cell, simulate_cell
+
+REPORT = Path(__file__).resolve().parent / "reports" / "cell.md"
+STATE_11 = {"oval_flange_1": "F3", "square_flange": "S12", "oval_flange_2": "F01"}
+
+
+@dataclass(frozen=True)
+class Setting:
+    name: str
+    include_robot: bool
+    time_step: float
+    approximation: str = "sap"
+    meshcat: bool = False
+
+
+SETTINGS = (
+    Setting("lean: workpieces only, 5 ms", False, 5e-3),
+    Setting("full: arm held, 5 ms (default)", True, 5e-3),
+    Setting("full, lagged approximation", True, 5e-3, "lagged"),
+    Setting("full, 2 ms", True, 2e-3),
+    Setting("full, 5 ms, Meshcat recording", True, 5e-3, meshcat=True),
+)
+
+
+def _scenario(setting: Setting) -> CellScenario:
+    return CellScenario(
+        plant_config=MultibodyPlantConfig(
+            time_step=setting.time_step,
+            contact_model="hydroelastic_with_fallback",
+            discrete_contact_approximation=setting.approximation,
+            contact_surface_representation="polygon",
+        ),
+        include_robot=setting.include_robot,
+        meshcat=setting.meshcat,
+    )
+
+
+def run(setting: Setting, duration: float) -> dict:
+    """Build once, then one settling run: build time, wall time, RTF and what the monitor read."""
+    t0 = time.perf_counter()
+    station = build_cell(_scenario(setting))
+    build = time.perf_counter() - t0
+    context = station.create_default_context()
+    plant, plant_context = station.plant, station.plant.GetMyContextFromRoot(context)
+    for part, X in station.placement_poses(STATE_11).items():
+        lift = 0.006 if part == "oval_flange_2" else 0.003
+        plant.SetFreeBodyPose(
+            plant_context, station.part_body(part), X @ RigidTransform([0.0005, -0.0005, lift])
+        )
+    recording = None
+    if setting.meshcat:
+        recording = Path(tempfile.mkdtemp()) / "settling.html"
+    t0 = time.perf_counter()
+    simulate_cell(station, context, duration, recording_path=recording)
+    wall = time.perf_counter() - t0
+    speed = max(
+        float(
+            np.linalg.norm(plant.EvalBodySpatialVelocityInWorld(plant_context, b).translational())
+        )
+        for b in (station.part_body(p) for p in STATE_11)
+    )
+    tokens = station.configuration(context).tokens()
+    return {
+        "build": build,
+        "wall": wall,
+        "rtf": duration / wall,
+        "speed": speed,
+        "read": "ok" if tokens == frozenset(STATE_11.values()) else "+".join(sorted(tokens)),
+    }
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
+    with os.fdopen(fd, "w") as f:
+        f.write(text)
+    os.chmod(tmp, 0o644)
+    os.replace(tmp, path)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run every setting `repeats` times; report the best real-time factor of each."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--duration", type=float, default=1.0)
+    parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--out", type=Path, default=REPORT)
+    args = parser.parse_args(argv)
+    rows = []
+    for setting in SETTINGS:
+        runs = [run(setting, args.duration) for _ in range(args.repeats)]
+        best = max(runs, key=lambda r: r["rtf"])
+        best["build"] = min(r["build"] for r in runs)
+        rows.append((setting, best))
+        print(
+            f"{setting.name:38s} build {best['build']:.2f} s  RTF {best['rtf']:.2f}  "
+            f"max part speed {best['speed'] * 1000:.2f} mm/s  read {best['read']}"
+        )
+    lines = [
+        "# Cell benchmark",
+        "",
+        f"`python benchmarks/bench_cell.py --duration {args.duration} --repeats {args.repeats}`"
+        f" — drake {importlib.metadata.version('drake')}, "
+        f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}.",
+        "",
+        f"Settling run: the parts of state 11 (F3, S12, F01) let go 3–6 mm above their seats, "
+        f"{args.duration} s simulated; hydroelastic_with_fallback, polygon surfaces. RTF = "
+        f"simulated / wall time, best of {args.repeats}; build = `build_cell` wall time, best of "
+        f"{args.repeats}; speed = fastest part at the end; read = SlotMonitor tokens equal "
+        "{F3, S12, F01}.",
+        "",
+        "Why `sap` is the default although `lagged` runs faster here: in a harder drop (1 mm off, "
+        "1° tilt, 3 mm above slot 1) the 67 g oval flange never comes to rest under `lagged` or "
+        "`similar` at 5 ms (0.4 N of its 0.66 N weight carried, ~9 mm/s residual velocity after "
+        "2 s, pose frozen in the seat), and rests exactly under `sap`.",
+        "",
+        "| setting | time step | approximation | build [s] | RTF | part speed at end [mm/s] "
+        "| read |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for setting, r in rows:
+        lines.append(
+            f"| {setting.name} | {setting.time_step:g} | {setting.approximation} | "
+            f"{r['build']:.2f} | {r['rtf']:.2f} | {r['speed'] * 1000:.2f} | {r['read']} |"
+        )
+    _atomic_write(args.out, "\n".join(lines) + "\n")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
