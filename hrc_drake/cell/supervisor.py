@@ -1,0 +1,316 @@
+"""The Supervisor: at every task boundary it reads the cell, asks the policy, and drives the robot.
+
+At a task boundary the Supervisor
+1. reads the SlotMonitor's configuration and, with the history it has seen, the MDP state;
+2. asks the Policy for the next task and proposes it on the HRI;
+3. takes the operator's answer (confirm, or another task: the slot the operator indicates);
+4. asks the motion layer for the plan and drives the UR3 and the gripper through it: pick,
+   carry, place, hold while the operator bolts, release, retreat (or, for `undo`, take the part
+   placed last back to the tray);
+5. after the task, learns what really happened from the SlotMonitor — the part may sit in
+   another seat than planned — and only then moves the MDP state on.
+
+Grasping and bolting are weld constraints of the plant. A Drake system cannot write another
+system's parameters from its events, so the Supervisor publishes the welds it wants on its
+`welds` port, and the cell runner (`hrc_drake.cell.run`) applies them between simulation steps.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+from hrc_drake.cell.slot_monitor import CellConfiguration, PartStatus
+from hrc_drake.motion.plan import Plan, Stage
+from hrc_drake.tasks.decide import Operator
+from hrc_drake.tasks.graph import StateKind, StateSpace
+from hrc_drake.tasks.policy import Policy
+from hrc_drake.tasks.tokens import UNDO
+
+# (configuration, task, last token) -> Plan
+Planner = Callable[[frozenset[str], str, str | None], Plan]
+
+
+class Mode(enum.Enum):
+    """What the Supervisor is doing."""
+
+    DECIDE = "decide"  # at a task boundary
+    EXECUTE = "execute"  # following a plan
+    SETTLE = "settle"  # plan done; let the parts come to rest before reading the cell
+    DONE = "done"  # a terminal state is reached
+    FAILED = "failed"  # cannot go on (the reason is in `error`)
+
+
+@dataclass(frozen=True)
+class TaskRecord:
+    """One task as it happened."""
+
+    step: int
+    state: tuple[str, ...]
+    proposed: str
+    indicated: str  # the task the operator confirmed or indicated instead
+    observed: str  # the task the cell shows was done (from contact), or "undo"
+    next_state: tuple[str, ...]
+    part: str
+    start_time: float
+    end_time: float
+
+
+@dataclass(frozen=True)
+class Weld:
+    """A weld constraint the Supervisor wants active: a grasp, or a bolt at a seat."""
+
+    kind: str  # "grasp" | "bolt"
+    part: str
+    seat: str = ""  # bolt: the seat key (token on the plate, row frame on a host part)
+
+
+@dataclass(frozen=True)
+class SupervisorStatus:
+    """The Supervisor's abstract state (one value, replaced at every update)."""
+
+    mode: Mode = Mode.DECIDE
+    state: tuple[str, ...] = ()
+    step: int = 0
+    plan: Plan | None = None
+    plan_start: float = 0.0
+    pending: tuple[str, str, str] | None = None  # (proposed, indicated, part) of the task
+    tokens_before: frozenset[str] = frozenset()
+    settle_until: float = 0.0
+    welds: frozenset[Weld] = frozenset()
+    bolt_seat: str | None = None
+    q_hold: tuple[float, ...] = ()
+    opening_hold: float = 0.0
+    history: tuple[TaskRecord, ...] = ()
+    error: str | None = None
+    events: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def visited(self) -> list[tuple[str, ...]]:
+        """The MDP states visited, from the start."""
+        return [(), *(r.next_state for r in self.history)] if self.history else [self.state]
+
+
+class Supervisor(LeafSystem):
+    """Task-level state machine of the cell (see the module docstring).
+
+    Input ports: `slot_configuration` (CellConfiguration). Output ports: `ur3.desired_state`
+    (12), `rg2.desired_opening` (1), `welds` (frozenset[Weld]), `status` (SupervisorStatus).
+    """
+
+    def __init__(
+        self,
+        space: StateSpace,
+        policy: Policy,
+        operator: Operator,
+        planner: Planner,
+        home: np.ndarray,
+        home_opening: float,
+        period: float = 0.02,
+        settle_time: float = 0.3,
+        max_steps: int = 30,
+    ):
+        super().__init__()
+        policy.matches(space.spec)
+        self._space, self._policy, self._operator, self._planner = space, policy, operator, planner
+        self._settle_time, self._max_steps = settle_time, max_steps
+        self._config_port = self.DeclareAbstractInputPort(
+            "slot_configuration", AbstractValue.Make(CellConfiguration())
+        )
+        initial = SupervisorStatus(
+            q_hold=tuple(float(x) for x in home), opening_hold=float(home_opening)
+        )
+        self._status_index = self.DeclareAbstractState(AbstractValue.Make(initial))
+        self.DeclareVectorOutputPort("ur3.desired_state", BasicVector(12), self._calc_arm)
+        self.DeclareVectorOutputPort("rg2.desired_opening", BasicVector(1), self._calc_gripper)
+        self.DeclareAbstractOutputPort(
+            "welds", lambda: AbstractValue.Make(frozenset()), self._calc_welds
+        )
+        self.DeclareAbstractOutputPort(
+            "status", lambda: AbstractValue.Make(SupervisorStatus()), self._calc_status
+        )
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
+
+    # --- outputs -------------------------------------------------------------------------
+    def _status(self, context) -> SupervisorStatus:
+        return context.get_abstract_state(self._status_index).get_value()
+
+    def _calc_arm(self, context, output) -> None:
+        s = self._status(context)
+        if s.mode == Mode.EXECUTE and s.plan is not None:
+            tau = float(np.clip(context.get_time() - s.plan_start, 0.0, s.plan.duration))
+            q = s.plan.trajectory.value(tau).ravel()
+            v = s.plan.trajectory.EvalDerivative(tau, 1).ravel()
+            if tau >= s.plan.duration:
+                v = np.zeros_like(v)
+            output.SetFromVector(np.concatenate([q, v]))
+        else:
+            output.SetFromVector(np.concatenate([s.q_hold, np.zeros(len(s.q_hold))]))
+
+    def _calc_gripper(self, context, output) -> None:
+        s = self._status(context)
+        if s.mode == Mode.EXECUTE and s.plan is not None:
+            output.SetFromVector([s.plan.gripper_opening(context.get_time() - s.plan_start)])
+        else:
+            output.SetFromVector([s.opening_hold])
+
+    def _calc_welds(self, context, output) -> None:
+        output.set_value(self._status(context).welds)
+
+    def _calc_status(self, context, output) -> None:
+        output.set_value(self._status(context))
+
+    # --- the state machine ---------------------------------------------------------------
+    def _update(self, context, state) -> None:
+        status = self._status(context)
+        config = self._config_port.Eval(context)
+        now = context.get_time()
+        try:
+            if status.mode == Mode.DECIDE:
+                status = self._decide(status, config, now)
+            elif status.mode == Mode.EXECUTE:
+                status = self._execute(status, config, now)
+            elif status.mode == Mode.SETTLE and now >= status.settle_until:
+                status = self._observe(status, config, now)
+        except SupervisorError as err:
+            status = replace(status, mode=Mode.FAILED, error=str(err), plan=None)
+        state.get_mutable_abstract_state(self._status_index).set_value(status)
+
+    def _decide(self, s: SupervisorStatus, config: CellConfiguration, now: float):
+        space = self._space
+        tokens = config.tokens()
+        index = space.index(s.state)
+        if tokens != space.configuration(index):
+            raise SupervisorError(
+                f"the cell shows {sorted(tokens)} but state {list(s.state)} holds "
+                f"{sorted(space.configuration(index))}"
+            )
+        if space.kind[index] == StateKind.TERMINAL:
+            return replace(s, mode=Mode.DONE, events=(*s.events, f"{now:.2f}: done"))
+        if s.step >= self._max_steps:
+            raise SupervisorError(f"no terminal state after {s.step} tasks")
+        step = s.step + 1
+        proposed = self._policy.next_task(s.state)
+        indicated = self._operator(step, s.state, proposed)
+        feasible = {t for t, _ in space.tasks(index)}
+        if indicated not in feasible:
+            raise SupervisorError(
+                f"step {step}: the operator indicated {indicated!r}, not feasible in "
+                f"{list(s.state)} (feasible: {sorted(feasible)})"
+            )
+        last = s.state[-1] if s.state else None
+        try:
+            plan = self._planner(tokens, indicated, last)
+        except (RuntimeError, ValueError) as err:  # UnreachableError, PlanningError, bad input
+            raise SupervisorError(
+                f"step {step}: no plan for {indicated} from {sorted(tokens)}: {err}"
+            ) from err
+        placement = config.placement(plan.instance)
+        expected = PartStatus.SEATED if indicated == UNDO else PartStatus.TRAY
+        if placement.status != expected:
+            raise SupervisorError(
+                f"step {step}: {plan.instance} should be {expected.value} for {indicated}, the "
+                f"cell shows it {placement.status.value}"
+            )
+        welds = s.welds
+        event = f"{now:.2f}: step {step} proposes {proposed}, operator indicates {indicated}"
+        return replace(
+            s,
+            mode=Mode.EXECUTE,
+            step=step,
+            plan=plan,
+            plan_start=now,
+            pending=(proposed, indicated, plan.instance),
+            tokens_before=tokens,
+            welds=welds,
+            bolt_seat=None,
+            events=(*s.events, event),
+        )
+
+    def _execute(self, s: SupervisorStatus, config: CellConfiguration, now: float):
+        plan = s.plan
+        tau = now - s.plan_start
+        part = plan.instance
+        grasp, welds = Weld("grasp", part), set(s.welds)
+        grasped_at = plan.segment(Stage.GRASP).end
+        bolt_seat = s.bolt_seat
+        if grasped_at <= tau < plan.t_release:
+            welds.add(grasp)
+            # Taking a part back: unbolt it once it is held.
+            welds -= {w for w in welds if w.kind == "bolt" and w.part == part}
+        if tau >= plan.t_release:
+            welds.discard(grasp)
+            if plan.task != UNDO and bolt_seat is None:
+                # The operator has bolted the part where it really sits (read from contact).
+                placement = config.placement(part)
+                if placement.status == PartStatus.SEATED and placement.seats:
+                    bolt_seat = placement.token if placement.host is None else placement.seats[0]
+                    welds.add(Weld("bolt", part, bolt_seat))
+                else:
+                    bolt_seat = ""
+        s = replace(s, welds=frozenset(welds), bolt_seat=bolt_seat)
+        if tau >= plan.duration:
+            q_end = tuple(float(x) for x in plan.trajectory.value(plan.duration).ravel())
+            return replace(
+                s,
+                mode=Mode.SETTLE,
+                settle_until=now + self._settle_time,
+                q_hold=q_end,
+                opening_hold=plan.gripper_opening(plan.duration),
+                plan=None,
+            )
+        return s
+
+    def _observe(self, s: SupervisorStatus, config: CellConfiguration, now: float):
+        space = self._space
+        proposed, indicated, part = s.pending
+        tokens = config.tokens()
+        added, removed = tokens - s.tokens_before, s.tokens_before - tokens
+        if indicated == UNDO:
+            if added or removed != {s.state[-1]}:
+                raise SupervisorError(
+                    f"after undo of {s.state[-1]} the cell shows {sorted(tokens)} (removed "
+                    f"{sorted(removed)}, added {sorted(added)})"
+                )
+            observed, next_state = UNDO, s.state[:-1]
+        else:
+            if removed or len(added) != 1:
+                raise SupervisorError(
+                    f"after {indicated} the cell shows {sorted(tokens)}: {part} is "
+                    f"{config.placement(part).status.value}, not in a seat"
+                )
+            (observed,) = added
+            next_state = (*s.state, observed)
+            if observed not in {t for t, _ in space.tasks(space.index(s.state))}:
+                raise SupervisorError(
+                    f"the cell shows {observed} placed, not a feasible task from {list(s.state)}"
+                )
+        record = TaskRecord(
+            step=s.step,
+            state=s.state,
+            proposed=proposed,
+            indicated=indicated,
+            observed=observed,
+            next_state=next_state,
+            part=part,
+            start_time=s.plan_start,
+            end_time=now,
+        )
+        event = f"{now:.2f}: cell shows {observed}; state {' '.join(next_state) or '(start)'}"
+        return replace(
+            s,
+            mode=Mode.DECIDE,
+            state=next_state,
+            pending=None,
+            history=(*s.history, record),
+            events=(*s.events, event),
+        )
+
+
+class SupervisorError(RuntimeError):
+    """The supervisor cannot go on."""

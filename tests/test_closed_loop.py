@@ -1,0 +1,75 @@
+"""The closed-loop cell: every Table 2 row through the full diagram, read back from physics."""
+
+import dataclasses
+
+import pytest
+
+from hrc_drake.cell.run import RunSettings, run_scenario, shared_planner
+from hrc_drake.hri.scenario import load_scenario, table2_scenarios
+from hrc_drake.tasks.graph import StateKind, generate_states
+from hrc_drake.tasks.spec import load_spec
+
+pytestmark = pytest.mark.slow
+
+ROWS = table2_scenarios()
+
+
+@pytest.fixture(scope="module")
+def space():
+    return generate_states(load_spec())
+
+
+def _terminal_configurations(space):
+    return {
+        space.configuration(s) for s in range(space.n_states) if space.kind[s] == StateKind.TERMINAL
+    }
+
+
+@pytest.mark.parametrize("row", ROWS, ids=[r.name for r in ROWS])
+def test_table2_row_in_the_cell(row, space):
+    result = run_scenario(row, settings=RunSettings.lean())
+    assert result.error is None
+    assert result.names == list(row.minimum_effort)
+    assert result.done and result.final_kind == "terminal"
+    # The final configuration as contact shows it is a terminal one, and the one reached.
+    assert result.final_tokens in _terminal_configurations(space)
+    assert result.final_tokens == frozenset(result.states[-1])
+    assert result.collisions == []
+    # The operator's deviations are the scenario's; the cell shows what was really done.
+    for task in result.tasks:
+        assert task.indicated == row.script.get(task.step, task.proposed)
+        assert task.observed == task.indicated
+
+
+def test_stochastic_operator_ends_terminal(space):
+    scenario = load_scenario("stochastic-mistakes")
+    result = run_scenario(scenario, settings=RunSettings.lean())
+    assert result.error is None and result.done
+    assert result.final_tokens in _terminal_configurations(space)
+    assert any(t.indicated != t.proposed for t in result.tasks), "the operator never deviated"
+    assert result.collisions == []
+
+
+def test_state_comes_from_contact_not_from_the_operator(space):
+    """The operator indicates F02 but the part really lands in F03: the cell state says F03."""
+    motion = shared_planner(RunSettings.lean().motion_options())
+
+    def misplacing_planner(configuration, task, last):
+        if task == "F02" and "S23" in configuration:
+            return dataclasses.replace(motion.plan_task(configuration, "F03"), task="F02")
+        return motion.plan_task(configuration, task, last_token=last)
+
+    row7 = load_scenario("row7-forces-9")  # operator indicates F02 at step 3
+    result = run_scenario(row7, settings=RunSettings.lean(), planner=misplacing_planner)
+    assert result.error is None
+    assert result.tasks[2].indicated == "F02" and result.tasks[2].observed == "F03"
+    assert result.names == ["1", "2", "7", "10"]
+
+
+def test_recording_is_a_self_contained_html(tmp_path):
+    path = tmp_path / "row5.html"
+    result = run_scenario("row5-forces-5", settings=RunSettings.lean(), record=path)
+    assert result.done and result.recording == path
+    text = path.read_text()
+    assert "<html" in text.lower() and len(text) > 1_000_000
+    assert [p.name for p in tmp_path.iterdir()] == ["row5.html"]
