@@ -290,6 +290,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--policy")
     p.add_argument("--record", type=Path, default=None, help="Meshcat HTML recording to write")
     p.add_argument("--lean", action="store_true", help="fast settings (tests, previews)")
+    p.add_argument("--still", type=Path, default=None, help="PNG of the cell at --still-time")
+    p.add_argument("--still-time", type=float, default=10.0, help="simulated time of --still")
     return parser
 
 

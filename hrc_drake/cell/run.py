@@ -14,6 +14,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.analysis import Simulator
@@ -187,10 +188,12 @@ def run_scenario(
     record: str | Path | None = None,
     progress: bool = False,
     planner: Planner | None = None,
+    still: tuple[float, str | Path] | None = None,
 ) -> RunResult:
     """Run one operator scenario through the full cell diagram until a terminal state.
 
-    `planner` replaces the motion layer's `plan_task` (tests use it to misplace a part)."""
+    `planner` replaces the motion layer's `plan_task` (tests use it to misplace a part).
+    `still=(t, path)` saves a camera image of the cell at simulated time t as a PNG."""
     scenario = load_scenario(scenario) if isinstance(scenario, str) else scenario
     settings = settings or RunSettings.lean()
     space = generate_states(load_spec(scenario.assembly))
@@ -212,6 +215,7 @@ def run_scenario(
             ur3_initial_positions=[float(x) for x in motion.q_home],
             rg2_initial_opening=home_opening,
             mesh_resolution_hint=settings.mesh_resolution_hint,
+            camera=still is not None,
         )
     )
     builder = DiagramBuilder()
@@ -277,6 +281,9 @@ def run_scenario(
             active = wanted
             handled = status.pending[2] if status.pending else None
             watch.check(contacts.Eval(station_context), handled, root.get_time())
+            if still is not None and root.get_time() >= still[0]:
+                _save_still(station, station_context, Path(still[1]))
+                still = None
             if progress:
                 bar.update(round(root.get_time(), 1), 0, float(status.step))
             if status.mode in (Mode.DONE, Mode.FAILED):
@@ -317,13 +324,29 @@ def run_scenario(
     )
 
 
+def _save_still(station: CellStation, station_context, path: Path) -> None:
+    import io
+
+    import matplotlib.image
+
+    from hrc_drake.tasks.policy import atomic_write_bytes
+
+    image = station.diagram.GetOutputPort("camera.rgb_image").Eval(station_context)
+    buffer = io.BytesIO()
+    matplotlib.image.imsave(buffer, np.array(image.data, copy=True)[:, :, :3], format="png")
+    atomic_write_bytes(path, buffer.getvalue())
+
+
 def simulate_command(args) -> int:
     """`hrc-drake simulate`: run a scenario headless, print the states, write the recording."""
     scenario = load_scenario(args.scenario)
     space = generate_states(load_spec(args.assembly or scenario.assembly))
     policy = load_policy(args.policy, space) if args.policy else None
     settings = RunSettings.lean() if args.lean else RunSettings.full()
-    result = run_scenario(scenario, policy, settings, record=args.record, progress=True)
+    still = (args.still_time, args.still) if args.still else None
+    result = run_scenario(
+        scenario, policy, settings, record=args.record, progress=True, still=still
+    )
     if args.json:
         json.dump(result.to_json(), sys.stdout, indent=1)
         sys.stdout.write("\n")
