@@ -151,11 +151,17 @@ class _Timeline:
 class MotionPlanner:
     """Plans the robot's motion for tasks of the flange case, caching scenes and plans.
 
-    Plans start and end at the home posture `q_home`. Scenes are cached by layout; plans by
+    Plans start and end at the home posture `q_home` (default: the tcp pointing down 0.2 m above
+    the seats, halfway between the plate and the tray). Scenes are cached by layout; plans by
     (configuration, task, last_token for undo).
     """
 
-    def __init__(self, options: MotionOptions | None = None, frames: CellFrames | None = None):
+    def __init__(
+        self,
+        options: MotionOptions | None = None,
+        frames: CellFrames | None = None,
+        q_home: np.ndarray | None = None,
+    ):
         self.options = options or MotionOptions()
         self.frames = frames or load_cell_frames()
         self._models: dict[str | None, SceneModel] = {}
@@ -164,7 +170,7 @@ class MotionPlanner:
         empty = self.scene(Layout.of({}, None, MAX_OPENING))
         self.limits = JointLimits.of(empty, self.options)
         self._rng = np.random.default_rng(self.options.seed)
-        self.q_home = self._home(empty)
+        self.q_home = self._home(empty) if q_home is None else np.asarray(q_home, dtype=float)
 
     def scene(self, layout: Layout) -> PlanningScene:
         """The planning scene of a layout (built once)."""

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from pydrake.common.eigen_geometry import Quaternion
@@ -55,6 +55,7 @@ class CellFrames:
         rows: host instance -> row index j -> X_host_row_j.
         grasps: part instance -> X_part_grasp.
         widths: part instance -> width between the fingers when held [m].
+        tray: X_W_tray, the tray's body frame.
     """
 
     seats: Mapping[int, RigidTransform]
@@ -62,22 +63,17 @@ class CellFrames:
     rows: Mapping[str, Mapping[int, RigidTransform]]
     grasps: Mapping[str, RigidTransform]
     widths: Mapping[str, float]
+    tray: RigidTransform = field(default_factory=RigidTransform)
     part_instances: Mapping[str, tuple[str, ...]] = field(default_factory=lambda: PART_INSTANCES)
     host_tags: Mapping[str, str] = field(default_factory=lambda: HOST_TAGS)
 
     def with_seat(self, slot: int, X_W_slot: RigidTransform) -> CellFrames:
         """A copy with base slot `slot` moved to `X_W_slot` (tests: an unreachable seat)."""
-        seats = dict(self.seats)
-        seats[slot] = X_W_slot
-        return CellFrames(
-            seats,
-            self.homes,
-            self.rows,
-            self.grasps,
-            self.widths,
-            self.part_instances,
-            self.host_tags,
-        )
+        return replace(self, seats={**self.seats, slot: X_W_slot})
+
+    def with_homes(self, homes: Mapping[str, RigidTransform]) -> CellFrames:
+        """A copy with some parts' tray homes (X_W_part) replaced."""
+        return replace(self, homes={**self.homes, **homes})
 
     def symbol_of(self, instance: str) -> str:
         """The spec symbol of a part instance."""

@@ -371,7 +371,8 @@ def load_cell_frames() -> CellFrames:
                 hi = np.maximum(hi, offset + _support(shape, R @ axis_part))
                 lo = np.minimum(lo, offset - _support(shape, R @ -axis_part))
             widths[instance] = float(hi - lo)
-    return CellFrames(seats, homes, rows, grasps, widths)
+    tray = plant.GetBodyByName(TRAY, plant.GetModelInstanceByName(TRAY))
+    return CellFrames(seats, homes, rows, grasps, widths, tray.EvalPoseInWorld(plant_context))
 
 
 def _finger_axis_in_tcp(plant: MultibodyPlant, plant_context) -> np.ndarray:

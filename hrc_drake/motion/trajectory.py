@@ -83,18 +83,27 @@ def free_path(
     zero = np.zeros(n)
     trajopt.AddPathVelocityConstraint(zero, zero, 0.0)
     trajopt.AddPathVelocityConstraint(zero, zero, 1.0)
-    guess_duration = float(np.max(np.abs(q_end - q_start) / limits.velocity)) * 2.0 + 0.5
-    basis = BsplineBasis(
-        order, options.kto_control_points, KnotVectorType.kClampedUniform, 0.0, guess_duration
-    )
-    control = [
-        (q_start + (q_end - q_start) * a).reshape(n, 1)
-        for a in np.linspace(0.0, 1.0, options.kto_control_points)
-    ]
-    trajopt.SetInitialGuess(BsplineTrajectory(basis, control))
+    base_duration = float(np.max(np.abs(q_end - q_start) / limits.velocity)) * 2.0 + 0.5
     solver = SnoptSolver()
-    result = solver.Solve(prog)
-    if not result.is_success():
+    # KTO is nonconvex (duration × velocity and acceleration bounds); when SNOPT stalls from one
+    # guess, a slower or faster one usually converges.
+    for scale in (1.0, 2.0, 0.5, 4.0):
+        basis = BsplineBasis(
+            order,
+            options.kto_control_points,
+            KnotVectorType.kClampedUniform,
+            0.0,
+            base_duration * scale,
+        )
+        control = [
+            (q_start + (q_end - q_start) * a).reshape(n, 1)
+            for a in np.linspace(0.0, 1.0, options.kto_control_points)
+        ]
+        trajopt.SetInitialGuess(BsplineTrajectory(basis, control))
+        result = solver.Solve(prog)
+        if result.is_success():
+            break
+    else:
         raise PlanningError(f"KTO without collisions failed: {result.get_solution_result()}")
     path = trajopt.ReconstructTrajectory(result)
     target = options.clearance + options.clearance_margin
