@@ -48,13 +48,20 @@ class CheckPhase:
 
 @dataclass(frozen=True)
 class MotionTiming:
-    """One arm motion of a plan: KTO's own duration (free-space motions only), Toppra's
-    time-optimal duration on the same path under the same limits, and the duration planned."""
+    """One arm motion of a plan, over [start, start + duration].
+
+    Attributes:
+        kto_duration: KTO's own duration (free-space motions; None for straight lines).
+        optimal_duration: Toppra's time-optimal duration on the same path, same limits.
+        collision_constraints: KTO needed its minimum-distance constraints.
+    """
 
     name: str
-    kto_duration: float | None
-    optimal_duration: float
+    start: float
     duration: float
+    optimal_duration: float
+    kto_duration: float | None = None
+    collision_constraints: bool = False
 
 
 @dataclass(frozen=True)

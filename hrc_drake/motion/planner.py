@@ -101,7 +101,7 @@ class _Timeline:
         self.gripper_times = [0.0]
         self.gripper_values = [opening]
 
-    def move(self, name: str, retimed: Retimed, kto: float | None) -> None:
+    def move(self, name: str, retimed: Retimed, free: tuple | None = None) -> None:
         n = max(2, int(np.ceil(retimed.duration * self.rate)) + 1)
         for t in np.linspace(0.0, retimed.duration, n)[1:]:
             q, qdot = retimed.sample(t)
@@ -110,8 +110,11 @@ class _Timeline:
             self.qdot.append(qdot)
         self.q[-1] = retimed.end
         self.qdot[-1] = np.zeros(len(self.q[-1]))
+        kto, constrained = (None, False) if free is None else (free[0].end_time(), free[1])
+        self.motions.append(
+            MotionTiming(name, self.t, retimed.duration, retimed.optimal_duration, kto, constrained)
+        )
         self.t += retimed.duration
-        self.motions.append(MotionTiming(name, kto, retimed.optimal_duration, retimed.duration))
 
     def wait(self, duration: float) -> None:
         if duration <= 0.0:
@@ -304,11 +307,11 @@ class MotionPlanner:
 
         line = _Timeline(q_home, 2.0 * opts.validation_rate, opening)
         t0 = line.t
-        line.move("home to pre-grasp", timed(pick, approach), approach.end_time())
+        line.move("home to pre-grasp", timed(pick, approach[0]), approach)
         line.phase(t0, pick.layout, ())
         t1 = line.t
         descend = timed(pick, spline_through(down))
-        line.move("down to grasp", descend, None)
+        line.move("down to grasp", descend)
         line.phase(t1, pick.layout, hand)
         line.stage(Stage.APPROACH, t0)
 
@@ -318,16 +321,16 @@ class MotionPlanner:
         line.stage(Stage.GRASP, t0)
 
         t0 = line.t
-        line.move("lift", descend.reversed(), None)
+        line.move("lift", descend.reversed())
         line.phase(t0, carry.layout, lift_allowed)
         t1 = line.t
-        line.move("carry to pre-place", timed(carry, transfer), transfer.end_time())
+        line.move("carry to pre-place", timed(carry, transfer[0]), transfer)
         line.phase(t1, carry.layout, ())
         line.stage(Stage.CARRY, t0)
 
         t0 = line.t
         lowering = timed(carry, spline_through(lower))
-        line.move("down to place", lowering, None)
+        line.move("down to place", lowering)
         line.stage(Stage.PLACE, t0)
         t_in_place = line.t
         line.wait(opts.undo_hold_time if task == UNDO else opts.hold_time)
@@ -338,10 +341,10 @@ class MotionPlanner:
         line.gripper(opening, opts.gripper_time)
         line.stage(Stage.RELEASE, t_release)
         t0 = line.t
-        line.move("retreat up", lowering.reversed(), None)
+        line.move("retreat up", lowering.reversed())
         line.phase(t_release, placed.layout, release)
         t1 = line.t
-        line.move("pre-place to home", timed(placed, back), back.end_time())
+        line.move("pre-place to home", timed(placed, back[0]), back)
         line.phase(t1, placed.layout, ())
         line.stage(Stage.RETREAT, t0)
 

@@ -62,11 +62,13 @@ def free_path(
     q_end: np.ndarray,
     limits: JointLimits,
     options: MotionOptions,
-) -> BsplineTrajectory:
-    """A collision-free KTO path between two postures at rest.
+) -> tuple[BsplineTrajectory, bool]:
+    """A collision-free KTO path between two postures at rest, and whether it needed collision
+    constraints.
 
     Solved with SNOPT first without collision constraints; when that path comes closer than the
-    clearance plus margin, solved again from it with minimum-distance constraints sampled densely.
+    clearance plus margin (checked at `check_samples` points), solved again from it with
+    minimum-distance constraints (bound: clearance + margin) at `collision_samples` points.
     """
     n = len(q_start)
     order = 4
@@ -109,7 +111,7 @@ def free_path(
     target = options.clearance + options.clearance_margin
     worst, pair = path_clearance(scene, path, options.check_samples)
     if worst >= target:
-        return path
+        return path, False
     samples = options.collision_samples
     for _ in range(2):
         constraint = MinimumDistanceLowerBoundConstraint(
@@ -123,7 +125,7 @@ def free_path(
             path = trajopt.ReconstructTrajectory(result)
             worst, pair = path_clearance(scene, path, options.check_samples)
             if worst >= options.clearance:
-                return path
+                return path, True
         samples *= 2
     raise PlanningError(
         f"KTO with collision constraints failed ({result.get_solution_result()}); "
