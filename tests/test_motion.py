@@ -16,8 +16,10 @@ from hrc_drake.motion import (
     resolve_task,
     validate_plan,
 )
+from hrc_drake.motion.ik import solve_ik
 from hrc_drake.motion.poses import part_pose, tcp_pose
-from hrc_drake.motion.scene import load_cell_frames
+from hrc_drake.motion.scene import Layout, load_cell_frames
+from hrc_drake.motion.trajectory import free_path, path_clearance
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.spec import load_spec
 from hrc_drake.tasks.tokens import UNDO
@@ -151,6 +153,33 @@ def test_a_seat_inside_the_table_fails_on_minimum_distance(planner):
     with pytest.raises(UnreachableError, match="minimum distance") as error:
         planner.plan_task(frozenset(), "F2")
     assert error.value.constraint == "minimum distance"
+
+
+def test_kto_adds_distance_constraints_when_the_direct_path_collides(planner):
+    # Tcp 25 mm above the seats, from over slot 1 to past the square on slots 2-3: the square
+    # stands in the way of any path that keeps that height.
+    scene = planner.scene(Layout.of({"S23": "square_flange"}, None, 0.061))
+    R = scene.tcp_pose(planner.q_home).rotation()
+    seat = planner.frames.seats[1].translation()
+
+    def posture(y):
+        X = RigidTransform(R, [seat[0], y, seat[2] + 0.025])
+        return solve_ik(
+            scene,
+            X,
+            [planner.q_home],
+            planner.q_home,
+            min_distance=0.012,
+            task="test",
+            waypoint="end",
+        )
+
+    q0, q1 = posture(seat[1]), posture(0.15)
+    assert scene.min_distance((q0 + q1) / 2)[0] < 0.0
+    path, constrained = free_path(scene, q0, q1, planner.limits, planner.options)
+    assert constrained
+    clearance, pair = path_clearance(scene, path, 400)
+    assert clearance >= planner.options.clearance, pair
 
 
 def test_validation_reports_a_broken_limit(planner):
