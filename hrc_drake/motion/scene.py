@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from pydrake.geometry import (
@@ -26,7 +25,6 @@ from pydrake.geometry import (
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import (
     LoadModelDirectives,
-    Parser,
     ProcessModelDirectives,
 )
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
@@ -35,49 +33,24 @@ from pydrake.systems.framework import DiagramBuilder
 
 from hrc_drake import resources
 from hrc_drake.motion.poses import PART_INSTANCES, CellFrames, part_pose
+from hrc_drake.robot_models import RG2_FINGER_JOINTS, RG2_MAX_OPENING, UR3_JOINTS, make_parser
 
 ROBOT = "ur3"
 GRIPPER = "rg2"
 TCP = "tcp"
-UR3_JOINTS = (
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-)
-FINGER_JOINTS = ("left_finger_joint", "right_finger_joint")
-MAX_OPENING = 0.110
+FINGER_JOINTS = RG2_FINGER_JOINTS
+MAX_OPENING = RG2_MAX_OPENING
 PLATE = "base_plate"
 TRAY = "tray"
 # Wrist links sit right against the gripper mount; their capsules may touch it (calibration).
 _WRIST_LINKS = ("wrist_1_link", "wrist_2_link", "wrist_3_link")
 
 
-def make_parser(plant: MultibodyPlant) -> Parser:
-    """The models package's parser (the robot engineer's, when it is there)."""
-    try:
-        from hrc_drake.robot_models import make_parser as robot_parser
-    except ImportError:
-        parser = Parser(plant)
-        parser.package_map().AddPackageXml(str(resources.models_dir() / "package.xml"))
-        return parser
-    return robot_parser(plant)
-
-
-def _directive_files() -> list[Path]:
-    models = resources.models_dir()
-    return [models / "cell.dmd.yaml", models / "cell" / "robot.dmd.yaml"]
-
-
 def add_cell(plant: MultibodyPlant) -> None:
-    """Add the cell's models (robot, gripper, table, plate, tray, parts) from the directives."""
+    """Add the cell's models (robot, gripper, table, plate, tray, parts): models/cell.dmd.yaml."""
     parser = make_parser(plant)
-    cell, robot = _directive_files()
-    ProcessModelDirectives(LoadModelDirectives(str(cell)), plant, parser)
-    if not plant.HasModelInstanceNamed(ROBOT):
-        ProcessModelDirectives(LoadModelDirectives(str(robot)), plant, parser)
+    directives = LoadModelDirectives(str(resources.models_dir() / "cell.dmd.yaml"))
+    ProcessModelDirectives(directives, plant, parser)
 
 
 def part_body(plant: MultibodyPlant, instance: str):
@@ -165,10 +138,12 @@ class SceneModel:
                 plant.WeldFrames(frame, body.body_frame(), RigidTransform())
                 self.part_frames[instance] = frame
         plant.Finalize()
-        if plant.num_positions() != len(UR3_JOINTS):
+        ur3 = plant.GetModelInstanceByName(ROBOT)
+        starts = [plant.GetJointByName(j, ur3).position_start() for j in UR3_JOINTS]
+        if plant.num_positions() != len(UR3_JOINTS) or starts != list(range(len(UR3_JOINTS))):
             raise ValueError(
-                f"planning plant has {plant.num_positions()} positions; expected the UR3's 6 "
-                "(is a part or the gripper left free in the directives?)"
+                f"planning plant has {plant.num_positions()} positions, UR3 joints at {starts}; "
+                f"expected exactly {UR3_JOINTS} in that order (is a part left free?)"
             )
         self.plant = plant
         self.scene_graph = scene_graph
