@@ -156,7 +156,8 @@ class MotionPlanner:
 
     Plans start and end at the home posture `q_home` (default: the tcp pointing down 0.2 m above
     the seats, halfway between the plate and the tray). Scenes are cached by layout; plans by
-    (configuration, task, last_token for undo).
+    (task, which instance sits at each token, the token moved): for the flange case, that is
+    (configuration, task) plus, for undo, the last task.
     """
 
     def __init__(
@@ -212,22 +213,20 @@ class MotionPlanner:
             seeds.append(nominal + self._rng.normal(0.0, 0.3, size=len(nominal)))
         return seeds
 
-    def _ik(self, scene, X, previous, task, waypoint, min_distance=None) -> np.ndarray:
-        opts = self.options
+    def _ik(self, scene, X, previous, task, waypoint) -> np.ndarray:
         nominal = self._toward(scene, X.translation())
+        margin = self.options.clearance + self.options.clearance_margin
         return solve_ik(
             scene,
             X,
             self._seeds(scene, X, previous),
             nominal,
-            min_distance=opts.clearance + opts.clearance_margin
-            if min_distance is None
-            else min_distance,
+            min_distance=margin,
             task=task,
             waypoint=waypoint,
         )
 
-    def _support(self, token: str | None, tokens: Iterable[str]) -> str:
+    def _support(self, token: str | None) -> str:
         """The model instance a part rests on at `token` (None: the tray)."""
         if token is None:
             return TRAY
@@ -246,15 +245,16 @@ class MotionPlanner:
         a pose is out of reach, PlanningError when no path is found.
         """
         configuration = frozenset(configuration)
-        key = (configuration, task, last_token if task == UNDO else None)
+        move = resolve_task(self.frames, configuration, task, last_token)
+        # Which part sits where, and which one moves: all a plan depends on.
+        key = (task, frozenset(move.before.items()), move.source)
         if key not in self._plans:
             self._rng = np.random.default_rng(self.options.seed)
-            self._plans[key] = self._plan(configuration, task, last_token)
+            self._plans[key] = self._plan(configuration, move)
         return self._plans[key]
 
-    def _plan(self, configuration: frozenset[str], task: str, last_token: str | None) -> Plan:
-        opts, frames = self.options, self.frames
-        move = resolve_task(frames, configuration, task, last_token)
+    def _plan(self, configuration: frozenset[str], move: TaskMove) -> Plan:
+        opts, frames, task = self.options, self.frames, move.task
         part = move.instance
         width = frames.widths[part]
         opening = float(min(MAX_OPENING, width + 2.0 * opts.finger_gap))
@@ -278,8 +278,8 @@ class MotionPlanner:
         placed = self.scene(Layout.of(move.after, None, opening))
         # Near the grasp and place instants the fingertips come within a few mm of the surface
         # the part rests on (they hold a 10 mm part), and the part touches it.
-        source = self._support(move.source, move.before)
-        target = self._support(move.target, move.after)
+        source = self._support(move.source)
+        target = self._support(move.target)
         hand = ((GRIPPER, part), (GRIPPER, source))
         lift_allowed = ((part, source), (GRIPPER, source))
         place_allowed = ((part, target), (GRIPPER, target))
