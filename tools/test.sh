@@ -9,7 +9,8 @@ python3 -m venv .venv
 .venv/bin/ruff check .
 .venv/bin/ruff format --check .
 set +e
-.venv/bin/python -m pytest "$@"
+# Two workers: the closed-loop physics runs are most of the time and the machine has two cores.
+.venv/bin/python -m pytest -n 2 --dist worksteal "$@"
 rc=$?
 set -e
 if [ "$rc" -eq 5 ]; then
