@@ -21,6 +21,7 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import MultibodyPlantConfig
 
+from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell import CellScenario, build_cell, simulate_cell
 
 REPORT = Path(__file__).resolve().parent / "reports" / "cell.md"
@@ -92,15 +93,6 @@ def run(setting: Setting, duration: float) -> dict:
     }
 
 
-def _atomic_write(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    os.chmod(tmp, 0o644)
-    os.replace(tmp, path)
-
-
 def main(argv: list[str] | None = None) -> int:
     """Run every setting `repeats` times; report the best real-time factor of each."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -145,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
             f"| {setting.name} | {setting.time_step:g} | {setting.approximation} | "
             f"{r['build']:.2f} | {r['rtf']:.2f} | {r['speed'] * 1000:.2f} | {r['read']} |"
         )
-    _atomic_write(args.out, "\n".join(lines) + "\n")
+    atomic_write_text(args.out, "\n".join(lines) + "\n")
     print(f"wrote {args.out}")
     return 0
 

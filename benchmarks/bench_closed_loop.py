@@ -15,9 +15,9 @@ import argparse
 import time
 from pathlib import Path
 
+from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.run import RunSettings, run_scenario
 from hrc_drake.hri.scenario import table2_scenarios
-from hrc_drake.tasks.policy import atomic_write_text
 
 HERE = Path(__file__).resolve().parent
 

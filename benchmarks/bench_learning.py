@@ -16,6 +16,7 @@ import sys
 from collections import Counter
 from pathlib import Path
 
+from hrc_drake.atomic import atomic_write_text
 from hrc_drake.hri.operator import ScriptedOperator
 from hrc_drake.hri.scenario import table2_scenarios
 from hrc_drake.progress import ProgressLine
@@ -23,7 +24,7 @@ from hrc_drake.tasks.decide import DecisionError, minimum_effort_violations, run
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.learn import FullSchedule, PaperSchedule, train
 from hrc_drake.tasks.mdp import build_mdp
-from hrc_drake.tasks.policy import atomic_write_text, policy_from_choices
+from hrc_drake.tasks.policy import policy_from_choices
 from hrc_drake.tasks.spec import load_spec
 
 HERE = Path(__file__).resolve().parent

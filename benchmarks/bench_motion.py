@@ -16,16 +16,16 @@ import importlib.metadata
 import os
 import platform
 import statistics
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-from pydrake.multibody.optimization import CalcGridPointsOptions, Toppra
 from pydrake.trajectories import PiecewisePolynomial
 
+from hrc_drake.atomic import atomic_write_text
 from hrc_drake.motion import MotionPlanner, Plan, check_plan
 from hrc_drake.motion.scene import MAX_OPENING, Layout
+from hrc_drake.motion.trajectory import time_optimal
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.spec import load_spec
 
@@ -50,12 +50,7 @@ def _optimal_motion_time(planner: MotionPlanner, plan: Plan) -> float:
         path = PiecewisePolynomial.CubicWithContinuousSecondDerivatives(
             s[keep], q[:, keep], periodic_end_condition=False
         )
-        grid = Toppra.CalcGridPoints(path, CalcGridPointsOptions())
-        toppra = Toppra(path, scene.plant, grid)
-        toppra.AddJointVelocityLimit(-limits.velocity, limits.velocity)
-        toppra.AddJointAccelerationLimit(-limits.acceleration, limits.acceleration)
-        toppra.AddFrameTranslationalSpeedLimit(scene.tcp_frame, options.tcp_speed_limit)
-        s_of_t = toppra.SolvePathParameterization()
+        s_of_t = time_optimal(scene, path, limits, options)
         if s_of_t is None:
             return float("nan")
         total += s_of_t.end_time() - s_of_t.start_time()
@@ -67,14 +62,6 @@ def _drake_version() -> str:
         return importlib.metadata.version("drake")
     except importlib.metadata.PackageNotFoundError:
         return "?"
-
-
-def _write_atomic(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    os.replace(tmp, path)
 
 
 def main() -> None:
@@ -176,7 +163,7 @@ def main() -> None:
         *rows,
         "",
     ]
-    _write_atomic(REPORT, "\n".join(lines))
+    atomic_write_text(REPORT, "\n".join(lines))
     print("\n".join(lines[:20]))
 
 

@@ -10,14 +10,14 @@ while recording to Meshcat, and writes the self-contained `Meshcat.StaticHtml()`
 """
 
 import argparse
-import os
+import io
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
 from pydrake.math import RigidTransform
 
+from hrc_drake.atomic import atomic_write_bytes
 from hrc_drake.cell import CellScenario, build_cell, simulate_cell
 
 STATE_11 = {"oval_flange_1": "F3", "square_flange": "S12", "oval_flange_2": "F01"}
@@ -31,12 +31,9 @@ def render_png(out: Path) -> Path:
     context = station.create_default_context()
     image = station.diagram.GetOutputPort("camera.rgb_image").Eval(context)
     rgb = np.array(image.data, copy=True)[:, :, :3]
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=out.name, suffix=".tmp.png")
-    os.close(fd)
-    matplotlib.image.imsave(tmp, rgb)
-    os.replace(tmp, out)
-    return out
+    buffer = io.BytesIO()
+    matplotlib.image.imsave(buffer, rgb, format="png")
+    return atomic_write_bytes(out, buffer.getvalue())
 
 
 def record_settling(out: Path, duration: float) -> Path:

@@ -4,8 +4,6 @@
 ports it exports (see `CellStation`).
 """
 
-import os
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,6 +33,7 @@ from pydrake.systems.framework import Context, Diagram, DiagramBuilder, LeafSyst
 from pydrake.systems.primitives import MatrixGain, Saturation
 from pydrake.systems.sensors import CameraInfo, RgbdSensor
 
+from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.slot_monitor import (
     DEFAULT_HOST_TAGS,
     DEFAULT_PART_SYMBOLS,
@@ -553,21 +552,7 @@ def simulate_cell(
 
 def save_meshcat_html(meshcat: Meshcat, path: str | Path) -> Path:
     """Write `meshcat.StaticHtml()` (a self-contained page) to `path`, atomically."""
-    return _atomic_write(Path(path), meshcat.StaticHtml())
-
-
-def _atomic_write(path: Path, text: str) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return atomic_write_text(path, meshcat.StaticHtml())
 
 
 __all__ = [

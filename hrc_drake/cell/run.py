@@ -329,7 +329,7 @@ def _save_still(station: CellStation, station_context, path: Path) -> None:
 
     import matplotlib.image
 
-    from hrc_drake.tasks.policy import atomic_write_bytes
+    from hrc_drake.atomic import atomic_write_bytes
 
     image = station.diagram.GetOutputPort("camera.rgb_image").Eval(station_context)
     buffer = io.BytesIO()

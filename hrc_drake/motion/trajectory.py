@@ -228,19 +228,31 @@ class Retimed:
         return q, q_dot
 
 
-def retime(
-    scene: PlanningScene, path: Trajectory, limits: JointLimits, options: MotionOptions
-) -> Retimed:
-    """Toppra's time-optimal parameterisation under joint velocity and acceleration limits and
-    the tcp speed limit; the plan then runs it uniformly slower by `options.limit_fraction`."""
+def time_optimal(
+    scene: PlanningScene,
+    path: Trajectory,
+    limits: JointLimits,
+    options: MotionOptions,
+    min_grid_points: int | None = None,
+) -> Trajectory | None:
+    """Toppra's time-optimal s(t) along `path` under the joint velocity and acceleration limits
+    and the tcp speed limit; None if Toppra finds none."""
     grid_options = CalcGridPointsOptions()
-    grid_options.min_points = 40
-    grid = Toppra.CalcGridPoints(path, grid_options)
-    toppra = Toppra(path, scene.plant, grid)
+    if min_grid_points is not None:
+        grid_options.min_points = min_grid_points
+    toppra = Toppra(path, scene.plant, Toppra.CalcGridPoints(path, grid_options))
     toppra.AddJointVelocityLimit(-limits.velocity, limits.velocity)
     toppra.AddJointAccelerationLimit(-limits.acceleration, limits.acceleration)
     toppra.AddFrameTranslationalSpeedLimit(scene.tcp_frame, options.tcp_speed_limit)
-    s_of_t = toppra.SolvePathParameterization()
+    return toppra.SolvePathParameterization()
+
+
+def retime(
+    scene: PlanningScene, path: Trajectory, limits: JointLimits, options: MotionOptions
+) -> Retimed:
+    """Toppra's time-optimal parameterisation (`time_optimal`); the plan then runs it uniformly
+    slower by `options.limit_fraction`."""
+    s_of_t = time_optimal(scene, path, limits, options, min_grid_points=40)
     if s_of_t is None:
         raise PlanningError("Toppra found no time parameterisation of the path")
     return Retimed(path, s_of_t, options.limit_fraction)

@@ -10,9 +10,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
+from hrc_drake.atomic import atomic_write_bytes
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.learn import LearningResult
-from hrc_drake.tasks.policy import atomic_write_bytes
 
 _COLOURS = {
     StateKind.START: "#4caf50",
