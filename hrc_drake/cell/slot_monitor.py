@@ -60,6 +60,10 @@ class CellConfiguration:
 
     placements: tuple[tuple[str, PartPlacement], ...] = ()
 
+    def __deepcopy__(self, memo) -> CellConfiguration:
+        # Immutable: Drake's copies of this abstract value can share it.
+        return self
+
     def placement(self, instance: str) -> PartPlacement:
         """The placement of the part `instance`; KeyError naming the known parts if unknown."""
         for name, placement in self.placements:

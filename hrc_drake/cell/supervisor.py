@@ -90,6 +90,11 @@ class SupervisorStatus:
     error: str | None = None
     events: tuple[str, ...] = field(default_factory=tuple)
 
+    def __deepcopy__(self, memo) -> SupervisorStatus:
+        # Drake copies abstract values at every update and output evaluation; this value is
+        # immutable (its plan's trajectories are never modified), so the copy is itself.
+        return self
+
     @property
     def visited(self) -> list[tuple[str, ...]]:
         """The MDP states visited, from the start."""
