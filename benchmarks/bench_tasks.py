@@ -62,14 +62,11 @@ def policy_lookup_time(repeats: int = 5000) -> tuple[float, float]:
     import timeit
 
     from hrc_drake.tasks.graph import generate_states
-    from hrc_drake.tasks.mdp import build_mdp
-    from hrc_drake.tasks.policy import policy_from_choices
-    from hrc_drake.tasks.solve import solve_exact
+    from hrc_drake.tasks.solve import exact_policy
     from hrc_drake.tasks.spec import load_spec
 
     space = generate_states(load_spec())
-    mdp = build_mdp(space)
-    policy = policy_from_choices(mdp, solve_exact(mdp).choice, "exact")
+    policy = exact_policy(space)
     states = [space.sequence(s) for s in range(space.n_states)]
     table = dict(policy.table)
     calls = repeats * len(states)

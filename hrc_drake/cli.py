@@ -25,7 +25,7 @@ from hrc_drake.tasks.policy import (
     policy_from_choices,
     save_policy,
 )
-from hrc_drake.tasks.solve import solve_exact, tasks_to_finish
+from hrc_drake.tasks.solve import exact_policy, tasks_to_finish
 from hrc_drake.tasks.spec import SpecError, load_spec
 
 EXIT_USAGE = 2
@@ -39,21 +39,10 @@ def _mdp_config(args) -> MdpConfig:
     return MdpConfig(gamma=args.gamma, mistake_prob=args.mistake_prob)
 
 
-def _exact_policy(space: StateSpace, config: MdpConfig) -> Policy:
-    mdp = build_mdp(space, config)
-    solution = solve_exact(mdp)
-    meta = {
-        "gamma": config.gamma,
-        "mistake_prob": config.mistake_prob,
-        "iterations": solution.iterations,
-    }
-    return policy_from_choices(mdp, solution.choice, "exact", meta)
-
-
 def _policy(args, space: StateSpace) -> Policy:
     if getattr(args, "policy", None):
         return load_policy(args.policy, space)
-    return _exact_policy(space, _mdp_config(args))
+    return exact_policy(space, _mdp_config(args))
 
 
 def _print_json(data) -> None:
@@ -99,7 +88,7 @@ def cmd_states(args) -> int:
 def cmd_solve(args) -> int:
     """Solve the MDP exactly and save the policy."""
     space = _space(args)
-    policy = _exact_policy(space, _mdp_config(args))
+    policy = exact_policy(space, _mdp_config(args))
     save_policy(policy, args.out)
     print(f"exact policy for {space.spec.name!r} ({len(policy.table)} states) -> {args.out}")
     return 0

@@ -4,10 +4,11 @@ import dataclasses
 
 import pytest
 
-from hrc_drake.cell.run import RunSettings, exact_policy, run_scenario, shared_planner
+from hrc_drake.cell.run import RunSettings, run_scenario, shared_planner
 from hrc_drake.hri.scenario import load_scenario, table2_scenarios
 from hrc_drake.tasks.decide import run_decisions
 from hrc_drake.tasks.graph import StateKind, generate_states
+from hrc_drake.tasks.solve import exact_policy
 from hrc_drake.tasks.spec import load_spec
 
 pytestmark = pytest.mark.slow

@@ -11,9 +11,7 @@ from hrc_drake.hri.operator import (
 from hrc_drake.hri.scenario import ScenarioError, load_scenario, table2_scenarios
 from hrc_drake.tasks.decide import run_decisions
 from hrc_drake.tasks.graph import StateKind
-from hrc_drake.tasks.mdp import build_mdp
-from hrc_drake.tasks.policy import policy_from_choices
-from hrc_drake.tasks.solve import solve_exact
+from hrc_drake.tasks.solve import exact_policy
 
 
 def test_script_parsing():
@@ -31,8 +29,7 @@ def test_scripted_operator_overrides_only_its_steps():
 
 
 def test_stochastic_operator_always_ends_terminal_and_is_seeded(flange_space):
-    mdp = build_mdp(flange_space)
-    policy = policy_from_choices(mdp, solve_exact(mdp).choice, "exact")
+    policy = exact_policy(flange_space)
     runs = []
     for seed in range(30):
         op = StochasticOperator(flange_space, override_prob=0.3, mistake_prob=0.5, seed=seed)

@@ -8,13 +8,7 @@ from hrc_drake.hri.operator import ScriptedOperator, parse_operator_script
 from hrc_drake.tasks.decide import minimum_effort_violations, run_decisions
 from hrc_drake.tasks.graph import StateKind
 from hrc_drake.tasks.mdp import MdpConfig, Rewards, build_mdp
-from hrc_drake.tasks.policy import policy_from_choices
-from hrc_drake.tasks.solve import solve_exact, tasks_to_finish
-
-
-def _exact(space, config=None):
-    mdp = build_mdp(space, config)
-    return policy_from_choices(mdp, solve_exact(mdp).choice, "exact")
+from hrc_drake.tasks.solve import exact_policy, solve_exact, tasks_to_finish
 
 
 def test_tasks_to_finish_matches_the_spec(flange_space):
@@ -52,12 +46,12 @@ def test_mistake_transitions_as_read_in_the_spec(flange_space, flange_mdp):
     ],
 )
 def test_exact_policy_is_minimum_effort_from_every_state(flange_space, config):
-    assert minimum_effort_violations(flange_space, _exact(flange_space, config)) == {}
+    assert minimum_effort_violations(flange_space, exact_policy(flange_space, config)) == {}
 
 
 @pytest.mark.parametrize(("script", "published", "minimum"), TABLE2)
 def test_table2_rows_follow_the_minimum_effort_column(flange_space, script, published, minimum):
-    policy = _exact(flange_space)
+    policy = exact_policy(flange_space)
     states, _ = run_decisions(flange_space, policy, ScriptedOperator(parse_operator_script(script)))
     names = [flange_space.name(flange_space.index(s)) for s in states]
     assert names == minimum.split()
@@ -84,7 +78,7 @@ def test_task_costs_break_ties_by_duration(flange_space):
         "undo": 4.0,
     }
     config = MdpConfig(rewards=Rewards(task_costs=costs, terminal_bonus=10.0))
-    policy = _exact(flange_space, config)
+    policy = exact_policy(flange_space, config)
     # S23 costs more than S12: start with the sequence that uses S12.
     assert policy.next_task(()) in {"F3", "S12"}
     with pytest.raises(KeyError, match="no entry for 'F1'"):

@@ -34,10 +34,9 @@ from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.planner import MotionPlanner
 from hrc_drake.progress import ProgressLine
 from hrc_drake.robot_models import RG2_MAX_OPENING
-from hrc_drake.tasks.graph import StateKind, StateSpace, generate_states
-from hrc_drake.tasks.mdp import build_mdp
-from hrc_drake.tasks.policy import Policy, load_policy, policy_from_choices
-from hrc_drake.tasks.solve import solve_exact
+from hrc_drake.tasks.graph import StateKind, generate_states
+from hrc_drake.tasks.policy import Policy, load_policy
+from hrc_drake.tasks.solve import exact_policy
 from hrc_drake.tasks.spec import load_spec
 
 ROBOT_INSTANCES = ("ur3", "rg2")
@@ -131,12 +130,6 @@ def shared_planner(options: MotionOptions) -> MotionPlanner:
     if options not in _PLANNERS:
         _PLANNERS[options] = MotionPlanner(options)
     return _PLANNERS[options]
-
-
-def exact_policy(space: StateSpace) -> Policy:
-    """The exact minimum-effort policy of a state space."""
-    mdp = build_mdp(space)
-    return policy_from_choices(mdp, solve_exact(mdp).choice, "exact")
 
 
 class _ContactWatch:
@@ -297,7 +290,7 @@ def run_scenario(
     final_tokens = (
         station.diagram.GetOutputPort("slot_configuration").Eval(station_context).tokens()
     )
-    states = [(), *(t.next_state for t in status.history)]
+    states = status.visited
     try:
         final_kind = space.state_kind(space.index(status.state)).label
     except KeyError:
@@ -373,4 +366,4 @@ def simulate_command(args) -> int:
     return 0 if result.done else 1
 
 
-__all__ = ["RunResult", "RunSettings", "exact_policy", "run_scenario", "shared_planner"]
+__all__ = ["RunResult", "RunSettings", "run_scenario", "shared_planner"]

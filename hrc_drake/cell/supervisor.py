@@ -98,7 +98,7 @@ class SupervisorStatus:
     @property
     def visited(self) -> list[tuple[str, ...]]:
         """The MDP states visited, from the start."""
-        return [(), *(r.next_state for r in self.history)] if self.history else [self.state]
+        return [(), *(r.next_state for r in self.history)]
 
 
 class Supervisor(LeafSystem):
@@ -222,7 +222,6 @@ class Supervisor(LeafSystem):
                 f"step {step}: {plan.instance} should be {expected.value} for {indicated}, the "
                 f"cell shows it {placement.status.value}"
             )
-        welds = s.welds
         event = f"{now:.2f}: step {step} proposes {proposed}, operator indicates {indicated}"
         return replace(
             s,
@@ -232,7 +231,6 @@ class Supervisor(LeafSystem):
             plan_start=now,
             pending=(proposed, indicated, plan.instance),
             tokens_before=tokens,
-            welds=welds,
             bolt_seat=None,
             events=(*s.events, event),
         )

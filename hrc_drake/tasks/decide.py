@@ -15,6 +15,7 @@ import numpy as np
 
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.policy import Policy
+from hrc_drake.tasks.solve import tasks_to_finish
 
 # (decision step from 1, state, robot's proposal) -> the task the operator performs
 Operator = Callable[[int, tuple[str, ...], str], str]
@@ -79,8 +80,6 @@ def minimum_effort_violations(space: StateSpace, policy: Policy) -> dict[tuple[s
     Maps each such state to a short explanation; empty when the policy is minimum-effort from
     every non-terminal state.
     """
-    from hrc_drake.tasks.solve import tasks_to_finish
-
     best = tasks_to_finish(space)
     bad = {}
     for s in np.flatnonzero(space.kind != StateKind.TERMINAL):

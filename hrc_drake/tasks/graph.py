@@ -11,7 +11,7 @@ State ids are canonical: by depth, then by parent, then by task in the spec's to
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cached_property
 
 import networkx as nx
@@ -190,7 +190,6 @@ class StateSpace:
     kind: np.ndarray  # int8 StateKind
     first_child: np.ndarray
     n_children: np.ndarray
-    _index: dict = field(default_factory=dict, repr=False)
 
     @property
     def n_states(self) -> int:
@@ -258,7 +257,7 @@ class StateSpace:
             out.append((UNDO, int(self.parent[state])))
         return out
 
-    def action_label(self, task: str, state: int | None = None) -> str:
+    def action_label(self, task: str) -> str:
         """The paper's name of a task: 'ass' + part symbol, or 'disass'."""
         if task == UNDO:
             return "disass"
@@ -357,10 +356,6 @@ def generate_states(spec: AssemblySpec) -> StateSpace:
     n = len(parent)
     first_child = np.concatenate(first_child_parts).astype(np.int64)
     n_children = np.concatenate(n_children_parts).astype(np.int64)
-    if len(first_child) < n:  # the last level had no children
-        pad = n - len(first_child)
-        first_child = np.concatenate([first_child, np.full(pad, n)])
-        n_children = np.concatenate([n_children, np.zeros(pad, dtype=np.int64)])
     if n_children[0] == 0:
         raise SpecError(f"assembly spec {spec.source}: no task is feasible from the empty base")
     kind = _kinds(spec, table, mask, n_children > 0)

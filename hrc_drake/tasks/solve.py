@@ -15,7 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from hrc_drake.tasks.graph import StateKind, StateSpace
-from hrc_drake.tasks.mdp import SequenceMDP
+from hrc_drake.tasks.mdp import MdpConfig, SequenceMDP, build_mdp
+from hrc_drake.tasks.policy import Policy, policy_from_choices
 
 UNREACHABLE = np.iinfo(np.int64).max // 4
 
@@ -107,3 +108,15 @@ def solve_exact(
         )
     q = q_from_values(mdp, values)
     return Solution(mdp, values, q, greedy_choice(mdp, q), iterations)
+
+
+def exact_policy(space: StateSpace, config: MdpConfig | None = None) -> Policy:
+    """The exact (minimum-effort) policy of `space` under `config` (default MdpConfig())."""
+    mdp = build_mdp(space, config)
+    solution = solve_exact(mdp)
+    meta = {
+        "gamma": mdp.config.gamma,
+        "mistake_prob": mdp.config.mistake_prob,
+        "iterations": solution.iterations,
+    }
+    return policy_from_choices(mdp, solution.choice, "exact", meta)
