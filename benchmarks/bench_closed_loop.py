@@ -16,7 +16,8 @@ import time
 from pathlib import Path
 
 from hrc_drake.atomic import atomic_write_text
-from hrc_drake.cell.run import RunSettings, run_scenario
+from hrc_drake.cell.run import run_scenario
+from hrc_drake.cell.scenario import LEAN
 from hrc_drake.hri.scenario import table2_scenarios
 
 HERE = Path(__file__).resolve().parent
@@ -39,17 +40,16 @@ def main() -> None:
         "planning) | collisions |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    full = RunSettings.full()
     for row in rows:
         print(f"full: {row.name} ...", flush=True)
-        r = run_scenario(row, settings=full)
+        r = run_scenario(row.name)
         ok = r.done and r.names == list(row.minimum_effort)
         lines.append(
             f"| {row.table2_row} | {' '.join(r.names)} | {'yes' if ok else 'NO'} | "
             f"{len(r.tasks)} | {r.sim_time:.1f} | {r.wall_time:.1f} | "
             f"{r.sim_time / r.wall_time:.2f} | {len(r.collisions)} |"
         )
-    again = run_scenario(rows[0], settings=full)
+    again = run_scenario(rows[0].name)
     lines += [
         "",
         f"Row {rows[0].table2_row} again with every plan cached (physics and control "
@@ -57,12 +57,11 @@ def main() -> None:
         f"factor **{again.sim_time / again.wall_time:.2f}**.",
         "",
     ]
-    lean = RunSettings.lean()
     start = time.perf_counter()
     sims = []
     for row in rows:
         print(f"lean: {row.name} ...", flush=True)
-        sims.append(run_scenario(row, settings=lean).sim_time)
+        sims.append(run_scenario(row.name, scenario_text=LEAN).sim_time)
     wall = time.perf_counter() - start
     lines += [
         "## Lean settings (0.5 s holds), as in pytest",

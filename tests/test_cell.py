@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -16,10 +17,12 @@ from hrc_drake.cell import (
     CellScenario,
     PartStatus,
     build_cell,
-    load_scenario,
     simulate_cell,
 )
 from hrc_drake.cell.builder import UR3_READY
+from hrc_drake.cell.scenario import load_cell_scenario, plant_config
+from hrc_drake.cell_models import CellDesign, CellModelError, add_cell_models
+from hrc_drake.hri.scenario import ScenarioError
 from hrc_drake.resources import models_dir
 from hrc_drake.robot_models import add_robot, make_parser
 from hrc_drake.tasks.graph import generate_states
@@ -91,18 +94,18 @@ def _set_parts(station, context, poses: dict[str, RigidTransform]) -> None:
 
 def test_every_model_parses_offline():
     files = sorted((models_dir() / "cell").glob("*.sdf"))
-    assert {f.name for f in files} >= {
-        "table.sdf",
-        "base_plate.sdf",
-        "tray.sdf",
-        "oval_flange.sdf",
-        "square_flange.sdf",
-    }
+    assert {f.name for f in files} >= {"table.sdf"}
     for path in files:
         plant = MultibodyPlant(0.0)
         parser = make_parser(plant)
         assert isinstance(parser.package_map(), PackageMap)
         assert parser.AddModels(str(path)), path
+    # The workpieces are generated from every assembly spec and parse the same way.
+    for spec_file in sorted((models_dir() / "assemblies").glob("*.yaml")):
+        plant = MultibodyPlant(0.0)
+        instances = add_cell_models(plant, CellDesign.of(load_spec(spec_file)))
+        plant.Finalize()
+        assert {"base_plate", "tray", "table", "ur3", "rg2"} <= set(instances), spec_file
 
 
 def test_models_carry_the_convention_frames(workcell):
@@ -125,8 +128,9 @@ def test_whole_cell_builds_with_ports_and_constraints(cell):
     for name in ("plant_state", "contact_results", "body_poses", "slot_configuration"):
         assert diagram.HasOutputPort(name)
     assert set(cell.grasp_constraints) == set(PARTS)
+    rows = ("square_flange/row_1", "square_flange/row_2")
     assert set(cell.bolt_constraints) == {
-        *((oval, key) for oval in PARTS[:2] for key in ("F1", "F2", "F3", "row_1", "row_2")),
+        *((oval, key) for oval in PARTS[:2] for key in ("F1", "F2", "F3", *rows)),
         ("square_flange", "S12"),
         ("square_flange", "S23"),
     }
@@ -257,15 +261,32 @@ def test_held_flange_above_the_plate_is_held_not_seated(cell):
 
 
 def test_scenario_yaml_is_typed_and_checked():
-    scenario = load_scenario(text="include_robot: false\nplant_config: {time_step: 0.002}\n")
-    assert scenario.plant_config.time_step == 0.002
-    assert scenario.plant_config.discrete_contact_approximation == "sap"
-    with pytest.raises(RuntimeError, match="include_robt"):
-        load_scenario(text="include_robt: false\n")
+    scenario = load_cell_scenario(None, "physics: {time_step: 0.002}")
+    assert plant_config(scenario).time_step == 0.002
+    assert plant_config(scenario).discrete_contact_approximation == "sap"
+    with pytest.raises(ScenarioError, match="time_stp"):
+        load_cell_scenario(None, "physics: {time_stp: 0.002}")
+    tamsi = load_cell_scenario(None, "physics: {discrete_contact_approximation: tamsi}")
     with pytest.raises(ValueError, match="SAP-family"):
-        build_cell(load_scenario(text="plant_config: {discrete_contact_approximation: tamsi}\n"))
+        build_cell(CellScenario(include_robot=False, plant_config=plant_config(tamsi)))
     with pytest.raises(ValueError, match="not a part"):
         build_cell(CellScenario(include_robot=False, initial_placements={"flange_9": "F1"}))
+    with pytest.raises(ValueError, match="'F07' is not a placement"):
+        build_cell(CellScenario(include_robot=False, initial_placements={"oval_flange_1": "F07"}))
+    with pytest.raises(ValueError, match="places a S"):
+        build_cell(CellScenario(include_robot=False, initial_placements={"oval_flange_1": "S12"}))
+
+
+def test_a_spec_that_does_not_fit_the_cell_is_refused(tmp_path):
+    spec = load_spec()
+    design = CellDesign.of(spec)
+    missing = CellDesign.of(
+        spec, dataclasses.replace(design.layout, part_models={"F": str(tmp_path / "no.sdf")})
+    )
+    with pytest.raises(CellModelError, match=r"part F: its model file .* does not exist"):
+        build_cell(CellScenario(design=missing, include_robot=False))
+    with pytest.raises(CellModelError, match=r"cell\.part_models names 'Q'"):
+        CellDesign.of(spec, dataclasses.replace(design.layout, part_models={"Q": "x.sdf"}))
 
 
 def test_initial_placements_seat_the_parts(workcell):
@@ -282,5 +303,5 @@ def test_initial_placements_seat_the_parts(workcell):
     context = station.create_default_context()
     simulate_cell(station, context, 0.1)
     assert station.configuration(context).tokens() == {"S23", "F03", "F1"}
-    with pytest.raises(ValueError, match="needs its host"):
+    with pytest.raises(ValueError, match="F01 needs one S over base slot 1"):
         workcell.placement_poses({"oval_flange_1": "F01"})

@@ -4,8 +4,9 @@ import dataclasses
 
 import pytest
 
-from hrc_drake.cell.run import RunSettings, run_scenario, shared_planner
-from hrc_drake.hri.scenario import load_scenario, table2_scenarios
+from hrc_drake.cell.run import run_scenario, shared_planner
+from hrc_drake.cell.scenario import LEAN, load_cell_scenario, motion_options
+from hrc_drake.hri.scenario import table2_scenarios
 from hrc_drake.tasks.decide import run_decisions
 from hrc_drake.tasks.graph import StateKind, generate_states
 from hrc_drake.tasks.solve import exact_policy
@@ -29,7 +30,7 @@ def _terminal_configurations(space):
 
 @pytest.mark.parametrize("row", ROWS, ids=[r.name for r in ROWS])
 def test_table2_row_in_the_cell(row, space):
-    result = run_scenario(row, settings=RunSettings.lean())
+    result = run_scenario(row.name, scenario_text=LEAN)
     assert result.error is None
     assert result.names == list(row.minimum_effort)
     assert result.done and result.final_kind == "terminal"
@@ -44,29 +45,30 @@ def test_table2_row_in_the_cell(row, space):
 
 
 def test_stochastic_operator_ends_terminal(space):
-    scenario = load_scenario("stochastic-mistakes")
-    result = run_scenario(scenario, settings=RunSettings.lean())
+    scenario = load_cell_scenario("stochastic-mistakes", LEAN)
+    result = run_scenario(scenario)
     assert result.error is None and result.done
     assert result.final_tokens in _terminal_configurations(space)
     deviations = [t for t in result.tasks if t.indicated != t.proposed]
     assert any(t.observed in {"F01", "F02", "F03"} for t in deviations), "no misplaced flange"
     assert result.collisions == []
     # Same seed, same run: the physical run visits what the decision loop predicts.
-    predicted, _ = run_decisions(space, exact_policy(space), scenario.operator(space))
+    predicted, _ = run_decisions(space, exact_policy(space), scenario.operator_for(space))
     assert result.states == predicted
 
 
 def test_state_comes_from_contact_not_from_the_operator(space):
     """The operator indicates F02 but the part really lands in F03: the cell state says F03."""
-    motion = shared_planner(RunSettings.lean().motion_options())
+    row7 = load_cell_scenario("row7-forces-9", LEAN)  # operator indicates F02 at step 3
+    motion = shared_planner(motion_options(row7))
 
-    def misplacing_planner(configuration, task, last):
+    def misplacing_planner(configuration, task, last, layout):
         if task == "F02" and "S23" in configuration:
-            return dataclasses.replace(motion.plan_task(configuration, "F03"), task="F02")
-        return motion.plan_task(configuration, task, last_token=last)
+            plan = motion.plan_task(configuration, "F03", layout=layout)
+            return dataclasses.replace(plan, task="F02")
+        return motion.plan_task(configuration, task, last_token=last, layout=layout)
 
-    row7 = load_scenario("row7-forces-9")  # operator indicates F02 at step 3
-    result = run_scenario(row7, settings=RunSettings.lean(), planner=misplacing_planner)
+    result = run_scenario(row7, planner=misplacing_planner)
     assert result.error is None
     assert result.tasks[2].indicated == "F02" and result.tasks[2].observed == "F03"
     assert result.names == ["1", "2", "7", "10"]
@@ -74,7 +76,7 @@ def test_state_comes_from_contact_not_from_the_operator(space):
 
 def test_recording_is_a_self_contained_html(tmp_path):
     path = tmp_path / "row5.html"
-    result = run_scenario("row5-forces-5", settings=RunSettings.lean(), record=path)
+    result = run_scenario("row5-forces-5", record=path, scenario_text=LEAN)
     assert result.done and result.recording == path
     text = path.read_text()
     assert "<html" in text.lower() and len(text) > 1_000_000

@@ -61,9 +61,21 @@ def test_bad_scenarios(tmp_path):
     with pytest.raises(ScenarioError, match="not found; known scenarios"):
         load_scenario("no-such-row")
     path = tmp_path / "s.yaml"
-    path.write_text("name: x\noperator: {script: '1-F3'}\n")
-    with pytest.raises(ScenarioError, match="STEP:TASK"):
+    path.write_text("name: x\noperator: {script: '1:F3'}\n")
+    with pytest.raises(ScenarioError, match=r"operator\.script: unknown key"):
         load_scenario(path)
     path.write_text("name: x\nspeed: 3\n")
-    with pytest.raises(ScenarioError, match="unknown key 'speed'"):
+    with pytest.raises(ScenarioError, match="speed: unknown key"):
+        load_scenario(path)
+    path.write_text("name: x\nexpected: {minimum_efort: ['1']}\n")
+    with pytest.raises(ScenarioError, match=r"expected\.minimum_efort: unknown key"):
+        load_scenario(path)
+    path.write_text("name: x\noperator: {seed: 3.7}\n")
+    with pytest.raises(ScenarioError, match=r"operator\.seed: expected a whole number, got 3\.7"):
+        load_scenario(path)
+    path.write_text("name: x\noperator: {mistake_prob: 1.5}\n")
+    with pytest.raises(ScenarioError, match=r"within \[0, 1\], got 1\.5"):
+        load_scenario(path)
+    path.write_text("name: x\noperator: {deviations: [{step: 0, task: F3}]}\n")
+    with pytest.raises(ScenarioError, match="steps count from 1"):
         load_scenario(path)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform
 
+from hrc_drake.cell_models import CellDesign
 from hrc_drake.motion import (
     MotionPlanner,
     Stage,
@@ -40,7 +41,7 @@ EDGES = _edges()
 
 @pytest.fixture(scope="module")
 def model_frames():
-    return load_cell_frames()
+    return load_cell_frames(CellDesign.of(load_spec()))
 
 
 @pytest.fixture(scope="module")

@@ -1,11 +1,9 @@
-"""The Drake cell: diagram builder and SlotMonitor."""
+"""The Drake cell: the diagram built from a scenario, the SlotMonitor, the Supervisor, runs."""
 
 from hrc_drake.cell.builder import (
     CellScenario,
     CellStation,
     build_cell,
-    load_scenario,
-    placement_poses,
     save_meshcat_html,
     simulate_cell,
 )
@@ -26,8 +24,6 @@ __all__ = [
     "SlotMonitor",
     "SlotTolerances",
     "build_cell",
-    "load_scenario",
-    "placement_poses",
     "save_meshcat_html",
     "simulate_cell",
 ]

@@ -9,7 +9,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from pydrake.common.yaml import yaml_load_typed
 from pydrake.geometry import (
     ClippingRange,
     ColorRenderCamera,
@@ -25,28 +24,21 @@ from pydrake.geometry import (
     RoleAssign,
 )
 from pydrake.math import RigidTransform, RotationMatrix
-from pydrake.multibody.parsing import LoadModelDirectives, ProcessModelDirectives
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
 from pydrake.multibody.tree import JointActuatorIndex, MultibodyConstraintId, PdControllerGains
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import Context, Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import MatrixGain, Saturation
 from pydrake.systems.sensors import CameraInfo, RgbdSensor
 
 from hrc_drake.atomic import atomic_write_text
-from hrc_drake.cell.slot_monitor import (
-    DEFAULT_HOST_TAGS,
-    DEFAULT_PART_SYMBOLS,
-    CellConfiguration,
-    SlotMonitor,
-)
-from hrc_drake.resources import package_uri
-from hrc_drake.robot_models import RG2_MAX_OPENING, UR3_JOINTS, make_parser
-from hrc_drake.tasks.tokens import parse_base_token, placement_token
+from hrc_drake.cell.slot_monitor import CellConfiguration, SlotMonitor
+from hrc_drake.cell_models import CellDesign, add_cell_models, check_cell_models
+from hrc_drake.motion.poses import CellFrames, layout_poses, seat_pose
+from hrc_drake.motion.scene import read_cell_frames
+from hrc_drake.robot_models import RG2_MAX_OPENING, UR3_JOINTS
+from hrc_drake.tasks.spec import SpecError, load_spec
 
-CELL_DIRECTIVES = "cell.dmd.yaml"
-WORKCELL_DIRECTIVES = "cell/workcell.dmd.yaml"
-PARTS = ("oval_flange_1", "oval_flange_2", "square_flange")
 TRAY = "tray"
 _SAP_FAMILY = ("sap", "similar", "lagged")
 
@@ -74,14 +66,15 @@ def _default_plant_config() -> MultibodyPlantConfig:
 
 @dataclass
 class CellScenario:
-    """Everything `build_cell` needs; load one from YAML with `load_scenario`.
+    """Everything `build_cell` needs (the closed loop builds one from a `Scenario` file).
 
     Attributes:
+        design: the cell's assembly spec, layout and part instances (default: the flange case).
         plant_config: time step, contact model and discrete approximation (a SAP-family one,
             for the weld constraints) of the MultibodyPlant.
         include_robot: add the UR3 and the gripper (False: workpieces only, for fast tests).
-        initial_placements: part instance -> a task token (``F1``, ``S23``, ``F02``) or
-            ``tray``; unnamed parts start in the tray.
+        initial_placements: part instance -> a task token of the spec (``F1``, ``S23``,
+            ``F02``) or ``tray``; unnamed parts start in the tray.
         hydroelastic_modulus: if set, replaces the modulus of every compliant geometry [Pa].
         mesh_resolution_hint: if set, replaces the hint of every compliant geometry [m].
         ur3_initial_positions: the arm's initial joint positions (UR3_JOINTS order) [rad].
@@ -93,6 +86,7 @@ class CellScenario:
         simulation_duration: default duration of `simulate_cell` [s].
     """
 
+    design: CellDesign | None = None
     plant_config: MultibodyPlantConfig = field(default_factory=_default_plant_config)
     include_robot: bool = True
     initial_placements: dict[str, str] = field(default_factory=dict)
@@ -104,15 +98,6 @@ class CellScenario:
     camera: bool = False
     recording_path: str | None = None
     simulation_duration: float = 0.5
-
-
-def load_scenario(text: str | None = None, path: str | Path | None = None) -> CellScenario:
-    """A CellScenario from YAML `text` or a file: unknown keys are errors, missing ones default."""
-    if (text is None) == (path is None):
-        raise ValueError("load_scenario: pass exactly one of text= or path=")
-    if path is not None:
-        return yaml_load_typed(schema=CellScenario, filename=str(path))
-    return yaml_load_typed(schema=CellScenario, data=text)
 
 
 @dataclass(frozen=True)
@@ -128,10 +113,9 @@ class CellStation:
     `plant.SetConstraintActiveStatus(plant_context, id, bool)`):
     - `grasp_constraints[part]`: `rg2_base` <-> part with the gripper's `tcp` at the part's
       `grasp` frame (robot only);
-    - `bolt_constraints[(part, key)]`: the part held at a seat. `key` is the task token for the
-      plate (`F1`, `F2`, `F3`, `S12`, `S23`) and the row frame (`row_1`, `row_2`) for an oval
-      flange on the square: its token, `F0k`, depends on where the square sits (row_1 is over the
-      lower base slot the square covers when the square is placed as its convention says).
+    - `bolt_constraints[(part, key)]`: the part held at a seat. `key` is the task token for a
+      seat on the plate (`F1`, `S12`, …) and ``<host instance>/row_<j>`` for a row of a host
+      part (the token of a part there, `F0k`, depends on where the host sits).
     Drake makes a new context with every constraint active: use `create_default_context()`
     (or `deactivate_constraints`) so that they start inactive.
     """
@@ -144,9 +128,10 @@ class CellStation:
     monitor: SlotMonitor
     grasp_constraints: Mapping[str, MultibodyConstraintId]
     bolt_constraints: Mapping[tuple[str, str], MultibodyConstraintId]
+    design: CellDesign
+    frames: CellFrames
     meshcat: Meshcat | None = None
     visualizer: MeshcatVisualizer | None = None
-    part_symbols: Mapping[str, str] = field(default_factory=lambda: dict(DEFAULT_PART_SYMBOLS))
 
     @property
     def has_robot(self) -> bool:
@@ -155,8 +140,10 @@ class CellStation:
 
     def part_body(self, part: str):
         """The body of the part instance `part` (e.g. ``oval_flange_1``)."""
-        if part not in PARTS:
-            raise KeyError(f"unknown part {part!r}; the parts are {', '.join(PARTS)}")
+        if part not in self.design.instance_names:
+            raise KeyError(
+                f"unknown part {part!r}; the parts are {', '.join(self.design.instance_names)}"
+            )
         return self.plant.get_body(self.plant.GetBodyIndices(self.instances[part])[0])
 
     def deactivate_constraints(self, context: Context) -> None:
@@ -188,7 +175,7 @@ class CellStation:
 
     def placement_poses(self, placements: Mapping[str, str]) -> dict[str, RigidTransform]:
         """World poses of parts seated as `placements` says (part instance -> token or "tray")."""
-        return placement_poses(self.plant, placements, self.part_symbols)
+        return layout_poses(self.frames, placements)
 
     def configuration(self, context: Context) -> CellConfiguration:
         """The SlotMonitor's reading in the root `context`."""
@@ -202,27 +189,7 @@ class CellStation:
             return self.plant.GetMyContextFromRoot(context)
 
 
-class _GravityFeedForward(LeafSystem):
-    """Actuation that cancels gravity on the UR3 joints (fed forward to the PD actuators)."""
-
-    def __init__(self, plant: MultibodyPlant, ur3):
-        super().__init__()
-        self._plant = plant
-        self._context = plant.CreateDefaultContext()
-        self._rows = [
-            plant.get_joint_actuator(a).joint().velocity_start()
-            for a in plant.GetJointActuatorIndices(ur3)
-        ]
-        self.DeclareVectorInputPort("plant_state", plant.num_multibody_states())
-        self.DeclareVectorOutputPort("actuation", len(self._rows), self._calc)
-
-    def _calc(self, context, output) -> None:
-        self._plant.SetPositionsAndVelocities(self._context, self.get_input_port().Eval(context))
-        tau_g = self._plant.CalcGravityGeneralizedForces(self._context)
-        output.SetFromVector(-tau_g[self._rows])
-
-
-def _check_scenario(scenario: CellScenario) -> None:
+def _check_scenario(scenario: CellScenario, design: CellDesign) -> None:
     approximation = scenario.plant_config.discrete_contact_approximation
     if approximation not in _SAP_FAMILY:
         raise ValueError(
@@ -235,13 +202,22 @@ def _check_scenario(scenario: CellScenario) -> None:
             "(5e-3 is the calibrated choice)"
         )
     for part, where in scenario.initial_placements.items():
-        if part not in PARTS:
+        if part not in design.instance_names:
             raise ValueError(
                 f"CellScenario.initial_placements names {part!r}, which is not a part; "
-                f"the parts are {', '.join(PARTS)}"
+                f"the parts are {', '.join(design.instance_names)}"
             )
-        if where != "tray":
-            parse_base_token(where)
+        if where == "tray":
+            continue
+        try:
+            placement = design.spec.placement(where)
+        except SpecError as err:
+            raise ValueError(f"CellScenario.initial_placements[{part}]: {err}") from err
+        if placement.part != design.symbol_of(part):
+            raise ValueError(
+                f"CellScenario.initial_placements[{part}]: {where} places a {placement.part}, "
+                f"{part} is a {design.symbol_of(part)}"
+            )
     if len(scenario.ur3_initial_positions) != 6:
         raise ValueError("CellScenario.ur3_initial_positions needs 6 joint positions")
     if not 0.0 <= scenario.rg2_initial_opening <= RG2_MAX_OPENING:
@@ -269,149 +245,79 @@ def _override_hydroelastic(plant, scene_graph, scenario: CellScenario) -> None:
         scene_graph.AssignRole(source, gid, props, RoleAssign.kReplace)
 
 
-def _seat_frames(plant: MultibodyPlant, model, prefix: str) -> dict[int, object]:
-    frames = {}
-    k = 1
-    while plant.HasFrameNamed(f"{prefix}{k}", model):
-        frames[k] = plant.GetFrameByName(f"{prefix}{k}", model)
-        k += 1
-    return frames
+def _fixed_pose(plant: MultibodyPlant, model, frame: str) -> RigidTransform:
+    return plant.GetFrameByName(frame, model).GetFixedPoseInBodyFrame()
 
 
-def _midpoint(X_a: RigidTransform, X_b: RigidTransform) -> RigidTransform:
-    return RigidTransform(X_a.rotation(), (X_a.translation() + X_b.translation()) / 2)
-
-
-def _span(plant: MultibodyPlant, inspector, body) -> int:
-    """How many base slots a part covers: one boss per covered slot."""
-    names = [inspector.GetName(g) for g in plant.GetCollisionGeometriesForBody(body)]
-    return max(1, sum(1 for n in names if n.split("::")[-1].startswith("boss")))
-
-
-def _add_weld_constraints(plant: MultibodyPlant, inspector, instances, symbols):
+def _add_weld_constraints(
+    plant: MultibodyPlant, instances: Mapping[str, object], design: CellDesign
+) -> tuple[dict[str, MultibodyConstraintId], dict[tuple[str, str], MultibodyConstraintId]]:
+    """Declare the grasp and bolt welds of every part (see `CellStation`), from the models'
+    frames and the one pose rule (`motion.poses.seat_pose`)."""
+    spec = design.spec
     plate = instances["base_plate"]
     plate_body = plant.GetBodyByName("base_plate", plate)
-    slots = _seat_frames(plant, plate, "slot_")
+    seats = {k: _fixed_pose(plant, plate, f"slot_{k}") for k in range(1, design.slots + 1)}
     bolts: dict[tuple[str, str], MultibodyConstraintId] = {}
     grasps: dict[str, MultibodyConstraintId] = {}
-    for part in PARTS:
-        model = instances[part]
+    hosts = [p for p in design.parts if spec.part(p.symbol).is_host]
+    for part in design.parts:
+        model = instances[part.name]
         body = plant.get_body(plant.GetBodyIndices(model)[0])
-        span = _span(plant, inspector, body)
-        for start in range(1, len(slots) - span + 2):
-            run = tuple(range(start, start + span))
-            X_plate_seat = slots[run[0]].GetFixedPoseInBodyFrame()
-            if span == 2:
-                X_plate_seat = _midpoint(X_plate_seat, slots[run[1]].GetFixedPoseInBodyFrame())
-            token = placement_token(symbols[part], run)
-            bolts[(part, token)] = plant.AddWeldConstraint(
-                plate_body, X_plate_seat, body, RigidTransform()
-            )
-        if span == 1:
-            for host, _tag in DEFAULT_HOST_TAGS.items():
-                host_model = instances[host]
-                host_body = plant.get_body(plant.GetBodyIndices(host_model)[0])
-                for j, row in _seat_frames(plant, host_model, "row_").items():
-                    bolts[(part, f"row_{j}")] = plant.AddWeldConstraint(
-                        host_body, row.GetFixedPoseInBodyFrame(), body, RigidTransform()
-                    )
+        for token, mount, slots in spec.placements():
+            if mount.part == part.symbol and mount.on == "base":
+                bolts[(part.name, token)] = plant.AddWeldConstraint(
+                    plate_body, seat_pose(seats, slots), body, RigidTransform()
+                )
+        mounts_on = {m.on for m in spec.mounts if m.part == part.symbol}
+        for host in hosts:
+            if host.symbol not in mounts_on:
+                continue
+            host_model = instances[host.name]
+            host_body = plant.get_body(plant.GetBodyIndices(host_model)[0])
+            for j in range(1, spec.part(host.symbol).footprint + 1):
+                bolts[(part.name, f"{host.name}/row_{j}")] = plant.AddWeldConstraint(
+                    host_body, _fixed_pose(plant, host_model, f"row_{j}"), body, RigidTransform()
+                )
         if "rg2" in instances:
             tcp = plant.GetFrameByName("tcp", instances["rg2"])
-            grasp = plant.GetFrameByName("grasp", model)
-            grasps[part] = plant.AddWeldConstraint(
-                tcp.body(),
-                tcp.GetFixedPoseInBodyFrame(),
-                body,
-                grasp.GetFixedPoseInBodyFrame(),
+            grasps[part.name] = plant.AddWeldConstraint(
+                tcp.body(), tcp.GetFixedPoseInBodyFrame(), body, _fixed_pose(plant, model, "grasp")
             )
     return grasps, bolts
 
 
-def placement_poses(
-    plant: MultibodyPlant,
-    placements: Mapping[str, str],
-    part_symbols: Mapping[str, str] = DEFAULT_PART_SYMBOLS,
-) -> dict[str, RigidTransform]:
-    """World poses of the parts seated as `placements` says (part -> token or ``tray``).
-
-    Derived from the frames (docs/conventions.md): on slot k, `X_W_slot_k`; the square on slots
-    j, j+1, the midpoint of theirs; an oval flange on the square (``F0k``), `X_W_square` times
-    the square's row frame over base slot k (the square must be in `placements` too).
-    """
-    context = plant.CreateDefaultContext()
-    plate = plant.GetModelInstanceByName("base_plate")
-    slots = {k: f.CalcPoseInWorld(context) for k, f in _seat_frames(plant, plate, "slot_").items()}
-    tray = plant.GetModelInstanceByName(TRAY)
-    poses: dict[str, RigidTransform] = {}
-    hosted = []
-    for part, where in placements.items():
-        if part not in part_symbols:
-            raise ValueError(f"unknown part {part!r}; the parts are {', '.join(part_symbols)}")
-        if where == "tray":
-            poses[part] = plant.GetFrameByName(f"home_{part}", tray).CalcPoseInWorld(context)
-            continue
-        symbol = part_symbols[part]
-        tags = set(DEFAULT_HOST_TAGS.values())
-        if where.startswith(symbol) and where[len(symbol) : len(symbol) + 1] in tags:
-            hosted.append((part, where))
-            continue
-        token_symbol, slots_named = parse_base_token(where)
-        if token_symbol != symbol:
-            raise ValueError(f"token {where!r} does not place part {part!r} (symbol {symbol!r})")
-        missing = [k for k in slots_named if k not in slots]
-        if missing:
-            raise ValueError(f"{where!r}: the plate has no slot {missing[0]}")
-        X = slots[slots_named[0]]
-        if len(slots_named) == 2:
-            X = _midpoint(X, slots[slots_named[1]])
-        poses[part] = X
-    for part, where in hosted:
-        tag, k = where[len(part_symbols[part])], int(where[len(part_symbols[part]) + 1 :])
-        hosts = [h for h, t in DEFAULT_HOST_TAGS.items() if t == tag]
-        if not hosts or hosts[0] not in poses:
-            raise ValueError(f"{where!r} for {part!r} needs its host part placed in the same call")
-        host = plant.GetModelInstanceByName(hosts[0])
-        X_W_host = poses[hosts[0]]
-        for row in _seat_frames(plant, host, "row_").values():
-            X = X_W_host @ row.GetFixedPoseInBodyFrame()
-            if np.linalg.norm((X.translation() - slots[k].translation())[:2]) < 1e-3:
-                poses[part] = X
-                break
-        else:
-            raise ValueError(f"{where!r}: no row of {hosts[0]} is over base slot {k}")
-    return poses
-
-
 def build_cell(scenario: CellScenario | None = None) -> CellStation:
-    """Build the cell diagram from `scenario` (default: the whole cell, no Meshcat)."""
+    """Build the cell diagram from `scenario` (default: the flange case's whole cell).
+
+    The models come from the scenario's design (`add_cell_models`) and are checked against its
+    spec before anything else (CellModelError naming the part or slot)."""
     scenario = scenario if scenario is not None else CellScenario()
-    _check_scenario(scenario)
+    design = scenario.design if scenario.design is not None else CellDesign.of(load_spec())
+    _check_scenario(scenario, design)
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(scenario.plant_config, builder)
-    parser = make_parser(plant)
-    directives_uri = package_uri(CELL_DIRECTIVES if scenario.include_robot else WORKCELL_DIRECTIVES)
-    directives = LoadModelDirectives(parser.package_map().ResolveUrl(directives_uri))
-    ProcessModelDirectives(directives, plant, parser)
+    instances = add_cell_models(plant, design, include_robot=scenario.include_robot)
     _override_hydroelastic(plant, scene_graph, scenario)
-
-    names = ["table", "base_plate", TRAY, *PARTS]
-    if scenario.include_robot:
-        names += ["ur3", "rg2"]
-    instances = {n: plant.GetModelInstanceByName(n) for n in names}
-    symbols = dict(DEFAULT_PART_SYMBOLS)
+    check_cell_models(plant, scene_graph, design)
     if scenario.include_robot:
         _set_pd_gains(plant, instances)
-    grasps, bolts = _add_weld_constraints(plant, scene_graph.model_inspector(), instances, symbols)
+        # The arm's PD holds it without a gravity model, as a UR controller does (gravity is
+        # compensated inside the real controller); held parts still weigh on it.
+        for name in ("ur3", "rg2"):
+            plant.set_gravity_enabled(instances[name], False)
+    grasps, bolts = _add_weld_constraints(plant, instances, design)
     plant.Finalize()
+    frames = read_cell_frames(plant, scene_graph, plant.CreateDefaultContext(), design)
 
-    poses = placement_poses(plant, {p: "tray" for p in PARTS}, symbols)
-    poses.update(placement_poses(plant, scenario.initial_placements, symbols))
-    for part, X_WP in poses.items():
+    layout = {p: "tray" for p in design.instance_names}
+    layout.update(scenario.initial_placements)
+    for part, X_WP in layout_poses(frames, layout).items():
         plant.SetDefaultFloatingBaseBodyPose(
             plant.get_body(plant.GetBodyIndices(instances[part])[0]), X_WP
         )
 
-    monitor = builder.AddNamedSystem("slot_monitor", SlotMonitor(plant, scene_graph, symbols))
+    monitor = builder.AddNamedSystem("slot_monitor", SlotMonitor(plant, scene_graph, frames))
     builder.Connect(
         plant.get_contact_results_output_port(), monitor.GetInputPort("contact_results")
     )
@@ -427,9 +333,6 @@ def build_cell(scenario: CellScenario | None = None) -> CellStation:
         plant.SetDefaultPositions(ur3, scenario.ur3_initial_positions)
         plant.SetDefaultPositions(rg2, [scenario.rg2_initial_opening / 2] * 2)
         builder.ExportInput(plant.get_desired_state_input_port(ur3), "ur3.desired_state")
-        gravity = builder.AddNamedSystem("ur3_gravity", _GravityFeedForward(plant, ur3))
-        builder.Connect(plant.get_state_output_port(), gravity.get_input_port())
-        builder.Connect(gravity.get_output_port(), plant.get_actuation_input_port(ur3))
         clip = builder.AddNamedSystem("rg2_clip", Saturation([0.0], [RG2_MAX_OPENING]))
         # Each finger joint runs half the opening; velocities are commanded zero.
         split = builder.AddNamedSystem(
@@ -463,9 +366,10 @@ def build_cell(scenario: CellScenario | None = None) -> CellStation:
         monitor=monitor,
         grasp_constraints=grasps,
         bolt_constraints=bolts,
+        design=design,
+        frames=frames,
         meshcat=meshcat,
         visualizer=visualizer,
-        part_symbols=symbols,
     )
 
 
@@ -559,8 +463,6 @@ __all__ = [
     "CellScenario",
     "CellStation",
     "build_cell",
-    "load_scenario",
-    "placement_poses",
     "save_meshcat_html",
     "simulate_cell",
 ]

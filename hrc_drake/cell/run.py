@@ -1,76 +1,43 @@
 """Closed-loop runs of the cell: the station, the Supervisor, an operator, and a recording.
 
-`run_scenario` builds the diagram (the cell station as a subsystem, the Supervisor wired to its
-SlotMonitor and controller inputs), simulates until the Supervisor reports a terminal state,
-applies the weld constraints the Supervisor asks for (grasp, bolt) between simulation steps, and
-watches the contact results for robot collisions. `hrc-drake simulate` is its command line.
+`run_scenario` builds the whole diagram from one scenario (the cell station generated from the
+assembly spec and its layout, the Supervisor wired to the SlotMonitor and the controller inputs),
+checks before simulating that the UR3 reaches every grasp the spec needs, and simulates until
+the Supervisor reports done or failed. A `Simulator` monitor does what a system cannot: it stops
+the simulation at the step where the Supervisor's wanted weld constraints (grasp, bolt) change
+so they are applied at once, watches the contact results for robot collisions, and ends the run
+when the Supervisor does. `hrc-drake simulate` is its command line.
 """
 
 from __future__ import annotations
 
-import json
-import sys
+import io
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.framework import DiagramBuilder, EventStatus
 
+from hrc_drake.atomic import atomic_write_bytes
 from hrc_drake.cell.builder import CellScenario, CellStation, build_cell, save_meshcat_html
-from hrc_drake.cell.supervisor import (
-    Mode,
-    Planner,
-    Supervisor,
-    SupervisorStatus,
-    TaskRecord,
-    Weld,
-)
-from hrc_drake.hri.scenario import OperatorScenario, load_scenario
+from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options, plant_config
+from hrc_drake.cell.supervisor import Mode, Planner, Supervisor, SupervisorStatus, TaskRecord, Weld
+from hrc_drake.cell_models import CellDesign
+from hrc_drake.hri.scenario import Scenario
 from hrc_drake.motion.options import MotionOptions
-from hrc_drake.motion.planner import MotionPlanner
+from hrc_drake.motion.planner import MotionPlanner, check_reach
 from hrc_drake.progress import ProgressLine
 from hrc_drake.robot_models import RG2_MAX_OPENING
+from hrc_drake.tasks.decide import Operator
 from hrc_drake.tasks.graph import StateKind, generate_states
 from hrc_drake.tasks.policy import Policy, load_policy
 from hrc_drake.tasks.solve import exact_policy
 from hrc_drake.tasks.spec import load_spec
 
 ROBOT_INSTANCES = ("ur3", "rg2")
-
-
-@dataclass(frozen=True)
-class RunSettings:
-    """Physics and timing of a closed-loop run.
-
-    `full()` is the product setting (5 s bolting holds, 0.25 m/s collaborative TCP speed);
-    `lean()` keeps the same models and limits but bolts in 0.5 s, for tests and previews.
-    """
-
-    time_step: float = 5e-3
-    hold_time: float = 5.0
-    tcp_speed_limit: float = 0.25
-    mesh_resolution_hint: float | None = None
-    period: float = 0.02
-    settle_time: float = 0.3
-    max_sim_time: float = 900.0
-
-    @staticmethod
-    def full() -> RunSettings:
-        """The product settings."""
-        return RunSettings()
-
-    @staticmethod
-    def lean() -> RunSettings:
-        """Short bolting holds, same physics and limits: for tests and quick previews."""
-        return RunSettings(hold_time=0.5, settle_time=0.2)
-
-    def motion_options(self) -> MotionOptions:
-        """The motion-layer options these settings imply."""
-        return MotionOptions(hold_time=self.hold_time, tcp_speed_limit=self.tcp_speed_limit)
 
 
 @dataclass(frozen=True)
@@ -91,59 +58,69 @@ class RunResult:
     recording: Path | None = None
     events: tuple[str, ...] = field(default_factory=tuple)
 
+    @property
+    def real_time_factor(self) -> float | None:
+        """Simulated time over wall time."""
+        return self.sim_time / self.wall_time if self.wall_time > 0 else None
+
     def to_json(self) -> dict:
-        """A JSON-able summary."""
+        """A JSON-able summary (the `--json` of `hrc-drake simulate`)."""
+        rtf = self.real_time_factor
         return {
             "scenario": self.scenario,
             "states": [list(s) for s in self.states],
             "names": self.names,
-            "tasks": [
+            "terminal": bool(self.done),
+            "final_kind": self.final_kind,
+            "final_configuration": sorted(self.final_tokens),
+            "collisions": len(self.collisions),
+            "contacts": list(self.collisions),
+            "steps": [
                 {
                     "step": t.step,
                     "proposed": t.proposed,
-                    "indicated": t.indicated,
+                    "operator": t.indicated,
                     "observed": t.observed,
                     "part": t.part,
                     "sim_time": round(t.end_time - t.start_time, 3),
                 }
                 for t in self.tasks
             ],
-            "final_configuration": sorted(self.final_tokens),
-            "final_kind": self.final_kind,
-            "done": self.done,
             "error": self.error,
-            "collisions": self.collisions,
             "sim_time": round(self.sim_time, 3),
             "wall_time": round(self.wall_time, 3),
-            "real_time_factor": round(self.sim_time / self.wall_time, 3)
-            if self.wall_time
-            else None,
+            "real_time_factor": None if rtf is None else round(rtf, 3),
             "recording": str(self.recording) if self.recording else None,
         }
 
 
-_PLANNERS: dict[MotionOptions, MotionPlanner] = {}
+_PLANNERS: dict[tuple, MotionPlanner] = {}
 
 
-def shared_planner(options: MotionOptions) -> MotionPlanner:
-    """One planner (and its plan cache) per set of options, shared by the runs of a process."""
-    if options not in _PLANNERS:
-        _PLANNERS[options] = MotionPlanner(options)
-    return _PLANNERS[options]
+def shared_planner(options: MotionOptions, design: CellDesign | None = None) -> MotionPlanner:
+    """One planner (and its plan cache) per cell and set of options, shared by a process's runs.
+
+    A new one is checked for reach (`check_reach`) before it is handed out."""
+    design = design if design is not None else CellDesign.of(load_spec())
+    key = (options, design.key())
+    if key not in _PLANNERS:
+        planner = MotionPlanner(options, design=design)
+        check_reach(planner)
+        _PLANNERS[key] = planner
+    return _PLANNERS[key]
 
 
 class _ContactWatch:
     """Flags contacts of the robot with anything but the part it is handling."""
 
     def __init__(self, station: CellStation):
-        plant, inspector = station.plant, station.scene_graph.model_inspector()
+        plant = station.plant
         self._owner = {}
         for body_index in range(plant.num_bodies()):
             body = plant.get_body(BodyIndex(body_index))
             model = plant.GetModelInstanceName(body.model_instance())
             for gid in plant.GetCollisionGeometriesForBody(body):
                 self._owner[gid] = (model, body.name())
-        self._inspector = inspector
         self.collisions: list[str] = []
 
     def check(self, results, handled: str | None, now: float) -> None:
@@ -174,60 +151,70 @@ class _ContactWatch:
                 self.collisions.append(text)
 
 
+def scenario_policy(scenario: Scenario, space) -> Policy:
+    """The scenario's policy file, or the exact minimum-effort policy."""
+    if scenario.policy:
+        return load_policy(scenario.policy, space)
+    return exact_policy(space)
+
+
 def run_scenario(
-    scenario: OperatorScenario | str,
+    scenario: Scenario | str,
     policy: Policy | None = None,
-    settings: RunSettings | None = None,
     record: str | Path | None = None,
     progress: bool = False,
     planner: Planner | None = None,
     still: tuple[float, str | Path] | None = None,
+    scenario_text: str | None = None,
+    operator: Operator | None = None,
 ) -> RunResult:
-    """Run one operator scenario through the full cell diagram until a terminal state.
+    """Run one scenario through the full cell diagram until a terminal state (or a failure).
 
-    `planner` replaces the motion layer's `plan_task` (tests use it to misplace a part).
-    `still=(t, path)` saves a camera image of the cell at simulated time t as a PNG."""
-    scenario = load_scenario(scenario) if isinstance(scenario, str) else scenario
-    settings = settings or RunSettings.lean()
-    space = generate_states(load_spec(scenario.assembly))
-    policy = policy or exact_policy(space)
+    `scenario` is a Scenario or a scenario name/path (then `scenario_text` overrides apply).
+    `policy` replaces the scenario's. `planner` replaces the motion layer's `plan_task` (tests
+    use it to misplace a part). `still=(t, path)` saves a camera image at simulated time t.
+    `operator` (a callable `(step, state, proposal) -> task`) replaces the scenario's.
+    CellModelError (before any simulation) if the spec does not fit the cell."""
+    if not isinstance(scenario, Scenario):
+        scenario = load_cell_scenario(scenario, scenario_text)
+    space = generate_states(load_spec(scenario.assembly_path))
+    policy = policy or scenario_policy(scenario, space)
     policy.matches(space.spec)
-    motion = shared_planner(settings.motion_options())
+    design = cell_design(scenario, space.spec)
+    motion = shared_planner(motion_options(scenario), design)
     home_opening = RG2_MAX_OPENING * 0.8
 
-    plant_config = MultibodyPlantConfig(
-        time_step=settings.time_step,
-        contact_model="hydroelastic_with_fallback",
-        discrete_contact_approximation="sap",
-        contact_surface_representation="polygon",
-    )
     station = build_cell(
         CellScenario(
-            plant_config=plant_config,
+            design=design,
+            plant_config=plant_config(scenario),
             meshcat=record is not None,
             ur3_initial_positions=[float(x) for x in motion.q_home],
             rg2_initial_opening=home_opening,
-            mesh_resolution_hint=settings.mesh_resolution_hint,
+            hydroelastic_modulus=scenario.physics.hydroelastic_modulus,
+            mesh_resolution_hint=scenario.physics.mesh_resolution_hint,
             camera=still is not None,
         )
     )
     builder = DiagramBuilder()
     cell = builder.AddNamedSystem("cell", station.diagram)
 
-    def plan(configuration, task, last):
-        return motion.plan_task(configuration, task, last_token=last)
+    def plan(configuration, task, last, layout):
+        return motion.plan_task(configuration, task, last_token=last, layout=layout)
 
+    run = scenario.run
     supervisor = builder.AddNamedSystem(
         "supervisor",
         Supervisor(
             space,
             policy,
-            scenario.operator(space),
+            operator or scenario.operator_for(space),
             planner or plan,
             home=motion.q_home,
             home_opening=home_opening,
-            period=settings.period,
-            settle_time=settings.settle_time,
+            period=run.period,
+            settle_time=run.settle_time,
+            max_steps=run.max_steps,
         ),
     )
     builder.Connect(
@@ -253,34 +240,48 @@ def run_scenario(
     contacts = station.diagram.GetOutputPort("contact_results")
     watch = _ContactWatch(station)
     active: set = set()
+    pending_still = [still]
+    next_watch = [0.0]
 
     def constraint(weld: Weld):
         if weld.kind == "grasp":
             return station.grasp_constraints[weld.part]
         return station.bolt_constraints[(weld.part, weld.seat)]
 
+    def monitor(context) -> EventStatus:
+        now = context.get_time()
+        status: SupervisorStatus = status_port.Eval(supervisor_context)
+        if now >= next_watch[0]:
+            next_watch[0] = now + run.period
+            handled = status.pending[2] if status.pending else None
+            watch.check(contacts.Eval(station_context), handled, now)
+        if pending_still[0] is not None and now >= pending_still[0][0]:
+            _save_still(station, station_context, Path(pending_still[0][1]))
+            pending_still[0] = None
+        if status.mode in (Mode.DONE, Mode.FAILED):
+            return EventStatus.ReachedTermination(supervisor, status.mode.value)
+        if {constraint(w) for w in status.welds} != active:
+            return EventStatus.ReachedTermination(supervisor, "welds")
+        return EventStatus.DidNothing()
+
+    simulator.set_monitor(monitor)
     if record is not None:
         station.visualizer.StartRecording()
     start = time.perf_counter()
     simulator.Initialize()
     status: SupervisorStatus = status_port.Eval(supervisor_context)
     with ProgressLine(f"cell {scenario.name}", "sim s", interval=2.0) as bar:
-        while root.get_time() < settings.max_sim_time:
-            simulator.AdvanceTo(root.get_time() + settings.period)
+        while root.get_time() < run.max_sim_time:
+            simulator.AdvanceTo(run.max_sim_time)
             status = status_port.Eval(supervisor_context)
+            if status.mode in (Mode.DONE, Mode.FAILED):
+                break
             wanted = {constraint(w) for w in status.welds}
             for cid in wanted ^ active:
                 plant.SetConstraintActiveStatus(plant_context, cid, cid in wanted)
             active = wanted
-            handled = status.pending[2] if status.pending else None
-            watch.check(contacts.Eval(station_context), handled, root.get_time())
-            if still is not None and root.get_time() >= still[0]:
-                _save_still(station, station_context, Path(still[1]))
-                still = None
             if progress:
                 bar.update(round(root.get_time(), 1), 0, float(status.step))
-            if status.mode in (Mode.DONE, Mode.FAILED):
-                break
     wall = time.perf_counter() - start
     path = None
     if record is not None:
@@ -290,15 +291,17 @@ def run_scenario(
     final_tokens = (
         station.diagram.GetOutputPort("slot_configuration").Eval(station_context).tokens()
     )
-    states = status.visited
     try:
-        final_kind = space.state_kind(space.index(status.state)).label
+        final_index = space.index(status.state)
+        final_kind = space.state_kind(final_index).label
+        terminal = bool(space.kind[final_index] == StateKind.TERMINAL)
     except KeyError:
-        final_kind = "unknown"
+        final_kind, terminal = "unknown", False
     if status.mode not in (Mode.DONE, Mode.FAILED):
-        error = f"no terminal state within {settings.max_sim_time} s of simulated time"
+        error = f"no terminal state within {run.max_sim_time} s of simulated time"
     else:
         error = status.error
+    states = status.visited
     return RunResult(
         scenario=scenario.name,
         states=states,
@@ -306,8 +309,7 @@ def run_scenario(
         tasks=list(status.history),
         final_tokens=final_tokens,
         final_kind=final_kind,
-        done=status.mode == Mode.DONE
-        and space.kind[space.index(status.state)] == StateKind.TERMINAL,
+        done=status.mode == Mode.DONE and terminal,
         error=error,
         collisions=watch.collisions,
         sim_time=root.get_time(),
@@ -318,11 +320,7 @@ def run_scenario(
 
 
 def _save_still(station: CellStation, station_context, path: Path) -> None:
-    import io
-
     import matplotlib.image
-
-    from hrc_drake.atomic import atomic_write_bytes
 
     image = station.diagram.GetOutputPort("camera.rgb_image").Eval(station_context)
     buffer = io.BytesIO()
@@ -330,40 +328,4 @@ def _save_still(station: CellStation, station_context, path: Path) -> None:
     atomic_write_bytes(path, buffer.getvalue())
 
 
-def simulate_command(args) -> int:
-    """`hrc-drake simulate`: run a scenario headless, print the states, write the recording."""
-    scenario = load_scenario(args.scenario)
-    space = generate_states(load_spec(args.assembly or scenario.assembly))
-    policy = load_policy(args.policy, space) if args.policy else None
-    settings = RunSettings.lean() if args.lean else RunSettings.full()
-    still = (args.still_time, args.still) if args.still else None
-    result = run_scenario(
-        scenario, policy, settings, record=args.record, progress=True, still=still
-    )
-    if args.json:
-        json.dump(result.to_json(), sys.stdout, indent=1)
-        sys.stdout.write("\n")
-    else:
-        print(f"scenario {result.scenario}: {scenario.description}")
-        for t in result.tasks:
-            who = "" if t.indicated == t.proposed else f" (operator: {t.indicated})"
-            print(
-                f"  step {t.step}: robot proposes {t.proposed}{who}; cell shows {t.observed}; "
-                f"{t.end_time - t.start_time:.1f} s simulated"
-            )
-        print("  states:", " ".join(result.names), f"({result.final_kind})")
-        print(
-            f"  {result.sim_time:.1f} s simulated in {result.wall_time:.1f} s "
-            f"(real-time factor {result.sim_time / max(result.wall_time, 1e-9):.2f})"
-        )
-        if result.collisions:
-            print("  unexpected contacts:", *result.collisions[:5], sep="\n    ")
-        if result.recording:
-            print(f"  recording: {result.recording} (open it in a web browser)")
-    if result.error:
-        print(f"hrc-drake simulate: error: {result.error}", file=sys.stderr)
-        return 1
-    return 0 if result.done else 1
-
-
-__all__ = ["RunResult", "RunSettings", "run_scenario", "shared_planner"]
+__all__ = ["RunResult", "run_scenario", "scenario_policy", "shared_planner"]

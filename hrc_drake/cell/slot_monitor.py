@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import enum
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,14 +19,9 @@ from pydrake.multibody.plant import ContactResults, MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex
 from pydrake.systems.framework import LeafSystem
 
-from hrc_drake.tasks.tokens import placement_token
+from hrc_drake.motion.poses import CellFrames, seat_pose
+from hrc_drake.tasks.spec import SpecError
 
-DEFAULT_PART_SYMBOLS: Mapping[str, str] = {
-    "oval_flange_1": "F",
-    "oval_flange_2": "F",
-    "square_flange": "S",
-}
-DEFAULT_HOST_TAGS: Mapping[str, str] = {"square_flange": "0"}
 PLATE = "base_plate"
 TRAY = "tray"
 GRIPPER = "rg2"
@@ -80,6 +74,10 @@ class CellConfiguration:
         """The task-layer configuration: the tokens of the seated parts, e.g. {"F3","S12","F01"}."""
         return frozenset(p.token for _, p in self.placements if p.token is not None)
 
+    def layout(self) -> dict[str, str]:
+        """Which part instance sits at each token: instance -> token, seated parts only."""
+        return {name: p.token for name, p in self.placements if p.token is not None}
+
 
 @dataclass(frozen=True)
 class SlotTolerances:
@@ -130,8 +128,8 @@ class SlotMonitor(LeafSystem):
     Args:
         plant: the finalized cell plant.
         scene_graph: its SceneGraph (for geometry names).
-        part_symbols: model instance -> spec part symbol; default the flange case.
-        host_tags: model instance of a host part -> its tag in tokens (``F01``: tag ``0``).
+        frames: the cell's frames and design: which instances are parts of which spec symbol,
+            which are hosts; tokens are the spec's (`AssemblySpec.placement_of`).
         tolerances: pose tolerances.
     """
 
@@ -139,13 +137,14 @@ class SlotMonitor(LeafSystem):
         self,
         plant: MultibodyPlant,
         scene_graph: SceneGraph,
-        part_symbols: Mapping[str, str] = DEFAULT_PART_SYMBOLS,
-        host_tags: Mapping[str, str] = DEFAULT_HOST_TAGS,
+        frames: CellFrames,
         tolerances: SlotTolerances | None = None,
     ):
         super().__init__()
         self._tol = tolerances if tolerances is not None else SlotTolerances()
-        self._symbols = dict(part_symbols)
+        design = frames.design
+        self._spec = design.spec
+        self._symbols = {p.name: p.symbol for p in design.parts}
         inspector = scene_graph.model_inspector()
 
         def instance(name: str, role: str):
@@ -196,12 +195,12 @@ class SlotMonitor(LeafSystem):
             self._parts[name] = body
             geoms = geometries(body)
             self._part_geometries[name] = set(geoms.values())
-            self._span[name] = max(1, sum(1 for g in geoms if g.startswith("boss")))
+            self._span[name] = self._spec.part(self._symbols[name]).footprint
             if plant.HasFrameNamed("grasp", model):
                 self._X_BG[name] = plant.GetFrameByName("grasp", model).GetFixedPoseInBodyFrame()
             for gid in geoms.values():
                 self._owner[gid] = name
-        self._host_tags = dict(host_tags)
+        self._host_tags = design.host_tags
         self._host_seats: dict[str, list[_Seat]] = {}
         for name in self._host_tags:
             instance(name, "host part")
@@ -276,15 +275,13 @@ class SlotMonitor(LeafSystem):
             seats = [self._slots[k] for k in run]
             if not all(s.floor in touching for s in seats):
                 continue
-            X_W_seats = [X_W_plate @ s.X_BS for s in seats]
-            centre = np.mean([X.translation() for X in X_W_seats], axis=0)
-            X_W_nominal = RigidTransform(X_W_seats[0].rotation(), centre)
+            X_W_nominal = seat_pose({k: X_W_plate @ self._slots[k].X_BS for k in run}, run)
             if self._within_seat(X_W_nominal, X_WP):
                 return PartPlacement(
                     PartStatus.SEATED,
                     seats=tuple(s.name for s in seats),
                     slots=run,
-                    token=placement_token(self._symbols[part], run),
+                    token=self._token(part, run, None),
                 )
         return None
 
@@ -311,13 +308,20 @@ class SlotMonitor(LeafSystem):
                         d = np.linalg.norm((X_W_seat.translation() - p_slot)[:2])
                         if d <= self._tol.host_over_slot:
                             slots = (k,)
-                            token = placement_token(
-                                self._symbols[part], slots, self._host_tags[host]
-                            )
+                            token = self._token(part, slots, host)
                 return PartPlacement(
                     PartStatus.SEATED, seats=(seat.name,), slots=slots, host=host, token=token
                 )
         return None
+
+    def _token(self, part: str, slots: tuple[int, ...], host: str | None) -> str | None:
+        """The spec's token for `part` over `slots` (on the base, or on the instance `host`);
+        None when the spec has no such placement."""
+        host_symbol = None if host is None else self._symbols[host]
+        try:
+            return self._spec.placement_of(self._symbols[part], slots, host_symbol).token
+        except SpecError:
+            return None
 
     def _held(self, part, X_WP, poses, touching) -> bool:
         if self._tcp is None:

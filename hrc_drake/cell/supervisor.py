@@ -12,7 +12,8 @@ At a task boundary the Supervisor
 
 Grasping and bolting are weld constraints of the plant. A Drake system cannot write another
 system's parameters from its events, so the Supervisor publishes the welds it wants on its
-`welds` port, and the cell runner (`hrc_drake.cell.run`) applies them between simulation steps.
+`welds` port; the simulator's monitor (`hrc_drake.cell.run`) stops the simulation at the step
+where they change, applies them, and goes on.
 """
 
 from __future__ import annotations
@@ -32,8 +33,8 @@ from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.policy import Policy
 from hrc_drake.tasks.tokens import UNDO
 
-# (configuration, task, last token) -> Plan
-Planner = Callable[[frozenset[str], str, str | None], Plan]
+# (configuration, task, last token, measured layout: instance -> token) -> Plan
+Planner = Callable[[frozenset[str], str, str | None, dict[str, str]], Plan]
 
 
 class Mode(enum.Enum):
@@ -67,7 +68,7 @@ class Weld:
 
     kind: str  # "grasp" | "bolt"
     part: str
-    seat: str = ""  # bolt: the seat key (token on the plate, row frame on a host part)
+    seat: str = ""  # bolt: the seat key (token on the plate, "<host>/row_<j>" on a host part)
 
 
 @dataclass(frozen=True)
@@ -210,7 +211,7 @@ class Supervisor(LeafSystem):
             )
         last = s.state[-1] if s.state else None
         try:
-            plan = self._planner(tokens, indicated, last)
+            plan = self._planner(tokens, indicated, last, config.layout())
         except (RuntimeError, ValueError) as err:  # UnreachableError, PlanningError, bad input
             raise SupervisorError(
                 f"step {step}: no plan for {indicated} from {sorted(tokens)}: {err}"
@@ -252,7 +253,11 @@ class Supervisor(LeafSystem):
                 # The operator has bolted the part where it really sits (read from contact).
                 placement = config.placement(part)
                 if placement.status == PartStatus.SEATED and placement.seats:
-                    bolt_seat = placement.token if placement.host is None else placement.seats[0]
+                    bolt_seat = (
+                        placement.token
+                        if placement.host is None
+                        else f"{placement.host}/{placement.seats[0]}"
+                    )
                     welds.add(Weld("bolt", part, bolt_seat))
                 else:
                     bolt_seat = ""

@@ -1,108 +1,269 @@
-"""Operator scenarios as data files (`scenarios/*.yaml`): who deviates, when, and what to expect.
+"""Scenarios: one typed file for a run — the assembly, the cell, the operator, motion and run
+settings, and what the run should show.
 
-A scenario names the assembly, the operator (a script of overrides, or stochastic override and
-mistake probabilities with a seed), and optionally its Table 2 row with the published and the
-minimum-effort sequences (as the spec's state names).
+A scenario file (`scenarios/*.yaml`) is loaded strictly: a misspelt key or a value of the wrong
+type is an error naming it, and keys left out take the defaults below. The cell layer loads the
+same schema with Drake's `yaml_load_typed` (`hrc_drake.cell.scenario`); this module reads it
+without Drake for the task layer (`react`, `table2`, evaluations). Command-line overrides are
+more YAML merged on top (`--scenario-text "{motion: {hold_time: 0.5}}"`).
+
+    name: row8-forces-4-then-8
+    description: the operator mounts F3, then S12
+    assembly: flange                 # models/assemblies/<name>.yaml, or a path
+    table2_row: 8
+    operator:
+      deviations: [{step: 1, task: F3}, {step: 2, task: S12}]
+    expected:
+      published: ["1", "4", "8", "4", "1", "2", "7", "10"]
+      minimum_effort: ["1", "4", "8", "11"]
+    motion: {hold_time: 5.0}         # optional sections: cell, motion, physics, run
 """
 
-from __future__ import annotations
-
-from dataclasses import dataclass
+import dataclasses
+from dataclasses import dataclass, field
 from pathlib import Path
 
-import yaml
-
-from hrc_drake.hri.operator import (
-    ScriptedOperator,
-    StochasticOperator,
-    parse_operator_script,
-)
+from hrc_drake.hri.operator import ScriptedOperator, StochasticOperator, parse_operator_script
+from hrc_drake.layout import CellLayout
 from hrc_drake.resources import models_dir, scenarios_dir
 from hrc_drake.tasks.graph import StateSpace
+from hrc_drake.typed_yaml import TypedYamlError, load_typed
 
 
 class ScenarioError(ValueError):
-    """A scenario file that cannot be used."""
+    """A scenario that cannot be used; the message names the file and the key."""
 
 
-@dataclass(frozen=True)
-class OperatorScenario:
-    """One operator scenario."""
+@dataclass
+class Deviation:
+    """At decision `step` (from 1) the operator performs `task` instead of the proposal."""
 
-    name: str
-    description: str
-    assembly: Path
-    script: dict[int, str]
+    step: int = 0
+    task: str = ""
+
+
+@dataclass
+class OperatorConfig:
+    """Who the operator is: scripted deviations, or a seeded stochastic operator.
+
+    Attributes:
+        deviations: scripted tasks performed instead of the robot's proposal.
+        override_prob: probability of performing another feasible task (stochastic).
+        mistake_prob: probability of misplacing a part the spec lists under `mistakes`.
+        seed: seed of the stochastic operator.
+        model: a named operator model (`hrc_drake.hri.populations`), with `params`.
+        params: parameters of `model`.
+    """
+
+    deviations: list[Deviation] = field(default_factory=list)
     override_prob: float = 0.0
     mistake_prob: float = 0.0
     seed: int = 0
+    model: str = ""
+    params: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class Expected:
+    """What a run should show, as the spec's state names (Table 2's columns)."""
+
+    published: list[str] = field(default_factory=list)
+    minimum_effort: list[str] = field(default_factory=list)
+
+
+@dataclass
+class MotionConfig:
+    """Motion-layer settings a scenario may change (the rest: `motion.options.MotionOptions`).
+
+    Attributes:
+        hold_time: seconds the robot holds a placed part while the operator bolts it.
+        tcp_speed_limit: m/s; 0.25 is ISO 10218-1's reduced speed.
+        approach_distance: m; pre-grasp / pre-place offset along the tool's approach axis.
+        seed: seed of the random IK starts.
+    """
+
+    hold_time: float = 5.0
+    tcp_speed_limit: float = 0.25
+    approach_distance: float = 0.06
+    seed: int = 0
+
+
+@dataclass
+class PhysicsConfig:
+    """The MultibodyPlant's settings (the names of Drake's `MultibodyPlantConfig`).
+
+    The defaults are calibrated: 5 ms settles the flanges in < 0.5 s at a real-time factor
+    near 1; `sap` rests the 67 g oval flange in its pocket where `lagged` leaves it chattering.
+    """
+
+    time_step: float = 5e-3
+    contact_model: str = "hydroelastic_with_fallback"
+    discrete_contact_approximation: str = "sap"
+    contact_surface_representation: str = "polygon"
+    hydroelastic_modulus: float | None = None
+    mesh_resolution_hint: float | None = None
+
+
+@dataclass
+class RunConfig:
+    """Timing of the closed loop.
+
+    Attributes:
+        period: the Supervisor's update period [s].
+        settle_time: after a task, how long the parts settle before the cell is read [s].
+        max_sim_time: a run that has not ended by then is a failure [s].
+        max_steps: decision steps before a run is a failure.
+    """
+
+    period: float = 0.02
+    settle_time: float = 0.3
+    max_sim_time: float = 900.0
+    max_steps: int = 30
+
+
+@dataclass
+class Scenario:
+    """One run of the cell (or of the decision loop): see the module docstring.
+
+    `cell` is the cell's layout; left out, the assembly spec's `cell:` section (or the default
+    layout) is used. `policy` is a policy file; empty, the exact minimum-effort policy.
+    """
+
+    name: str = ""
+    description: str = ""
+    assembly: str = "flange"
+    policy: str = ""
     table2_row: int | None = None
-    published: tuple[str, ...] = ()
-    minimum_effort: tuple[str, ...] = ()
+    operator: OperatorConfig = field(default_factory=OperatorConfig)
+    expected: Expected = field(default_factory=Expected)
+    cell: CellLayout | None = None
+    motion: MotionConfig = field(default_factory=MotionConfig)
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    run: RunConfig = field(default_factory=RunConfig)
+
+    @property
+    def assembly_path(self) -> Path:
+        """The assembly spec file: `assembly` as a path, or a name under models/assemblies/."""
+        path = Path(self.assembly)
+        if path.suffix:
+            return path
+        return models_dir() / "assemblies" / f"{self.assembly}.yaml"
+
+    @property
+    def script(self) -> dict[int, str]:
+        """The scripted deviations as decision step -> task."""
+        return {d.step: d.task for d in self.operator.deviations}
+
+    @property
+    def published(self) -> tuple[str, ...]:
+        """Table 2's published sequence (state names)."""
+        return tuple(self.expected.published)
+
+    @property
+    def minimum_effort(self) -> tuple[str, ...]:
+        """The minimum-effort sequence (state names)."""
+        return tuple(self.expected.minimum_effort)
 
     @property
     def stochastic(self) -> bool:
         """Whether the operator deviates at random."""
-        return self.override_prob > 0 or self.mistake_prob > 0
+        return self.operator.override_prob > 0 or self.operator.mistake_prob > 0
 
-    def operator(self, space: StateSpace):
+    def operator_for(self, space: StateSpace):
         """The operator this scenario describes, for the decision loop or the cell."""
+        op = self.operator
+        if op.model:
+            from hrc_drake.hri.populations import make_operator_model
+
+            return make_operator_model(op.model, space, seed=op.seed, **op.params)
         if self.stochastic:
-            return StochasticOperator(space, self.override_prob, self.mistake_prob, self.seed)
+            return StochasticOperator(space, op.override_prob, op.mistake_prob, op.seed)
         return ScriptedOperator(self.script)
 
 
-_KEYS = {"name", "description", "assembly", "operator", "table2_row", "expected"}
+def check_scenario(scenario: Scenario, source: str) -> Scenario:
+    """Value checks the types cannot express; ScenarioError naming the key."""
+
+    def fail(key: str, problem: str) -> ScenarioError:
+        return ScenarioError(f"scenario {source}: {key}: {problem}")
+
+    op = scenario.operator
+    for key in ("override_prob", "mistake_prob"):
+        value = getattr(op, key)
+        if not 0.0 <= value <= 1.0:
+            raise fail(f"operator.{key}", f"a probability is within [0, 1], got {value}")
+    steps = set()
+    for i, d in enumerate(op.deviations):
+        if d.step < 1:
+            raise fail(f"operator.deviations[{i}].step", f"steps count from 1, got {d.step}")
+        if not d.task:
+            raise fail(f"operator.deviations[{i}].task", "name a task, e.g. F3 or undo")
+        if d.step in steps:
+            raise fail(f"operator.deviations[{i}]", f"step {d.step} is given twice")
+        steps.add(d.step)
+    if op.deviations and (scenario.stochastic or op.model):
+        raise fail("operator", "give scripted deviations or a stochastic operator, not both")
+    for key in ("hold_time", "tcp_speed_limit", "approach_distance"):
+        if getattr(scenario.motion, key) < 0:
+            raise fail(f"motion.{key}", "must be >= 0")
+    if scenario.physics.time_step <= 0:
+        raise fail("physics.time_step", "the cell is a discrete plant: give a step > 0 (5e-3)")
+    for key in ("period", "settle_time", "max_sim_time"):
+        if getattr(scenario.run, key) <= 0:
+            raise fail(f"run.{key}", "must be > 0")
+    if scenario.cell is not None:
+        try:
+            scenario.cell.check("cell")
+        except ValueError as err:
+            raise ScenarioError(f"scenario {source}: {err}") from err
+    return scenario
 
 
-def load_scenario(name_or_path: str | Path) -> OperatorScenario:
-    """Load `scenarios/<name>.yaml` (or a path); ScenarioError naming the key if malformed."""
+def scenario_file(name_or_path: str | Path) -> Path:
+    """The file of a scenario: a path, or a name under scenarios/; ScenarioError if missing."""
     path = Path(name_or_path)
     if not path.suffix:
         path = scenarios_dir() / f"{name_or_path}.yaml"
     if not path.is_file():
         known = ", ".join(sorted(p.stem for p in scenarios_dir().glob("*.yaml")))
         raise ScenarioError(f"scenario {name_or_path!r} not found; known scenarios: {known}")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as err:
-        raise ScenarioError(f"scenario {path}: bad YAML: {err}") from err
-    if not isinstance(data, dict):
-        raise ScenarioError(f"scenario {path}: must be a mapping")
-    unknown = sorted(set(data) - _KEYS)
-    if unknown:
-        raise ScenarioError(
-            f"scenario {path}: unknown key {unknown[0]!r}; keys are {sorted(_KEYS)}"
-        )
-    operator = data.get("operator") or {}
-    op_keys = {"script", "override_prob", "mistake_prob", "seed"}
-    if not isinstance(operator, dict) or set(operator) - op_keys:
-        raise ScenarioError(f"scenario {path}: operator: allowed keys are {sorted(op_keys)}")
-    try:
-        script = parse_operator_script(str(operator.get("script", "")))
-    except ValueError as err:
-        raise ScenarioError(f"scenario {path}: operator.script: {err}") from err
-    expected = data.get("expected") or {}
-    assembly = data.get("assembly", "flange")
-    assembly_path = Path(assembly)
-    if not assembly_path.suffix:
-        assembly_path = models_dir() / "assemblies" / f"{assembly}.yaml"
-    return OperatorScenario(
-        name=str(data.get("name", path.stem)),
-        description=str(data.get("description", "")),
-        assembly=assembly_path,
-        script=script,
-        override_prob=float(operator.get("override_prob", 0.0)),
-        mistake_prob=float(operator.get("mistake_prob", 0.0)),
-        seed=int(operator.get("seed", 0)),
-        table2_row=data.get("table2_row"),
-        published=tuple(str(s) for s in expected.get("published", ())),
-        minimum_effort=tuple(str(s) for s in expected.get("minimum_effort", ())),
-    )
+    return path
 
 
-def table2_scenarios() -> list[OperatorScenario]:
+def load_scenario(
+    name_or_path: str | Path | None = None, scenario_text: str | None = None
+) -> Scenario:
+    """Load a scenario file (a path, or a name under scenarios/), then the YAML overrides in
+    `scenario_text`; with no file, `scenario_text` on top of the defaults. Strict: ScenarioError
+    naming the key for an unknown key or a value of the wrong type."""
+    scenario, source = Scenario(), "<defaults>"
+    if name_or_path is not None:
+        path = scenario_file(name_or_path)
+        source = str(path)
+        try:
+            scenario = load_typed(Scenario, text=path.read_text())
+        except TypedYamlError as err:
+            raise ScenarioError(f"scenario {path}: {err}") from err
+        if not scenario.name:
+            scenario.name = path.stem
+    if scenario_text:
+        try:
+            scenario = load_typed(Scenario, text=scenario_text, defaults=scenario)
+        except TypedYamlError as err:
+            raise ScenarioError(f"--scenario-text: {err}") from err
+    return check_scenario(scenario, source)
+
+
+def with_operator_script(scenario: Scenario, script: str) -> Scenario:
+    """A copy whose operator follows the command-line script ``"1:F3,2:S12"``."""
+    steps = parse_operator_script(script)
+    operator = OperatorConfig(deviations=[Deviation(k, t) for k, t in sorted(steps.items())])
+    return dataclasses.replace(scenario, operator=operator)
+
+
+def table2_scenarios() -> list[Scenario]:
     """The scenarios that reproduce the rows of the paper's Table 2, in the table's order."""
     rows = [load_scenario(p) for p in sorted(scenarios_dir().glob("*.yaml"))]
     rows = [r for r in rows if r.table2_row is not None]
     return sorted(rows, key=lambda r: r.table2_row)
+

@@ -9,14 +9,14 @@ import numpy as np
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.trajectories import PiecewisePolynomial
 
-from hrc_drake.motion.ik import solve_ik
+from hrc_drake.cell_models import CellDesign, CellModelError
+from hrc_drake.motion.ik import UnreachableError, solve_ik
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.plan import CheckPhase, MotionTiming, Plan, Segment, Stage
 from hrc_drake.motion.poses import (
     CellFrames,
-    assign_instances,
+    default_layout,
     offset_along_approach,
-    parse_token,
     part_pose,
     tcp_pose,
 )
@@ -38,6 +38,7 @@ from hrc_drake.motion.trajectory import (
     spline_through,
     straight_waypoints,
 )
+from hrc_drake.tasks.spec import load_spec
 from hrc_drake.tasks.tokens import UNDO
 
 # The UR3 "ready" posture family (ROS joint conventions): elbow up, tool pointing down.
@@ -59,15 +60,27 @@ class TaskMove:
 
 
 def resolve_task(
-    frames: CellFrames, configuration: Iterable[str], task: str, last_token: str | None = None
+    frames: CellFrames,
+    configuration: Iterable[str],
+    task: str,
+    last_token: str | None = None,
+    layout: Mapping[str, str] | None = None,
 ) -> TaskMove:
     """Which instance `task` moves from `configuration`, and the token assignments around it.
 
-    An assembly token takes a part of its symbol from the tray (the lowest-numbered free one);
-    `undo` returns the part at `last_token` (the task done last) to its tray home.
+    `layout` (instance -> token, e.g. measured by the SlotMonitor) says which instance sits at
+    each token; without it, `default_layout` gives the robot's own routine. An assembly token
+    takes a part of its symbol from the tray (the lowest-numbered free one); `undo` returns the
+    part at `last_token` (the task done last) to its tray home.
     """
     configuration = frozenset(configuration)
-    before = assign_instances(frames, configuration, last_token)
+    if layout is None:
+        layout = default_layout(frames, configuration, last_token)
+    if frozenset(layout.values()) != configuration:
+        raise ValueError(
+            f"layout {dict(layout)} does not hold the configuration {sorted(configuration)}"
+        )
+    before = {token: instance for instance, token in layout.items()}
     if task == UNDO:
         if last_token is None or last_token not in configuration:
             raise ValueError(f"undo needs the last task placed (last_token), got {last_token!r}")
@@ -76,9 +89,9 @@ def resolve_task(
         return TaskMove(task, instance, last_token, None, before, after)
     if task in configuration:
         raise ValueError(f"task {task} is already in place in {sorted(configuration)}")
-    symbol = parse_token(task, frames.host_tags).part
+    symbol = frames.spec.placement(task).part
     used = set(before.values())
-    free = [i for i in frames.part_instances.get(symbol, ()) if i not in used]
+    free = [i for i in frames.design.instances_of(symbol) if i not in used]
     if not free:
         raise ValueError(f"task {task}: no {symbol} left in the tray in {sorted(configuration)}")
     after = dict(before)
@@ -165,16 +178,29 @@ class MotionPlanner:
         options: MotionOptions | None = None,
         frames: CellFrames | None = None,
         q_home: np.ndarray | None = None,
+        design: CellDesign | None = None,
     ):
         self.options = options or MotionOptions()
-        self.frames = frames or load_cell_frames()
+        if frames is None:
+            frames = load_cell_frames(design or CellDesign.of(load_spec()))
+        self.frames = frames
         self._models: dict[str | None, SceneModel] = {}
         self._scenes: dict[Layout, PlanningScene] = {}
         self._plans: dict[tuple, Plan] = {}
         empty = self.scene(Layout.of({}, None, MAX_OPENING))
         self.limits = JointLimits.of(empty, self.options)
         self._rng = np.random.default_rng(self.options.seed)
-        self.q_home = self._home(empty) if q_home is None else np.asarray(q_home, dtype=float)
+        if q_home is None:
+            try:
+                q_home = self._home(empty)
+            except UnreachableError as err:
+                layout = self.frames.design.layout
+                raise CellModelError(
+                    f"the UR3 cannot reach its home pose above the work ({err}); the plate and "
+                    "the tray are too far: move them closer (cell.plate_position "
+                    f"{layout.plate_position}, cell.tray_position)"
+                ) from err
+        self.q_home = np.asarray(q_home, dtype=float)
 
     def scene(self, layout: Layout) -> PlanningScene:
         """The planning scene of a layout (built once)."""
@@ -226,26 +252,43 @@ class MotionPlanner:
             waypoint=waypoint,
         )
 
-    def _support(self, token: str | None) -> str:
-        """The model instance a part rests on at `token` (None: the tray)."""
+    def _support(self, token: str | None, placed: Mapping[str, str]) -> str:
+        """The model instance a part rests on at `token` (None: the tray), given the tokens in
+        place -> their instances."""
         if token is None:
             return TRAY
-        placement = parse_token(token, self.frames.host_tags)
+        spec = self.frames.spec
+        placement = spec.placement(token)
         if placement.host is None:
             return PLATE
-        return self.frames.part_instances[placement.host][0]
+        for other, instance in placed.items():
+            host = spec.placement(other)
+            if (
+                host.part == placement.host
+                and host.host is None
+                and placement.slots[0] in host.slots
+            ):
+                return instance
+        raise ValueError(f"{token}: no {placement.host} under it in {sorted(placed)}")
 
     def plan_task(
-        self, configuration: Iterable[str], task: str, *, last_token: str | None = None
+        self,
+        configuration: Iterable[str],
+        task: str,
+        *,
+        last_token: str | None = None,
+        layout: Mapping[str, str] | None = None,
     ) -> Plan:
         """The plan of `task` from `configuration` (the tokens in place), home to home.
 
         `last_token` is the task done last; `undo` needs it (the part placed last goes back to
-        its tray home). Raises UnreachableError (naming the task and the violated constraint) when
-        a pose is out of reach, PlanningError when no path is found.
+        its tray home). `layout` (instance -> token) is where each part physically is, as the
+        cell measured it; without it the robot's own routine is assumed (`default_layout`).
+        Raises UnreachableError (naming the task and the violated constraint) when a pose is out
+        of reach, PlanningError when no path is found.
         """
         configuration = frozenset(configuration)
-        move = resolve_task(self.frames, configuration, task, last_token)
+        move = resolve_task(self.frames, configuration, task, last_token, layout)
         # Which part sits where, and which one moves: all a plan depends on.
         key = (task, frozenset(move.before.items()), move.source)
         if key not in self._plans:
@@ -278,8 +321,8 @@ class MotionPlanner:
         placed = self.scene(Layout.of(move.after, None, opening))
         # Near the grasp and place instants the fingertips come within a few mm of the surface
         # the part rests on (they hold a 10 mm part), and the part touches it.
-        source = self._support(move.source)
-        target = self._support(move.target)
+        source = self._support(move.source, move.before)
+        target = self._support(move.target, move.after)
         hand = ((GRIPPER, part), (GRIPPER, source))
         lift_allowed = ((part, source), (GRIPPER, source))
         place_allowed = ((part, target), (GRIPPER, target))
@@ -361,3 +404,67 @@ class MotionPlanner:
             phases=tuple(line.phases),
             motions=tuple(line.motions),
         )
+
+
+def check_reach(planner: MotionPlanner) -> None:
+    """Check, before any simulation, that the UR3 reaches every grasp: each part in its tray home
+    and at every placement the spec allows (pre-grasp and grasp, with the robot's limits and
+    clearance). CellModelError naming the slot or part and the layout value to change."""
+    frames, spec = planner.frames, planner.frames.spec
+    opts = planner.options
+    layout = frames.design.layout
+    empty = planner.scene(Layout.of({}, None, MAX_OPENING))
+    targets: list[tuple[str, str, RigidTransform, str]] = []
+    for instance, X_W_home in frames.homes.items():
+        targets.append((instance, f"{instance} in its tray home", X_W_home, "cell.tray_position"))
+    configurations = {}
+    for token, _mount, _slots in spec.placements():
+        placement = spec.placement(token)
+        if placement.host is None:
+            configurations[token] = frozenset()
+            continue
+        host = next(
+            t
+            for t, m, slots in spec.placements()
+            if m.part == placement.host and m.on == "base" and placement.slots[0] in slots
+        )
+        configurations[token] = frozenset({host})
+    for token, configuration in configurations.items():
+        placement = spec.placement(token)
+        instance = frames.design.instances_of(placement.part)[0]
+        X_W_part = part_pose(frames, token, configuration | {token})
+        where = f"slot {'-'.join(map(str, placement.slots))}"
+        targets.append((instance, f"{token} ({where})", X_W_part, "cell.plate_position"))
+    # The fingers close around the part and near what it rests on; the arm must stay clear.
+    near_hand = [*frames.design.instance_names, PLATE, TRAY]
+    empty.set_allowed_contacts([(GRIPPER, other) for other in near_hand])
+    try:
+        for instance, what, X_W_part, knob in targets:
+            X_grasp = tcp_pose(frames, instance, X_W_part)
+            for waypoint, X in (
+                ("pre-grasp", offset_along_approach(X_grasp, opts.approach_distance)),
+                ("grasp", X_grasp),
+            ):
+                nominal = planner._toward(empty, X.translation())
+                try:
+                    solve_ik(
+                        empty,
+                        X,
+                        [nominal, planner.q_home],
+                        nominal,
+                        min_distance=opts.clearance,
+                        task=what,
+                        waypoint=waypoint,
+                    )
+                except UnreachableError as err:
+                    p = X.translation()
+                    raise CellModelError(
+                        f"the UR3 cannot reach {what}: {err.constraint} at the {waypoint} (tcp at "
+                        f"[{p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}] m, "
+                        f"{float(np.hypot(p[0], p[1])):.3f} m from its base axis; it reaches "
+                        f"about 0.5 m). Move it closer: change {knob} (now "
+                        f"{getattr(layout, knob.split('.')[1])}) or cell.slot_pitch "
+                        f"({layout.slot_pitch})"
+                    ) from err
+    finally:
+        empty.set_allowed_contacts(())

@@ -23,17 +23,13 @@ from pydrake.geometry import (
     Sphere,
 )
 from pydrake.math import RigidTransform
-from pydrake.multibody.parsing import (
-    LoadModelDirectives,
-    ProcessModelDirectives,
-)
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
 from pydrake.multibody.tree import FixedOffsetFrame
 from pydrake.systems.framework import DiagramBuilder
 
-from hrc_drake import resources
-from hrc_drake.motion.poses import PART_INSTANCES, CellFrames, part_pose
-from hrc_drake.robot_models import RG2_FINGER_JOINTS, RG2_MAX_OPENING, UR3_JOINTS, make_parser
+from hrc_drake.cell_models import CellDesign, add_cell_models, check_cell_models
+from hrc_drake.motion.poses import CellFrames, part_pose
+from hrc_drake.robot_models import RG2_FINGER_JOINTS, RG2_MAX_OPENING, UR3_JOINTS
 
 ROBOT = "ur3"
 GRIPPER = "rg2"
@@ -44,13 +40,6 @@ PLATE = "base_plate"
 TRAY = "tray"
 # Wrist links sit right against the gripper mount; their capsules may touch it (calibration).
 _WRIST_LINKS = ("wrist_1_link", "wrist_2_link", "wrist_3_link")
-
-
-def add_cell(plant: MultibodyPlant) -> None:
-    """Add the cell's models (robot, gripper, table, plate, tray, parts): models/cell.dmd.yaml."""
-    parser = make_parser(plant)
-    directives = LoadModelDirectives(str(resources.models_dir() / "cell.dmd.yaml"))
-    ProcessModelDirectives(directives, plant, parser)
 
 
 def part_body(plant: MultibodyPlant, instance: str):
@@ -116,7 +105,7 @@ class SceneModel:
         self.carried = carried
         builder = DiagramBuilder()
         plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
-        add_cell(plant)
+        add_cell_models(plant, frames.design)
         gripper = plant.GetModelInstanceByName(GRIPPER)
         self.finger_axes = {
             name: np.asarray(plant.GetJointByName(name, gripper).translation_axis())
@@ -125,18 +114,17 @@ class SceneModel:
         self.finger_frames = {name: _free_finger(plant, name) for name in FINGER_JOINTS}
         self.part_frames: dict[str, FixedOffsetFrame] = {}
         world = plant.world_frame()
-        for instances in frames.part_instances.values():
-            for instance in instances:
-                body = part_body(plant, instance)
-                if instance == carried:
-                    X_tcp_part = frames.grasps[instance].inverse()
-                    plant.WeldFrames(self._tcp_frame(plant), body.body_frame(), X_tcp_part)
-                    continue
-                frame = plant.AddFrame(
-                    FixedOffsetFrame(f"{instance}_pose", world, frames.homes[instance])
-                )
-                plant.WeldFrames(frame, body.body_frame(), RigidTransform())
-                self.part_frames[instance] = frame
+        for instance in frames.design.instance_names:
+            body = part_body(plant, instance)
+            if instance == carried:
+                X_tcp_part = frames.grasps[instance].inverse()
+                plant.WeldFrames(self._tcp_frame(plant), body.body_frame(), X_tcp_part)
+                continue
+            frame = plant.AddFrame(
+                FixedOffsetFrame(f"{instance}_pose", world, frames.homes[instance])
+            )
+            plant.WeldFrames(frame, body.body_frame(), RigidTransform())
+            self.part_frames[instance] = frame
         plant.Finalize()
         ur3 = plant.GetModelInstanceByName(ROBOT)
         starts = [plant.GetJointByName(j, ur3).position_start() for j in UR3_JOINTS]
@@ -298,56 +286,61 @@ def _support(shape, direction: np.ndarray) -> float:
     raise TypeError(f"no support function for {type(shape).__name__}")
 
 
-def load_cell_frames() -> CellFrames:
+def load_cell_frames(design: CellDesign) -> CellFrames:
     """Read seat, tray and part frames (and the parts' grasp widths) from the cell's models."""
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
-    add_cell(plant)
+    add_cell_models(plant, design)
     plant.Finalize()
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
-    plant_context = plant.GetMyContextFromRoot(context)
+    return read_cell_frames(plant, scene_graph, plant.GetMyContextFromRoot(context), design)
+
+
+def read_cell_frames(
+    plant: MultibodyPlant, scene_graph, plant_context, design: CellDesign
+) -> CellFrames:
+    """The cell's frames in a finalized plant holding `design`'s models (CellModelError if the
+    models do not fit the spec). Grasp widths need the gripper; without it they are empty."""
+    check_cell_models(plant, scene_graph, design)
 
     def world_pose(model: str, frame: str) -> RigidTransform:
         instance = plant.GetModelInstanceByName(model)
         return plant.GetFrameByName(frame, instance).CalcPoseInWorld(plant_context)
 
-    plate = plant.GetModelInstanceByName(PLATE)
-    seats = {}
-    k = 1
-    while plant.HasFrameNamed(f"slot_{k}", plate):
-        seats[k] = world_pose(PLATE, f"slot_{k}")
-        k += 1
+    seats = {k: world_pose(PLATE, f"slot_{k}") for k in range(1, design.slots + 1)}
     homes, rows, grasps, widths = {}, {}, {}, {}
-    finger_axis = _finger_axis_in_tcp(plant, plant_context)
+    has_gripper = plant.HasModelInstanceNamed(GRIPPER)
+    finger_axis = _finger_axis_in_tcp(plant, plant_context) if has_gripper else None
     inspector = scene_graph.model_inspector()
-    for instances in PART_INSTANCES.values():
-        for instance in instances:
-            homes[instance] = world_pose(TRAY, f"home_{instance}")
-            model = plant.GetModelInstanceByName(instance)
-            body = part_body(plant, instance)
-            grasp = plant.GetFrameByName("grasp", model)
-            if grasp.body().index() != body.index():
-                raise ValueError(f"{instance}::grasp is not on the part's body")
-            X_part_grasp = grasp.GetFixedPoseInBodyFrame()
-            grasps[instance] = X_part_grasp
-            rows[instance] = {
+    for instance in design.instance_names:
+        homes[instance] = world_pose(TRAY, f"home_{instance}")
+        model = plant.GetModelInstanceByName(instance)
+        body = part_body(plant, instance)
+        X_part_grasp = plant.GetFrameByName("grasp", model).GetFixedPoseInBodyFrame()
+        grasps[instance] = X_part_grasp
+        part = design.spec.part(design.symbol_of(instance))
+        if part.is_host and part.symbol not in rows:
+            rows[part.symbol] = {
                 j: plant.GetFrameByName(f"row_{j}", model).GetFixedPoseInBodyFrame()
-                for j in (1, 2, 3, 4, 5, 6, 7, 8, 9)
-                if plant.HasFrameNamed(f"row_{j}", model)
+                for j in range(1, part.footprint + 1)
             }
-            axis_part = X_part_grasp.rotation() @ finger_axis
-            hi, lo = -np.inf, np.inf
-            for g in plant.GetCollisionGeometriesForBody(body):
-                X_body_g = inspector.GetPoseInFrame(g)
-                R = X_body_g.rotation().inverse()
-                offset = float(axis_part @ (X_body_g.translation() - X_part_grasp.translation()))
-                shape = inspector.GetShape(g)
-                hi = np.maximum(hi, offset + _support(shape, R @ axis_part))
-                lo = np.minimum(lo, offset - _support(shape, R @ -axis_part))
-            widths[instance] = float(hi - lo)
+        if finger_axis is None:
+            continue
+        axis_part = X_part_grasp.rotation() @ finger_axis
+        hi, lo = -np.inf, np.inf
+        for g in plant.GetCollisionGeometriesForBody(body):
+            X_body_g = inspector.GetPoseInFrame(g)
+            R = X_body_g.rotation().inverse()
+            offset = float(axis_part @ (X_body_g.translation() - X_part_grasp.translation()))
+            shape = inspector.GetShape(g)
+            hi = np.maximum(hi, offset + _support(shape, R @ axis_part))
+            lo = np.minimum(lo, offset - _support(shape, R @ -axis_part))
+        widths[instance] = float(hi - lo)
     tray = plant.GetBodyByName(TRAY, plant.GetModelInstanceByName(TRAY))
-    return CellFrames(seats, homes, rows, grasps, widths, tray.EvalPoseInWorld(plant_context))
+    return CellFrames(
+        design, seats, homes, rows, grasps, widths, tray.EvalPoseInWorld(plant_context)
+    )
 
 
 def _finger_axis_in_tcp(plant: MultibodyPlant, plant_context) -> np.ndarray:

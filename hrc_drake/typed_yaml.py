@@ -1,0 +1,101 @@
+"""Strict, typed YAML loading into dataclasses, without Drake.
+
+The cell layer loads scenarios with Drake's `yaml_load_typed`; the task layer (which imports no
+Drake) reads the same files with `load_typed` here. Both are strict in the same way: an unknown
+key or a value of the wrong type is an error naming the key, and keys left out keep the schema's
+defaults (or those of `defaults`, for command-line overrides on top of a file).
+
+Supported field types: `str`, `int`, `float` (an int is accepted), `bool`, `X | None`,
+`list[X]`, `dict[str, X]` and nested dataclasses.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+import typing
+from typing import Any
+
+import yaml
+
+
+class TypedYamlError(ValueError):
+    """YAML that does not fit its schema; the message names the key."""
+
+
+def _type_name(tp: Any) -> str:
+    return getattr(tp, "__name__", str(tp))
+
+
+def _convert(value: Any, tp: Any, key: str, default: Any = dataclasses.MISSING) -> Any:
+    origin = typing.get_origin(tp)
+    args = typing.get_args(tp)
+    if origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        (inner,) = [a for a in args if a is not type(None)]
+        return _convert(value, inner, key, default)
+    if dataclasses.is_dataclass(tp):
+        base = default if dataclasses.is_dataclass(default) else None
+        return _merge(value, tp, key, base)
+    if origin is list:
+        if not isinstance(value, list):
+            raise TypedYamlError(f"{key}: expected a list, got {value!r}")
+        return [_convert(v, args[0], f"{key}[{i}]") for i, v in enumerate(value)]
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise TypedYamlError(f"{key}: expected a mapping, got {value!r}")
+        return {str(k): _convert(v, args[1], f"{key}.{k}") for k, v in value.items()}
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise TypedYamlError(f"{key}: expected a number, got {value!r}")
+        return float(value)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise TypedYamlError(f"{key}: expected a whole number, got {value!r}")
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise TypedYamlError(f"{key}: expected true or false, got {value!r}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise TypedYamlError(f"{key}: expected a string, got {value!r} (quote it)")
+        return value
+    raise TypeError(f"typed_yaml: unsupported field type {tp!r} at {key}")
+
+
+def _merge(data: Any, schema: type, where: str, base: Any = None) -> Any:
+    prefix = f"{where}." if where else ""
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise TypedYamlError(f"{where or '<top>'}: expected a mapping, got {data!r}")
+    hints = typing.get_type_hints(schema)
+    fields = {f.name: f for f in dataclasses.fields(schema)}
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        raise TypedYamlError(
+            f"{prefix}{unknown[0]}: unknown key; the keys of {where or 'the file'} are "
+            f"{sorted(fields)}"
+        )
+    obj = dataclasses.replace(base) if base is not None else schema()
+    for name, value in data.items():
+        current = getattr(obj, name)
+        setattr(obj, name, _convert(value, hints[name], f"{prefix}{name}", current))
+    return obj
+
+
+def load_typed(schema: type, *, text: str | None = None, data: Any = None, defaults: Any = None):
+    """An instance of the dataclass `schema` from YAML `text` (or parsed `data`).
+
+    Keys missing from the YAML keep the values of `defaults` (an instance of `schema`) or the
+    schema's own defaults; nested mappings merge key by key.
+    """
+    if text is not None:
+        try:
+            data = yaml.safe_load(text)
+        except yaml.YAMLError as err:
+            raise TypedYamlError(f"bad YAML: {err}") from err
+    base = dataclasses.replace(defaults) if defaults is not None else None
+    return _merge(data, schema, "", base)
