@@ -9,16 +9,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from pydrake.common.schema import Transform
 from pydrake.geometry import (
-    ClippingRange,
-    ColorRenderCamera,
-    DepthRange,
-    DepthRenderCamera,
     MakeRenderEngineVtk,
     Meshcat,
     MeshcatVisualizer,
     MeshcatVisualizerParams,
-    RenderCameraCore,
     RenderEngineVtkParams,
     Role,
     RoleAssign,
@@ -29,7 +25,7 @@ from pydrake.multibody.tree import JointActuatorIndex, MultibodyConstraintId, Pd
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.primitives import MatrixGain, Saturation
-from pydrake.systems.sensors import CameraInfo, RgbdSensor
+from pydrake.systems.sensors import CameraConfig, RgbdSensor
 
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.slot_monitor import CellConfiguration, SlotMonitor
@@ -387,22 +383,31 @@ def _look_at(position, target) -> RigidTransform:
     return RigidTransform(RotationMatrix(np.column_stack([x, y, z])), p)
 
 
-def _add_camera(builder: DiagramBuilder, scene_graph, width: int = 1024, height: int = 640):
-    scene_graph.AddRenderer("vtk", MakeRenderEngineVtk(RenderEngineVtkParams()))
-    core = RenderCameraCore(
-        "vtk",
-        CameraInfo(width=width, height=height, fov_y=np.radians(40)),
-        ClippingRange(0.05, 5.0),
-        RigidTransform(),
+def _add_camera(builder: DiagramBuilder, scene_graph, width: int = 1024, height: int = 640) -> None:
+    """The operator's-side RGB camera, described by a Drake `CameraConfig`.
+
+    The sensor is built from the config's cameras (`MakeCameras`) rather than with
+    `ApplyCameraConfig`, which would also publish every frame on LCM: here the image renders only
+    when the `camera.rgb_image` port is evaluated (a still), not at a frame rate.
+    """
+    config = CameraConfig(
+        name="operator_view",
+        width=width,
+        height=height,
+        focal=CameraConfig.FovDegrees(y=40.0),
+        clipping_near=0.05,
+        clipping_far=5.0,
+        z_near=0.06,
+        z_far=4.9,
+        X_PB=Transform(_look_at(CAMERA_POSITION, CAMERA_TARGET)),
+        renderer_name="vtk",
+        renderer_class="RenderEngineVtk",
     )
+    scene_graph.AddRenderer(config.renderer_name, MakeRenderEngineVtk(RenderEngineVtkParams()))
+    color, depth = config.MakeCameras()
     sensor = builder.AddNamedSystem(
-        "camera",
-        RgbdSensor(
-            scene_graph.world_frame_id(),
-            _look_at(CAMERA_POSITION, CAMERA_TARGET),
-            ColorRenderCamera(core),
-            DepthRenderCamera(core, DepthRange(0.06, 4.9)),
-        ),
+        config.name,
+        RgbdSensor(scene_graph.world_frame_id(), config.X_PB.GetDeterministicValue(), color, depth),
     )
     builder.Connect(scene_graph.get_query_output_port(), sensor.query_object_input_port())
     builder.ExportOutput(sensor.color_image_output_port(), "camera.rgb_image")

@@ -435,6 +435,10 @@ def check_reach(planner: MotionPlanner) -> None:
         X_W_part = part_pose(frames, token, configuration | {token})
         where = f"slot {'-'.join(map(str, placement.slots))}"
         targets.append((instance, f"{token} ({where})", X_W_part, "cell.plate_position"))
+    now = {
+        "cell.plate_position": layout.plate_position,
+        "cell.tray_position": [round(float(x), 3) for x in frames.tray.translation()],
+    }
     # The fingers close around the part and near what it rests on; the arm must stay clear.
     near_hand = [*frames.design.instance_names, PLATE, TRAY]
     empty.set_allowed_contacts([(GRIPPER, other) for other in near_hand])
@@ -463,8 +467,7 @@ def check_reach(planner: MotionPlanner) -> None:
                         f"[{p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}] m, "
                         f"{float(np.hypot(p[0], p[1])):.3f} m from its base axis; it reaches "
                         f"about 0.5 m). Move it closer: change {knob} (now "
-                        f"{getattr(layout, knob.split('.')[1])}) or cell.slot_pitch "
-                        f"({layout.slot_pitch})"
+                        f"{now[knob]}) or cell.slot_pitch ({layout.slot_pitch})"
                     ) from err
     finally:
         empty.set_allowed_contacts(())
