@@ -24,9 +24,10 @@ class SquareFirstOperator:
     def __call__(self, step: int, state: tuple[str, ...], proposal: str) -> str:
         if state:
             return proposal
+        spec = self.space.spec
         tasks = [t for t, _ in self.space.tasks(self.space.index(state))]
-        squares = [t for t in tasks if t.startswith("S")]
-        return squares[-1] if squares else proposal
+        hosts = [t for t in tasks if spec.part(spec.placement(t).part).is_host]
+        return hosts[-1] if hosts else proposal
 
 
 def main() -> None:

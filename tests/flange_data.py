@@ -1,4 +1,4 @@
-"""The flange case as written in shared/reference/flange-case.md, as test data."""
+"""The flange case as test data (the paper's Table 1 and Figure 8; see docs/flange-case.md)."""
 
 TABLE1 = {
     "1": ((), "start"),

@@ -23,6 +23,7 @@ from hrc_drake.cell.builder import UR3_READY
 from hrc_drake.cell.scenario import load_cell_scenario, plant_config
 from hrc_drake.cell_models import CellDesign, CellModelError, add_cell_models
 from hrc_drake.hri.scenario import ScenarioError
+from hrc_drake.motion.poses import default_layout
 from hrc_drake.resources import models_dir
 from hrc_drake.robot_models import add_robot, make_parser
 from hrc_drake.tasks.graph import generate_states
@@ -64,19 +65,6 @@ def workcell():
 @pytest.fixture(scope="module")
 def cell():
     return build_cell(CellScenario())
-
-
-def _assign(configuration: frozenset[str]) -> dict[str, str]:
-    """Part instance per token: the base F is oval_flange_1, the F on the square oval_flange_2."""
-    placements = {}
-    for token in sorted(configuration):
-        if token.startswith("S"):
-            placements["square_flange"] = token
-        elif len(token) == 3:
-            placements["oval_flange_2"] = token
-        else:
-            placements["oval_flange_1"] = token
-    return placements
 
 
 def _perturbed(X: RigidTransform, rng: np.random.Generator, lift: float) -> RigidTransform:
@@ -174,10 +162,11 @@ def test_the_sixteen_configurations_are_those_of_table_1():
 )
 def test_settled_configuration_is_read_from_physics(workcell, configuration):
     rng = np.random.default_rng(sorted(TABLE_1_CONFIGURATIONS, key=sorted).index(configuration))
-    placements = _assign(configuration)
+    placements = default_layout(workcell.frames, configuration)
     seated = workcell.placement_poses(placements)
+    spec = workcell.design.spec
     poses = {
-        part: _perturbed(X, rng, lift=0.006 if len(placements[part]) == 3 else 0.003)
+        part: _perturbed(X, rng, lift=0.006 if spec.placement(placements[part]).host else 0.003)
         for part, X in seated.items()
     }
     context = workcell.create_default_context()

@@ -1,6 +1,7 @@
 """Assembly specs: the flange file, other assemblies as new files only, and bad specs."""
 
 import copy
+import re
 
 import pytest
 import yaml
@@ -124,3 +125,101 @@ def test_bad_yaml_and_missing_file(tmp_path):
         load_spec(path)
     with pytest.raises(SpecError, match="file not found"):
         load_spec(tmp_path / "missing.yaml")
+
+
+# --- goal.correct: its form, entries that cannot be built, and min_gap AND correct -----------
+
+
+@pytest.mark.parametrize(
+    "correct",
+    [
+        ["F3", "S12", "F01"],  # a flat list
+        "F3 S12 F01",  # a string
+        [["F3", "S12", "F01"], "F1 S23 F03"],  # one entry a string
+        [],
+    ],
+)
+def test_correct_in_the_wrong_form_shows_the_expected_one(flange_data, correct):
+    data = _broken(flange_data, lambda d: d["goal"].update(correct=correct))
+    with pytest.raises(SpecError, match=r"goal\.correct.*correct: \[\[F3, S12, F01\]"):
+        parse_spec(data, source="bad.yaml")
+
+
+@pytest.mark.parametrize(
+    ("entry", "message"),
+    [
+        (["F1", "S23", "F07"], "unknown task 'F07'"),
+        (["F1", "S23"], "has 2 parts but a complete assembly has 3"),
+        (["F1", "F3", "S12"], "puts 2 'F' on base but the mounts put 1 there"),
+        (["F2", "S23", "F01"], "F2 and S23 both occupy base slot 2"),
+        (["F3", "S12", "F03"], "F03 sits on 'S' over slot 3 but no 'S' covers that slot"),
+        (["F1", "S23", "F03", "F03"], "lists 'F03' twice"),
+    ],
+)
+def test_correct_entry_that_cannot_be_built_is_named(flange_data, entry, message):
+    data = _broken(flange_data, lambda d: d["goal"].update(correct=[["F1", "S23", "F03"], entry]))
+    with pytest.raises(SpecError, match=r"goal\.correct\[1\]: .*" + re.escape(message)):
+        parse_spec(data, source="bad.yaml")
+
+
+def test_correct_entry_no_sequence_reaches_is_named(flange_data):
+    # Every oval flange before the square: the one that goes on the square never can.
+    def edit(d):
+        d["precedence"] = {"before": [["F", "S"]]}
+        d["goal"]["correct"] = [["F1", "S23", "F03"]]
+
+    with pytest.raises(SpecError, match=r"goal\.correct\[0\].*cannot be built by any sequence"):
+        generate_states(parse_spec(_broken(flange_data, edit), source="bad.yaml"))
+
+
+def test_min_gap_and_correct_combine_with_and(flange_data):
+    # Both given: only the listed configurations that also keep the gap are terminal.
+    data = _broken(flange_data, lambda d: d["goal"].update(correct=[["F1", "S23", "F03"]]))
+    space = generate_states(parse_spec(data))
+    terminal = {
+        space.configuration(s) for s in range(space.n_states) if space.kind[s] == StateKind.TERMINAL
+    }
+    assert terminal == {frozenset({"F1", "S23", "F03"})}
+    assert space.state_kind(space.index(("F3", "S12", "F01"))) == StateKind.WRONG
+    # A listed configuration that breaks the gap could never be correct: refused, rule named.
+    data = _broken(flange_data, lambda d: d["goal"].update(correct=[["F1", "S23", "F02"]]))
+    with pytest.raises(SpecError, match=r"goal\.correct\[0\].*breaks goal\.min_gap\[0\].*AND"):
+        parse_spec(data, source="bad.yaml")
+
+
+# --- state_names ------------------------------------------------------------------------------
+
+
+def test_state_names_must_label_every_state(flange_data):
+    wider = _broken(flange_data, lambda d: d["base"].update(slots=4))
+    with pytest.raises(SpecError, match="state_names: labels 20 of the 44 generated states"):
+        generate_states(parse_spec(wider, source="four.yaml"))
+    fewer = _broken(flange_data, lambda d: d["state_names"].pop("S23 F03 F1"))
+    with pytest.raises(SpecError, match="state_names: labels 19 of the 20 generated states"):
+        generate_states(parse_spec(fewer, source="bad.yaml"))
+
+
+def test_state_names_that_are_not_states_are_all_named(flange_data):
+    def edit(d):
+        d["state_names"]["F2 S23"] = "21"
+        d["state_names"]["S12 F03"] = "22"
+
+    with pytest.raises(SpecError, match=r"'F2 S23', 'S12 F03' are not a state"):
+        generate_states(parse_spec(_broken(flange_data, edit), source="bad.yaml"))
+
+
+def test_state_names_must_differ_and_tolerate_spacing(flange_data):
+    clash = _broken(flange_data, lambda d: d["state_names"].update({"S23 F03 F1": "10"}))
+    with pytest.raises(SpecError, match=r"label\(s\) \['10'\] given to more than one state"):
+        generate_states(parse_spec(clash, source="bad.yaml"))
+
+    def respace(d):
+        d["state_names"]["  F1   S23 "] = d["state_names"].pop("F1 S23")
+
+    space = generate_states(parse_spec(_broken(flange_data, respace)))
+    assert space.name(space.index(("F1", "S23"))) == "7"
+
+
+def test_state_kind_keys_are_snake_case():
+    assert StateKind.DEAD_END.key == "dead_end" and StateKind.DEAD_END.label == "dead end"
+    assert [k.key for k in StateKind] == ["start", "normal", "terminal", "wrong", "dead_end"]

@@ -293,7 +293,7 @@ def run_scenario(
     )
     try:
         final_index = space.index(status.state)
-        final_kind = space.state_kind(final_index).label
+        final_kind = space.state_kind(final_index).key
         terminal = bool(space.kind[final_index] == StateKind.TERMINAL)
     except KeyError:
         final_kind, terminal = "unknown", False

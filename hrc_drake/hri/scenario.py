@@ -266,4 +266,3 @@ def table2_scenarios() -> list[Scenario]:
     rows = [load_scenario(p) for p in sorted(scenarios_dir().glob("*.yaml"))]
     rows = [r for r in rows if r.table2_row is not None]
     return sorted(rows, key=lambda r: r.table2_row)
-

@@ -10,7 +10,8 @@ class MotionOptions:
     """Limits, offsets and solver settings for planning one task.
 
     Joint position and velocity limits come from the UR3 model; the UR3's acceleration limit is
-    not published (see shared/reference/ur3-rg2.md), so `joint_acceleration_limit` is our choice.
+    not published (ros-industrial ur_description joint_limits.yaml gives none), so
+    `joint_acceleration_limit` is our choice.
     """
 
     joint_acceleration_limit: float = 5.0

@@ -34,8 +34,13 @@ class StateKind(enum.IntEnum):
 
     @property
     def label(self) -> str:
-        """Lower-case name used in tables and JSON."""
+        """Lower-case name with spaces, for tables and plots people read (``dead end``)."""
         return self.name.lower().replace("_", " ")
+
+    @property
+    def key(self) -> str:
+        """snake_case name for JSON and other machine-read output (``dead_end``)."""
+        return self.name.lower()
 
 
 @dataclass(frozen=True)
@@ -353,12 +358,12 @@ def generate_states(spec: AssemblySpec) -> StateSpace:
         next_id += len(rows)
     parent = np.concatenate(parents).astype(np.int64)
     mask = np.concatenate(masks)
-    n = len(parent)
     first_child = np.concatenate(first_child_parts).astype(np.int64)
     n_children = np.concatenate(n_children_parts).astype(np.int64)
     if n_children[0] == 0:
         raise SpecError(f"assembly spec {spec.source}: no task is feasible from the empty base")
     kind = _kinds(spec, table, mask, n_children > 0)
+    _check_correct_reachable(spec, table, mask)
     if not np.any(kind == StateKind.TERMINAL):
         raise SpecError(
             f"assembly spec {spec.source}: goal: no complete configuration satisfies the goal; "
@@ -375,12 +380,51 @@ def generate_states(spec: AssemblySpec) -> StateSpace:
         first_child=first_child,
         n_children=n_children,
     )
-    if spec.state_names and n <= 200_000:
-        for key in spec.state_names:
-            seq = tuple(key.split())
-            if seq not in space._sequence_index:
-                raise SpecError(
-                    f"assembly spec {spec.source}: state_names: {key!r} is not a state of the "
-                    "assembly; fix or remove the label"
-                )
+    if spec.state_names:
+        _check_state_names(space)
     return space
+
+
+def _check_correct_reachable(spec: AssemblySpec, table: TokenTable, masks: np.ndarray) -> None:
+    """SpecError naming each `goal.correct` entry that no task sequence builds."""
+    if spec.goal.correct is None:
+        return
+    index = {t: i for i, t in enumerate(table.tokens)}
+    for i, config in enumerate(spec.goal.correct):
+        bits = np.uint64(sum(int(table.bit[index[t]]) for t in config))
+        if not np.any(masks == bits):
+            raise SpecError(
+                f"assembly spec {spec.source}: goal.correct[{i}]: {sorted(config)} cannot be "
+                "built by any sequence of feasible tasks (check the mounts and precedence); "
+                "fix or remove the entry"
+            )
+
+
+def _check_state_names(space: StateSpace) -> None:
+    """`state_names` must label every generated state, by sequences that are states."""
+    spec = space.spec
+    unknown, named = [], set()
+    for key in spec.state_names:
+        try:
+            named.add(space.index(tuple(key.split())))
+        except UnknownStateError:
+            unknown.append(key)
+    if unknown:
+        raise SpecError(
+            f"assembly spec {spec.source}: state_names: {', '.join(map(repr, unknown))} "
+            f"{'is' if len(unknown) == 1 else 'are'} not a state of the assembly; fix or "
+            "remove the label(s)"
+        )
+    if len(named) != space.n_states:
+        raise SpecError(
+            f"assembly spec {spec.source}: state_names: labels {len(named)} of the "
+            f"{space.n_states} generated states; label every state or remove `state_names` "
+            "(unlabelled states are numbered 1, 2, ... and would clash with the labels)"
+        )
+    labels = list(spec.state_names.values())
+    repeated = sorted({x for x in labels if labels.count(x) > 1})
+    if repeated:
+        raise SpecError(
+            f"assembly spec {spec.source}: state_names: label(s) {repeated} given to more than "
+            "one state; each state needs its own label"
+        )

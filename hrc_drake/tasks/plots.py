@@ -23,9 +23,21 @@ _COLOURS = {
 }
 
 
+FORMATS = (".png", ".pdf", ".svg")
+"""File suffixes the figures can be written as (matplotlib picks the backend by format)."""
+
+
 def _save(fig, path: str | Path) -> None:
+    suffix = Path(path).suffix.lower()
+    if suffix not in FORMATS:
+        plt.close(fig)
+        raise ValueError(f"{path}: figures are written as {', '.join(FORMATS)}, not {suffix!r}")
+    # No creation date and fixed SVG ids (salted by a constant, not at random): the same figure
+    # gives the same bytes in every format.
+    metadata = {".pdf": {"CreationDate": None}, ".svg": {"Date": None}}.get(suffix)
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=120, bbox_inches="tight")
+    with matplotlib.rc_context({"svg.hashsalt": "hrc_drake"}):
+        fig.savefig(buffer, format=suffix[1:], dpi=120, bbox_inches="tight", metadata=metadata)
     plt.close(fig)
     atomic_write_bytes(Path(path), buffer.getvalue())
 

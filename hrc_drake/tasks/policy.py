@@ -122,10 +122,18 @@ def load_policy(path: str | Path, space: StateSpace) -> Policy:
     """Load a policy file made for `space`'s spec; PolicyFileError with the fix if unusable."""
     path = Path(path)
     fix = f"make a new one with `hrc-drake solve --out {path}` (or `hrc-drake train`)"
+    if path.is_dir():
+        raise PolicyFileError(
+            f"policy file {path} is a directory; pass a policy file (e.g. {path / 'policy.json'}"
+            f"), made with `hrc-drake solve --out {path / 'policy.json'}` or `hrc-drake train`"
+        )
     try:
         text = path.read_text()
     except FileNotFoundError:
         raise PolicyFileError(f"policy file {path} not found; {fix}") from None
+    except (OSError, UnicodeDecodeError) as err:
+        reason = err.strerror if isinstance(err, OSError) and err.strerror else str(err)
+        raise PolicyFileError(f"policy file {path} cannot be read ({reason}); {fix}") from None
     try:
         payload = json.loads(text)
     except json.JSONDecodeError as err:

@@ -5,16 +5,15 @@ A token is a part symbol followed by where the part goes:
 - on a host part: the host's tag and the base slot it sits over, e.g. ``F01`` (tag ``0``).
 Slot numbers are written as digits when the base has at most nine slots, else joined by ``-``
 (``F10``, ``S9-10``) so that tokens stay unambiguous. ``undo`` removes the last part placed.
+
+Tokens are written here and read in one place only: `AssemblySpec.placement(token)`.
 """
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 
 UNDO = "undo"
-
-_TOKEN = re.compile(r"^(?P<part>[A-Z][A-Za-z]*)(?P<where>[0-9\-]+)$")
 
 
 @dataclass(frozen=True)
@@ -48,13 +47,3 @@ def placement_token(part: str, slots: tuple[int, ...], host_tag: str | None = No
     if not all(1 <= s <= 9 for s in slots):
         where = "-" + where
     return f"{part}{host_tag}{where}"
-
-
-def parse_base_token(token: str) -> tuple[str, tuple[int, ...]]:
-    """Split a base token such as ``S12`` or ``S9-10`` into (part, slots); ValueError if not one."""
-    match = _TOKEN.match(token)
-    if match is None:
-        raise ValueError(f"{token!r} is not a task token (expected a part symbol and slots)")
-    where = match["where"]
-    slots = tuple(int(s) for s in where.split("-")) if "-" in where else tuple(map(int, where))
-    return match["part"], slots
