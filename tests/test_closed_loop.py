@@ -81,3 +81,17 @@ def test_recording_is_a_self_contained_html(tmp_path):
     text = path.read_text()
     assert "<html" in text.lower() and len(text) > 1_000_000
     assert [p.name for p in tmp_path.iterdir()] == ["row5.html"]
+
+
+def test_the_next_plan_is_ready_when_the_operator_answers():
+    """While the operator bolts, the robot plans the task it will propose next."""
+    ahead = run_scenario("row4-forces-4", scenario_text=LEAN)
+    # Step 1 the operator overrides F1 with F3: that plan was not foreseen; later ones were.
+    assert ahead.done and list(ahead.plan_ready) == [False, True, True]
+    # A fresh planner (other options) without planning ahead: no plan is ready at any boundary.
+    cold = load_cell_scenario(
+        "row4-forces-4", [LEAN, "{run: {plan_ahead: false}, motion: {hold_time: 0.6}}"]
+    )
+    behind = run_scenario(cold)
+    assert behind.done and list(behind.plan_ready) == [False, False, False]
+    assert behind.states == ahead.states

@@ -11,6 +11,7 @@ when the Supervisor does. `hrc-drake simulate` is its command line.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import time
 from dataclasses import dataclass, field
@@ -36,6 +37,7 @@ from hrc_drake.tasks.graph import StateKind, generate_states
 from hrc_drake.tasks.policy import Policy, load_policy
 from hrc_drake.tasks.solve import exact_policy
 from hrc_drake.tasks.spec import load_spec
+from hrc_drake.tasks.tokens import UNDO
 
 ROBOT_INSTANCES = ("ur3", "rg2")
 
@@ -57,11 +59,22 @@ class RunResult:
     wall_time: float
     recording: Path | None = None
     events: tuple[str, ...] = field(default_factory=tuple)
+    idle: tuple[float, ...] = ()
+    """Per task: wall seconds the robot waited on the planner after the operator's answer."""
+    plan_ready: tuple[bool, ...] = ()
+    """Per task: the plan was ready (planned ahead) when the operator answered."""
 
     @property
     def real_time_factor(self) -> float | None:
         """Simulated time over wall time."""
         return self.sim_time / self.wall_time if self.wall_time > 0 else None
+
+    def _idle_per_task(self) -> list[float]:
+        return [*self.idle, *[0.0] * (len(self.tasks) - len(self.idle))][: len(self.tasks)]
+
+    def _ready_per_task(self) -> list[bool]:
+        missing = len(self.tasks) - len(self.plan_ready)
+        return [*self.plan_ready, *[False] * missing][: len(self.tasks)]
 
     def to_json(self) -> dict:
         """A JSON-able summary (the `--json` of `hrc-drake simulate`)."""
@@ -83,9 +96,14 @@ class RunResult:
                     "observed": t.observed,
                     "part": t.part,
                     "sim_time": round(t.end_time - t.start_time, 3),
+                    "idle_time": round(idle, 4),
+                    "plan_ready": ready,
                 }
-                for t in self.tasks
+                for t, idle, ready in zip(
+                    self.tasks, self._idle_per_task(), self._ready_per_task(), strict=True
+                )
             ],
+            "mean_idle": round(float(np.mean(self.idle)), 4) if self.idle else 0.0,
             "error": self.error,
             "sim_time": round(self.sim_time, 3),
             "wall_time": round(self.wall_time, 3),
@@ -199,8 +217,24 @@ def run_scenario(
     builder = DiagramBuilder()
     cell = builder.AddNamedSystem("cell", station.diagram)
 
+    idle: list[float] = []
+    ready: list[bool] = []
+
     def plan(configuration, task, last, layout):
-        return motion.plan_task(configuration, task, last_token=last, layout=layout)
+        # Simulated time stands still while the planner works: its wall time is what a real
+        # robot would stand idle between the operator's answer and its first motion.
+        ready.append(motion.has_plan(configuration, task, last_token=last, layout=layout))
+        start = time.perf_counter()
+        result = motion.plan_task(configuration, task, last_token=last, layout=layout)
+        idle.append(time.perf_counter() - start)
+        return result
+
+    def chosen_planner(configuration, task, last, layout):
+        if planner is None:
+            return plan(configuration, task, last, layout)
+        idle.append(0.0)
+        ready.append(False)
+        return planner(configuration, task, last, layout)
 
     run = scenario.run
     supervisor = builder.AddNamedSystem(
@@ -209,7 +243,7 @@ def run_scenario(
             space,
             policy,
             operator or scenario.operator_for(space),
-            planner or plan,
+            chosen_planner,
             home=motion.q_home,
             home_opening=home_opening,
             period=run.period,
@@ -242,6 +276,32 @@ def run_scenario(
     active: set = set()
     pending_still = [still]
     next_watch = [0.0]
+    planned_ahead: set[int] = set()
+
+    def plan_ahead(status: SupervisorStatus, now: float) -> None:
+        """During the hold, plan what the policy will propose once this task is done."""
+        plan_now = status.plan
+        step = status.step
+        if step in planned_ahead or now - status.plan_start < plan_now.t_in_place:
+            return
+        planned_ahead.add(step)
+        _proposed, indicated, part = status.pending
+        layout = station.configuration(station_context).layout()
+        if indicated == UNDO:
+            layout.pop(part, None)
+            state = status.state[:-1]
+        else:
+            layout[part] = indicated
+            state = (*status.state, indicated)
+        try:
+            index = space.index(state)
+        except KeyError:
+            return
+        if space.kind[index] == StateKind.TERMINAL:
+            return
+        task = policy.next_task(state)
+        last = state[-1] if state else None
+        _plan_ahead_quietly(motion, frozenset(layout.values()), task, last, layout)
 
     def constraint(weld: Weld):
         if weld.kind == "grasp":
@@ -255,6 +315,8 @@ def run_scenario(
             next_watch[0] = now + run.period
             handled = status.pending[2] if status.pending else None
             watch.check(contacts.Eval(station_context), handled, now)
+        if run.plan_ahead and planner is None and status.mode == Mode.EXECUTE and status.plan:
+            plan_ahead(status, now)
         if pending_still[0] is not None and now >= pending_still[0][0]:
             _save_still(station, station_context, Path(pending_still[0][1]))
             pending_still[0] = None
@@ -265,6 +327,11 @@ def run_scenario(
         return EventStatus.DidNothing()
 
     simulator.set_monitor(monitor)
+    if run.plan_ahead and planner is None:
+        # The robot's first proposal is planned before the operator answers.
+        first = policy.next_task(())
+        if first is not None and first != UNDO:
+            _plan_ahead_quietly(motion, frozenset(), first, None, {})
     if record is not None:
         station.visualizer.StartRecording()
     start = time.perf_counter()
@@ -316,7 +383,15 @@ def run_scenario(
         wall_time=wall,
         recording=path,
         events=status.events,
+        idle=tuple(idle),
+        plan_ready=tuple(ready),
     )
+
+
+def _plan_ahead_quietly(motion: MotionPlanner, configuration, task, last, layout) -> None:
+    """Fill the plan cache ahead of a boundary; a failure is left for the boundary to report."""
+    with contextlib.suppress(RuntimeError, ValueError):
+        motion.plan_task(configuration, task, last_token=last, layout=layout)
 
 
 def _save_still(station: CellStation, station_context, path: Path) -> None:

@@ -113,12 +113,15 @@ class RunConfig:
         settle_time: after a task, how long the parts settle before the cell is read [s].
         max_sim_time: a run that has not ended by then is a failure [s].
         max_steps: decision steps before a run is a failure.
+        plan_ahead: while the operator bolts, plan the task the policy will propose next, so
+            that the plan is ready at the task boundary (no robot idle time on the planner).
     """
 
     period: float = 0.02
     settle_time: float = 0.3
     max_sim_time: float = 900.0
     max_steps: int = 30
+    plan_ahead: bool = True
 
 
 @dataclass

@@ -289,12 +289,28 @@ class MotionPlanner:
         """
         configuration = frozenset(configuration)
         move = resolve_task(self.frames, configuration, task, last_token, layout)
-        # Which part sits where, and which one moves: all a plan depends on.
-        key = (task, frozenset(move.before.items()), move.source)
+        key = self._key(move)
         if key not in self._plans:
             self._rng = np.random.default_rng(self.options.seed)
             self._plans[key] = self._plan(configuration, move)
         return self._plans[key]
+
+    def has_plan(
+        self,
+        configuration: Iterable[str],
+        task: str,
+        *,
+        last_token: str | None = None,
+        layout: Mapping[str, str] | None = None,
+    ) -> bool:
+        """Whether `plan_task` with these arguments would return a plan made earlier."""
+        move = resolve_task(self.frames, frozenset(configuration), task, last_token, layout)
+        return self._key(move) in self._plans
+
+    @staticmethod
+    def _key(move: TaskMove) -> tuple:
+        # Which part sits where, and which one moves: all a plan depends on.
+        return (move.task, frozenset(move.before.items()), move.source)
 
     def _plan(self, configuration: frozenset[str], move: TaskMove) -> Plan:
         opts, frames, task = self.options, self.frames, move.task
