@@ -1,4 +1,4 @@
-"""The paper's Q-learning schedule against ours, over many seeds, on the flange case.
+"""The paper's Q-learning schedule against our two, over many seeds, on the flange case.
 
 Run: python benchmarks/bench_learning.py [--seeds N]
 For each Table 2 row: how often the learned policy gives the published sequence, the
@@ -22,7 +22,7 @@ from hrc_drake.hri.scenario import table2_scenarios
 from hrc_drake.progress import ProgressLine
 from hrc_drake.tasks.decide import DecisionError, minimum_effort_violations, run_decisions
 from hrc_drake.tasks.graph import generate_states
-from hrc_drake.tasks.learn import FullSchedule, PaperSchedule, train
+from hrc_drake.tasks.learn import ExploringStartsSchedule, FullSchedule, PaperSchedule, train
 from hrc_drake.tasks.mdp import build_mdp
 from hrc_drake.tasks.policy import policy_from_choices
 from hrc_drake.tasks.spec import load_spec
@@ -44,10 +44,28 @@ def main() -> None:
         f"Command: `python benchmarks/bench_learning.py --seeds {args.seeds}` "
         "(seeds 0 .. N-1; mistake probability 0.05, gamma 0.95).",
         "",
+        "An *episode* starts in one state (the empty base for `paper`; the exploring start for "
+        "`full`, a state-task pair, and `explore`, a state) and ends on reaching a terminal "
+        "state or after 100 tasks; a *step* is one task the operator performs (undo included). "
+        "Episodes and steps are counted until the schedule's own stop rule ends training; the "
+        "policy judged is the greedy one at that point.",
+        "",
+        "`explore` (`ExploringStartsSchedule()`): each sweep starts one episode from every "
+        "non-terminal state (16 on the flange case), deepest states first, opening with the "
+        "state's least-tried task; then greedy with ε = 0.3 / sweep; Q starts at 2 (optimistic: "
+        "the terminal reward); learning rate 1/n^0.6 per pair; stops when the greedy task of "
+        "every state is unchanged for 2 sweeps (at least 3, at most 10 sweeps).",
+        "",
+        "| schedule | minimum effort from every state | within 200 episodes | episodes "
+        "(median / max) | steps (median) | wall time (median) |",
+        "|---|---|---|---|---|---|",
+        "SUMMARY",
+        "",
     ]
-    for schedule in (PaperSchedule(), FullSchedule()):
+    summary = []
+    for schedule in (PaperSchedule(), FullSchedule(), ExploringStartsSchedule()):
         outcome = {r.table2_row: Counter() for r in rows}
-        episodes, steps, walls, good = [], [], [], 0
+        episodes, steps, walls, good, oks = [], [], [], 0, []
         bad_states = Counter()
         with ProgressLine(f"{schedule.name} schedule", "seed") as bar:
             for seed in range(args.seeds):
@@ -58,6 +76,7 @@ def main() -> None:
                 walls.append(result.wall_time)
                 violations = minimum_effort_violations(space, policy)
                 good += not violations
+                oks.append(not violations)
                 bad_states.update(" ".join(s) or "(start)" for s in violations)
                 for row in rows:
                     try:
@@ -78,6 +97,12 @@ def main() -> None:
                     outcome[row.table2_row][key] += 1
                 bar.update(seed + 1, args.seeds)
         n = args.seeds
+        within = sum(e <= 200 for e, ok in zip(episodes, oks, strict=True) if ok)
+        summary.append(
+            f"| {schedule.name} | {good}/{n} | {within}/{n} | "
+            f"{statistics.median(episodes):.0f} / {max(episodes)} | "
+            f"{statistics.median(steps):.0f} | {1e3 * statistics.median(walls):.1f} ms |"
+        )
         lines += [
             f"## {schedule.name} schedule",
             "",
@@ -107,8 +132,48 @@ def main() -> None:
                 f"{100 * c['longer or none'] / n:.0f} % | {100 * c['script n/a'] / n:.0f} % |"
             )
         lines.append("")
+    at = lines.index("SUMMARY")
+    lines[at : at + 1] = summary
+    lines += _other_assemblies(min(args.seeds, 20))
     atomic_write_text(args.out, "\n".join(lines))
     print("\n".join(lines))
+
+
+def _other_assemblies(seeds: int) -> list[str]:
+    """The explore schedule on the other assemblies of models/assemblies (the full schedule's
+    pair sweeps grow with the number of state-task pairs; see benchmarks/reports/tasks.md)."""
+    lines = [
+        f"## explore schedule on the other assemblies ({seeds} seeds)",
+        "",
+        "| assembly | states | episodes per sweep | minimum effort from every state | "
+        "episodes (median / max) |",
+        "|---|---|---|---|---|",
+    ]
+    for path in sorted((HERE.parent / "models" / "assemblies").glob("*.yaml")):
+        space = generate_states(load_spec(path))
+        if space.spec.name == "flange":
+            continue
+        mdp = build_mdp(space)
+        starts = int(sum(mdp.edge_start[s + 1] > mdp.edge_start[s] for s in range(space.n_states)))
+        good, episodes = 0, []
+        with ProgressLine(f"explore on {path.stem}", "seed") as bar:
+            for seed in range(seeds):
+                result = train(mdp, ExploringStartsSchedule(), seed=seed)
+                policy = policy_from_choices(mdp, result.choice, "explore")
+                good += not minimum_effort_violations(space, policy)
+                episodes.append(result.episodes)
+                bar.update(seed + 1, seeds)
+        lines.append(
+            f"| {path.stem} | {space.n_states} | {starts} | {good}/{seeds} | "
+            f"{statistics.median(episodes):.0f} / {max(episodes)} |"
+        )
+    lines += [
+        "",
+        "On these the greedy choice keeps moving between tasks of equal value, so training runs "
+        "to the 10-sweep cap; the episodes are 10 sweeps of one episode per non-terminal state.",
+        "",
+    ]
+    return lines
 
 
 if __name__ == "__main__":

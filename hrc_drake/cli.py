@@ -8,15 +8,24 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
 from hrc_drake.hri.operator import OperatorScriptError, ScriptedOperator, parse_operator_script
 from hrc_drake.hri.scenario import ScenarioError, table2_scenarios
+from hrc_drake.paths import UsageError, check_output_path
 from hrc_drake.progress import ProgressLine
-from hrc_drake.tasks.decide import DecisionError, run_decisions
+from hrc_drake.tasks.costs import CostTable, CostTableError, load_cost_table
+from hrc_drake.tasks.decide import (
+    DecisionError,
+    InfeasibleTaskError,
+    ScriptPastEndError,
+    check_script_within_run,
+    run_decisions,
+)
 from hrc_drake.tasks.graph import StateSpace, UnknownStateError, generate_states
-from hrc_drake.tasks.learn import FullSchedule, PaperSchedule, train
+from hrc_drake.tasks.learn import SCHEDULES, Schedule, train
 from hrc_drake.tasks.mdp import MdpConfig, build_mdp
 from hrc_drake.tasks.policy import (
     Policy,
@@ -25,7 +34,7 @@ from hrc_drake.tasks.policy import (
     policy_from_choices,
     save_policy,
 )
-from hrc_drake.tasks.solve import exact_policy, tasks_to_finish
+from hrc_drake.tasks.solve import exact_policy, tasks_to_finish, timed_config
 from hrc_drake.tasks.spec import SpecError, load_spec
 
 EXIT_USAGE = 2
@@ -35,8 +44,17 @@ def _space(args) -> StateSpace:
     return generate_states(load_spec(args.assembly))
 
 
-def _mdp_config(args) -> MdpConfig:
-    return MdpConfig(gamma=args.gamma, mistake_prob=args.mistake_prob)
+def _mdp_config(args, costs: CostTable | None = None) -> MdpConfig:
+    # Unit rewards: the paper's discount. Seconds: undiscounted, the expected time to finish.
+    gamma = args.gamma if args.gamma is not None else (0.95 if costs is None else 1.0)
+    config = MdpConfig(gamma=gamma, mistake_prob=args.mistake_prob)
+    return config if costs is None else timed_config(costs, config)
+
+
+def _costs(args, space: StateSpace) -> CostTable | None:
+    """The cost table of `--costs FILE` (None without it)."""
+    path = getattr(args, "costs", None)
+    return None if path is None else load_cost_table(path, space)
 
 
 def _policy(args, space: StateSpace) -> Policy:
@@ -61,7 +79,7 @@ def cmd_states(args) -> int:
                 "name": space.name(s),
                 "sequence": list(space.sequence(s)),
                 "configuration": sorted(space.configuration(s)),
-                "kind": space.state_kind(s).label,
+                "kind": space.state_kind(s).key,
                 "tasks": [t for t, _ in space.tasks(s)],
                 "actions": sorted({space.action_label(t) for t, _ in space.tasks(s)}),
                 "tasks_to_finish": int(best[s]),
@@ -78,8 +96,9 @@ def cmd_states(args) -> int:
     print(f"{'#':>4}  {'sequence':<20} {'kind':<10} {'to finish':>9}  tasks")
     for r in rows:
         seq = " ".join(r["sequence"]) or "(empty base)"
+        kind = r["kind"].replace("_", " ")
         print(
-            f"{r['name']:>4}  {seq:<20} {r['kind']:<10} {r['tasks_to_finish']:>9}  "
+            f"{r['name']:>4}  {seq:<20} {kind:<10} {r['tasks_to_finish']:>9}  "
             f"{', '.join(r['tasks'])}"
         )
     return 0
@@ -87,21 +106,25 @@ def cmd_states(args) -> int:
 
 def cmd_solve(args) -> int:
     """Solve the MDP exactly and save the policy."""
+    check_output_path(args.out, "--out")
     space = _space(args)
-    policy = exact_policy(space, _mdp_config(args))
+    costs = _costs(args, space)
+    policy = exact_policy(space, _mdp_config(args, costs), costs=costs)
     save_policy(policy, args.out)
     print(f"exact policy for {space.spec.name!r} ({len(policy.table)} states) -> {args.out}")
     return 0
 
 
-def _schedule(args):
-    return PaperSchedule() if args.schedule == "paper" else FullSchedule()
+def _schedule(args) -> Schedule:
+    return SCHEDULES[args.schedule]()
 
 
 def cmd_train(args) -> int:
     """Q-learning with the paper's or our schedule; save the policy."""
+    check_output_path(args.out, "--out")
     space = _space(args)
-    config = _mdp_config(args)
+    costs = _costs(args, space)
+    config = _mdp_config(args, costs)
     mdp = build_mdp(space, config)
     schedule = _schedule(args)
     unit = "episode" if args.schedule == "paper" else "sweep"
@@ -115,6 +138,8 @@ def cmd_train(args) -> int:
         "gamma": config.gamma,
         "mistake_prob": config.mistake_prob,
     }
+    if costs is not None:
+        meta["cell_hash"] = costs.cell_hash
     policy = policy_from_choices(mdp, result.choice, f"q-learning/{schedule.name}", meta)
     save_policy(policy, args.out)
     print(
@@ -135,14 +160,14 @@ def cmd_policy(args) -> int:
         if task is not None:
             nxt = list(space.sequence(dict(space.tasks(s))[task]))
         rows.append(
-            {"sequence": list(seq), "kind": space.state_kind(s).label, "task": task, "next": nxt}
+            {"sequence": list(seq), "kind": space.state_kind(s).key, "task": task, "next": nxt}
         )
     if args.json:
         _print_json(rows)
     else:
         for r in rows:
             seq = " ".join(r["sequence"]) or "(start)"
-            print(f"{seq:<16} {r['kind']:<10} -> {r['task'] or '-'}")
+            print(f"{seq:<16} {r['kind'].replace('_', ' '):<10} -> {r['task'] or '-'}")
     return 0
 
 
@@ -150,8 +175,11 @@ def cmd_react(args) -> int:
     """Run the decision loop with a scripted operator."""
     space = _space(args)
     policy = _policy(args, space)
-    operator = ScriptedOperator(parse_operator_script(args.operator))
-    states, decisions = run_decisions(space, policy, operator, max_steps=args.max_steps)
+    script = parse_operator_script(args.operator)
+    states, decisions = run_decisions(
+        space, policy, ScriptedOperator(script), max_steps=args.max_steps
+    )
+    check_script_within_run(script, decisions)
     if args.json:
         _print_json(
             {
@@ -168,25 +196,68 @@ def cmd_react(args) -> int:
 
 
 def table2_rows(space: StateSpace, policy: Policy) -> list[dict]:
-    """Table 2: per row, the published sequence, the minimum-effort one and this policy's."""
+    """Table 2: per row, the published sequence, the minimum-effort one and this policy's.
+
+    `compare` says how this policy's sequence relates to the minimum-effort one: ``same``,
+    ``equally_short`` (another route of the same length), ``longer``, ``shorter`` (the
+    scenario's expected column is not minimal for this spec), ``script_na`` (the row's script
+    does not apply to this policy's route: the scripted task is not feasible when its step
+    comes, or the route ends before it) or ``error``; the last two leave `policy` None and
+    say why in `note`.
+    """
     rows = []
     for scenario in table2_scenarios():
+        ours, note = None, None
         try:
-            states, _ = run_decisions(space, policy, ScriptedOperator(scenario.script))
+            states, decisions = run_decisions(space, policy, ScriptedOperator(scenario.script))
+            check_script_within_run(scenario.script, decisions)
             ours = [space.name(space.index(s)) for s in states]
+        except InfeasibleTaskError as err:
+            note = (
+                f"script n/a: its {err.task} at step {err.step} is not feasible in state "
+                f"{space.name(space.index(err.state))}, where this policy's route is then"
+            )
+        except ScriptPastEndError as err:
+            note = (
+                f"script n/a: this policy's route ends after {err.steps} step(s), before "
+                f"scripted step {min(err.late)}"
+            )
         except DecisionError as err:
-            ours = [f"error: {err}"]
+            note = f"error: {err}"
+        minimum = list(scenario.minimum_effort)
         rows.append(
             {
                 "row": scenario.table2_row,
                 "scenario": scenario.name,
                 "operator": scenario.description,
                 "published": list(scenario.published),
-                "minimum_effort": list(scenario.minimum_effort),
+                "minimum_effort": minimum,
                 "policy": ours,
+                "compare": _compare(ours, minimum, note),
+                "note": note,
             }
         )
     return rows
+
+
+def _compare(ours: list[str] | None, minimum: list[str], note: str | None) -> str:
+    if ours is None:
+        return "script_na" if note and note.startswith("script n/a") else "error"
+    if ours == minimum:
+        return "same"
+    if len(ours) > len(minimum):
+        return "longer"
+    return "equally_short" if len(ours) == len(minimum) else "shorter"
+
+
+_MARKS = {
+    "same": "",
+    "equally_short": "   (another, equally short)",
+    "longer": "   <- longer",
+    "shorter": "   <- shorter than the minimum-effort column: check the scenario's expectation",
+    "script_na": "",
+    "error": "",
+}
 
 
 def cmd_table2(args) -> int:
@@ -200,21 +271,19 @@ def cmd_table2(args) -> int:
     print(f"Table 2 ({policy.method} policy)")
     print(f"{'row':>3}  {'published':<20} {'minimum effort':<20} {'this policy':<20}")
     for r in rows:
-        mark = ""
-        if r["policy"] != r["minimum_effort"]:
-            same = len(r["policy"]) == len(r["minimum_effort"])
-            mark = "   (another, equally short)" if same else "   <- longer"
+        ours = r["note"] if r["policy"] is None else " ".join(r["policy"])
         print(
             f"{r['row']:>3}  {' '.join(r['published']):<20} "
-            f"{' '.join(r['minimum_effort']):<20} {' '.join(r['policy']):<20}{mark}"
+            f"{' '.join(r['minimum_effort']):<20} {ours:<20}{_MARKS[r['compare']]}"
         )
     return 0
 
 
 def cmd_plot(args) -> int:
-    """Figure 8 (state graph) or Figure 9 (learning curve) as a PNG."""
+    """Figure 8 (state graph) or Figure 9 (learning curve) as a PNG, PDF or SVG."""
     from hrc_drake.tasks import plots
 
+    check_output_path(args.out, "--out", suffixes=plots.FORMATS)
     space = _space(args)
     if args.what == "graph":
         plots.plot_state_graph(space, args.out)
@@ -226,11 +295,23 @@ def cmd_plot(args) -> int:
     return 0
 
 
+def cmd_costs(args) -> int:
+    """Plan every task edge with the motion layer and save the cost table (seconds)."""
+    from hrc_drake.cell.costs import costs_command
+
+    return costs_command(args)
+
+
 def cmd_simulate(args) -> int:
     """Run a scenario through the Drake cell (headless) and record it."""
-    from hrc_drake.cell.run import simulate_command
+    from hrc_drake.cell.command import simulate_command
+    from hrc_drake.cell_models import CellModelError
 
-    return simulate_command(args)
+    try:
+        return simulate_command(args)
+    except CellModelError as err:
+        print(f"hrc-drake simulate: error: {err}", file=sys.stderr)
+        return EXIT_USAGE
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -245,7 +326,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     common.add_argument("--seed", type=int, default=0)
     common.add_argument("--json", action="store_true", help="print data as JSON")
-    common.add_argument("--gamma", type=float, default=0.95, help="discount")
+    common.add_argument(
+        "--gamma", type=float, default=None, help="discount (default 0.95; 1 with --costs)"
+    )
     common.add_argument(
         "--mistake-prob",
         type=float,
@@ -260,10 +343,16 @@ def build_parser() -> argparse.ArgumentParser:
         return p
 
     add("states", cmd_states, "the state table (Table 1)")
-    add("solve", cmd_solve, "exact policy -> file").add_argument("--out", required=True)
+    costs_help = "cost table (hrc-drake costs): minimise seconds instead of tasks"
+    p = add("solve", cmd_solve, "exact policy -> file")
+    p.add_argument("--out", required=True)
+    p.add_argument("--costs", type=Path, default=None, help=costs_help)
     p = add("train", cmd_train, "Q-learned policy -> file")
     p.add_argument("--out", required=True)
-    p.add_argument("--schedule", choices=["paper", "full"], default="full")
+    p.add_argument("--schedule", choices=list(SCHEDULES), default="full")
+    p.add_argument("--costs", type=Path, default=None, help=costs_help)
+    p = add("costs", cmd_costs, "plan every task edge -> cost table file (seconds)")
+    p.add_argument("--out", type=Path, required=True)
     add("policy", cmd_policy, "the policy for every state").add_argument("--policy")
     p = add("react", cmd_react, "decision loop with a scripted operator")
     p.add_argument("--policy")
@@ -273,12 +362,27 @@ def build_parser() -> argparse.ArgumentParser:
     p = add("plot", cmd_plot, "Figure 8 (graph) or 9 (learning)")
     p.add_argument("what", choices=["graph", "learning"])
     p.add_argument("--out", required=True)
-    p.add_argument("--schedule", choices=["paper", "full"], default="paper")
+    p.add_argument("--schedule", choices=list(SCHEDULES), default="paper")
     p = add("simulate", cmd_simulate, "run a scenario in the Drake cell")
-    p.add_argument("--scenario", default="row1-optimal")
-    p.add_argument("--policy")
+    p.add_argument(
+        "--scenario",
+        default=None,
+        help="scenario name in scenarios/ or a path (default: row1-optimal, or with --assembly "
+        "an operator who follows the robot)",
+    )
+    p.add_argument(
+        "--scenario-text",
+        default=None,
+        help='YAML merged over the scenario, e.g. "{motion: {hold_time: 1.0}}"',
+    )
+    p.add_argument("--operator", default=None, help='operator script, e.g. "1:F3,2:S12"')
+    p.add_argument("--policy", type=Path, default=None, help="policy file (default: exact)")
     p.add_argument("--record", type=Path, default=None, help="Meshcat HTML recording to write")
-    p.add_argument("--lean", action="store_true", help="fast settings (tests, previews)")
+    p.add_argument(
+        "--lean",
+        action="store_true",
+        help="0.5 s bolting holds (tests, previews); same as --scenario-text with LEAN",
+    )
     p.add_argument("--still", type=Path, default=None, help="PNG of the cell at --still-time")
     p.add_argument("--still-time", type=float, default=10.0, help="simulated time of --still")
     return parser
@@ -288,7 +392,12 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of `hrc-drake`."""
     args = build_parser().parse_args(argv)
     try:
-        return args.func(args)
+        code = args.func(args)
+        sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's final flush
+        return code
+    except BrokenPipeError:
+        _quiet_stdout()
+        return 1
     except (
         SpecError,
         PolicyFileError,
@@ -296,9 +405,26 @@ def main(argv: list[str] | None = None) -> int:
         ScenarioError,
         DecisionError,
         UnknownStateError,
+        UsageError,
+        CostTableError,
     ) as err:
         print(f"hrc-drake {args.command}: error: {err}", file=sys.stderr)
         return EXIT_USAGE
+
+
+def _quiet_stdout() -> None:
+    """After the reader of stdout went away (`hrc-drake states | head`): send the rest nowhere.
+
+    The way the Python documentation gives (library/signal.html, "Note on SIGPIPE"): point
+    stdout at devnull so that the flush at exit does not raise again, then exit with status 1.
+    """
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):
+        return  # not a real file (captured in tests): nothing will flush to the pipe
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, fd)
+    os.close(devnull)
 
 
 if __name__ == "__main__":

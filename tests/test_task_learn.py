@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 from hrc_drake.tasks.decide import minimum_effort_violations
-from hrc_drake.tasks.learn import FullSchedule, PaperSchedule, train
+from hrc_drake.tasks.learn import ExploringStartsSchedule, FullSchedule, PaperSchedule, train
 from hrc_drake.tasks.mdp import MdpConfig, build_mdp
 from hrc_drake.tasks.policy import policy_from_choices
+from hrc_drake.tasks.solve import solve_exact
 
 
 @pytest.mark.parametrize("seed", range(12))
@@ -14,6 +15,34 @@ def test_full_schedule_is_minimum_effort_from_every_state(flange_space, flange_m
     result = train(flange_mdp, FullSchedule(), seed=seed)
     policy = policy_from_choices(flange_mdp, result.choice, "q-learning/full")
     assert minimum_effort_violations(flange_space, policy) == {}
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_exploring_starts_schedule_is_minimum_effort_within_200_episodes(
+    flange_space, flange_mdp, seed
+):
+    schedule = ExploringStartsSchedule()
+    result = train(flange_mdp, schedule, seed=seed)
+    policy = policy_from_choices(flange_mdp, result.choice, "q-learning/explore")
+    assert minimum_effort_violations(flange_space, policy) == {}
+    # One episode per non-terminal state per sweep (16 for the flange case), at most 10 sweeps.
+    starts = int(np.sum(np.diff(flange_mdp.edge_start) > 0))
+    assert starts == 16
+    assert result.episodes % starts == 0 and result.episodes <= 200
+    assert len(result.returns) == result.episodes
+
+
+def test_exploring_starts_tries_every_task_of_every_state(flange_space):
+    """Each state's first task is its least-tried one: after a sweep per task, all are tried."""
+    mdp = build_mdp(flange_space, MdpConfig(mistake_prob=0.0))
+    most = int(np.max(np.diff(mdp.edge_start)))
+    schedule = ExploringStartsSchedule(min_sweeps=most, max_sweeps=most, epsilon0=0.0)
+    result = train(mdp, schedule, seed=1)
+    assert result.episodes == most * 16
+    # Optimistic start at 2.0 (the terminal reward): a task worth less that still shows 2.0 was
+    # never tried.
+    exact = solve_exact(mdp).q
+    assert not np.any((result.q == 2.0) & (exact < 2.0 - 1e-9))
 
 
 def test_full_schedule_with_operator_overrides(flange_space):
@@ -24,7 +53,7 @@ def test_full_schedule_with_operator_overrides(flange_space):
 
 
 def test_same_seed_same_result(flange_mdp):
-    for schedule in (PaperSchedule(), FullSchedule()):
+    for schedule in (PaperSchedule(), FullSchedule(), ExploringStartsSchedule()):
         a = train(flange_mdp, schedule, seed=5)
         b = train(flange_mdp, schedule, seed=5)
         assert np.array_equal(a.q, b.q) and np.array_equal(a.returns, b.returns)

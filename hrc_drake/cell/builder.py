@@ -28,8 +28,10 @@ from pydrake.systems.primitives import MatrixGain, Saturation
 from pydrake.systems.sensors import CameraConfig, RgbdSensor
 
 from hrc_drake.atomic import atomic_write_text
+from hrc_drake.cell.scenario import plant_config
 from hrc_drake.cell.slot_monitor import CellConfiguration, SlotMonitor
 from hrc_drake.cell_models import CellDesign, add_cell_models, check_cell_models
+from hrc_drake.hri.scenario import Scenario
 from hrc_drake.motion.poses import CellFrames, layout_poses, seat_pose
 from hrc_drake.motion.scene import read_cell_frames
 from hrc_drake.robot_models import RG2_MAX_OPENING, UR3_JOINTS
@@ -40,24 +42,16 @@ _SAP_FAMILY = ("sap", "similar", "lagged")
 
 # A ready posture above the plate, clear of the table and the tray.
 UR3_READY = (0.0, -1.7, 1.9, -1.77, -1.5708, 0.0)
-# Stiff, implicit PD (SAP integrates it implicitly, so high gains stay stable); gravity is fed
-# forward, so these only have to reject the held part's weight and contact forces.
+# Stiff, implicit PD (SAP integrates it implicitly, so high gains stay stable); the arm's own
+# gravity is off, so these only have to reject the held part's weight and contact forces.
 UR3_KP = (4000.0, 4000.0, 2000.0, 500.0, 500.0, 500.0)
 UR3_KD = (200.0, 200.0, 100.0, 20.0, 20.0, 20.0)
 RG2_KP, RG2_KD = 2000.0, 40.0
 
 
 def _default_plant_config() -> MultibodyPlantConfig:
-    # 5 ms: flanges settle in < 0.5 s at a real-time factor ~1 (drake-calibration.md); 10 ms
-    # leaves them moving. `sap`: at 5 ms the light oval flange (67 g) keeps chattering in its
-    # pocket under `lagged`/`similar` (0.4 N of its 0.66 N weight carried, 9 mm/s left after
-    # 2 s) and rests exactly under `sap`, at the same cost.
-    return MultibodyPlantConfig(
-        time_step=5e-3,
-        contact_model="hydroelastic_with_fallback",
-        discrete_contact_approximation="sap",
-        contact_surface_representation="polygon",
-    )
+    # The scenario schema's physics defaults, calibrated (see `PhysicsConfig`).
+    return plant_config(Scenario())
 
 
 @dataclass

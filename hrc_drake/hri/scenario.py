@@ -92,8 +92,11 @@ class MotionConfig:
 class PhysicsConfig:
     """The MultibodyPlant's settings (the names of Drake's `MultibodyPlantConfig`).
 
-    The defaults are calibrated: 5 ms settles the flanges in < 0.5 s at a real-time factor
-    near 1; `sap` rests the 67 g oval flange in its pocket where `lagged` leaves it chattering.
+    The defaults are calibrated (benchmarks/reports/cell.md): 5 ms settles the flanges in
+    < 0.5 s at a real-time factor near 1 where 10 ms leaves them moving; `sap` rests the 67 g
+    oval flange in its pocket where `lagged`/`similar` leave it chattering (0.4 N of its 0.66 N
+    weight carried, 9 mm/s left after 2 s), at the same cost. The weld constraints need a
+    SAP-family approximation.
     """
 
     time_step: float = 5e-3

@@ -6,8 +6,10 @@
   ``mistake_prob``, in another free seat of the same kind (7 -> 9 instead of 7 -> 10).
 - **Overrides**: with probability ``override_prob`` the operator performs another feasible task
   of the state, uniformly, instead of the proposed one.
-- **Rewards**: as published, -1 for every task and +2 on reaching a terminal state; or, with a
-  per-task cost table (seconds, e.g. from the motion layer), -cost plus ``terminal_bonus``.
+- **Rewards**: as published, -1 for every task and +2 on reaching a terminal state; or, with
+  costs (seconds), -cost plus ``terminal_bonus``: per task token (``task_costs``) or per task
+  edge, (state, task) -> seconds (``edge_costs``, e.g. a `hrc_drake.tasks.costs.CostTable` of
+  the motion layer's planned durations plus the operator's bolting time).
 
 Transitions are stored as flat arrays (edges = state-action pairs, outcomes per edge) so the
 exact solver and the learner work on millions of states without per-state Python loops.
@@ -17,6 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -26,19 +29,34 @@ from hrc_drake.tasks.tokens import UNDO
 UNDO_INDEX = -1
 
 
+class EdgeCosts(Protocol):
+    """Seconds (or any cost) of each task edge: what a `CostTable` offers."""
+
+    def seconds(self, state: tuple[str, ...], task: str) -> float:
+        """Cost of `task` (a token or ``"undo"``) from `state` (its task sequence)."""
+        ...
+
+
 @dataclass(frozen=True)
 class Rewards:
     """Reward model. Without `task_costs`: the paper's -1 per task, +2 on reaching a terminal.
 
     `task_costs` maps a task token to its cost (e.g. seconds); undo costs are looked up as
-    ``"undo <token undone>"`` then ``"undo"``. With costs, a task's reward is -cost, plus
-    `terminal_bonus` on reaching a terminal state.
+    ``"undo <token undone>"`` then ``"undo"``. `edge_costs` gives the cost of each (state, task)
+    edge instead (a `CostTable`: the time of a task depends on what is in place); give one or
+    the other. With costs, a task's reward is -cost, plus `terminal_bonus` on reaching a
+    terminal state.
     """
 
     step: float = -1.0
     terminal: float = 2.0
     task_costs: Mapping[str, float] | None = None
     terminal_bonus: float = 0.0
+    edge_costs: EdgeCosts | None = None
+
+    def __post_init__(self):
+        if self.task_costs is not None and self.edge_costs is not None:
+            raise ValueError("give task_costs (per task) or edge_costs (per edge), not both")
 
     def cost_of(self, task: str, undone: str | None = None) -> float:
         """The cost of a task from the table; KeyError naming the task if it is missing."""
@@ -165,6 +183,10 @@ def _outcome_rewards(
     space: StateSpace, rewards: Rewards, src: np.ndarray, task: np.ndarray, dst: np.ndarray
 ) -> np.ndarray:
     terminal = space.kind[dst] == StateKind.TERMINAL
+    if rewards.edge_costs is not None:
+        return -_edge_costs(space, rewards.edge_costs, src, task) + np.where(
+            terminal, rewards.terminal_bonus, 0.0
+        )
     if rewards.task_costs is None:
         return np.where(terminal, rewards.terminal, rewards.step).astype(float)
     tokens = space.tokens
@@ -175,3 +197,21 @@ def _outcome_rewards(
         else:
             cost[i] = rewards.cost_of(tokens[t])
     return -cost + np.where(terminal, rewards.terminal_bonus, 0.0)
+
+
+def _edge_costs(
+    space: StateSpace, costs: EdgeCosts, src: np.ndarray, task: np.ndarray
+) -> np.ndarray:
+    tokens = space.tokens
+    sequences: dict[int, tuple[str, ...]] = {}
+    cached: dict[tuple[int, int], float] = {}
+    out = np.empty(len(src))
+    for i, (s, t) in enumerate(zip(src.tolist(), task.tolist(), strict=True)):
+        if (s, t) not in cached:
+            if s not in sequences:
+                sequences[s] = space.sequence(s)
+            cached[s, t] = float(
+                costs.seconds(sequences[s], UNDO if t == UNDO_INDEX else tokens[t])
+            )
+        out[i] = cached[s, t]
+    return out

@@ -10,12 +10,12 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from hrc_drake.tasks.graph import StateKind, StateSpace
-from hrc_drake.tasks.mdp import MdpConfig, SequenceMDP, build_mdp
+from hrc_drake.tasks.mdp import EdgeCosts, MdpConfig, Rewards, SequenceMDP, build_mdp
 from hrc_drake.tasks.policy import Policy, policy_from_choices
 
 UNREACHABLE = np.iinfo(np.int64).max // 4
@@ -110,8 +110,28 @@ def solve_exact(
     return Solution(mdp, values, q, greedy_choice(mdp, q), iterations)
 
 
-def exact_policy(space: StateSpace, config: MdpConfig | None = None) -> Policy:
-    """The exact (minimum-effort) policy of `space` under `config` (default MdpConfig())."""
+def timed_config(costs: EdgeCosts, config: MdpConfig | None = None) -> MdpConfig:
+    """`config` with every task's reward set to minus its seconds from `costs` (per edge).
+
+    Without `config`: `MdpConfig` with gamma 1, so that the solver minimises the expected
+    seconds to finish (undiscounted: a second later counts as much as a second now).
+    """
+    base = config or MdpConfig(gamma=1.0)
+    return replace(
+        base, rewards=Rewards(edge_costs=costs, terminal_bonus=base.rewards.terminal_bonus)
+    )
+
+
+def exact_policy(
+    space: StateSpace, config: MdpConfig | None = None, costs: EdgeCosts | None = None
+) -> Policy:
+    """The exact policy of `space` under `config` (default MdpConfig()).
+
+    Unit rewards give the minimum-effort policy; with `costs` (a `CostTable`, seconds per task
+    edge) the fastest one in expected seconds (see `timed_config`; default gamma 1).
+    """
+    if costs is not None:
+        config = timed_config(costs, config)
     mdp = build_mdp(space, config)
     solution = solve_exact(mdp)
     meta = {
@@ -119,4 +139,10 @@ def exact_policy(space: StateSpace, config: MdpConfig | None = None) -> Policy:
         "mistake_prob": mdp.config.mistake_prob,
         "iterations": solution.iterations,
     }
-    return policy_from_choices(mdp, solution.choice, "exact", meta)
+    method = "exact"
+    if costs is not None:
+        method = "exact/time"
+        meta["cell_hash"] = getattr(costs, "cell_hash", None)
+        if mdp.config.gamma == 1.0 and mdp.config.rewards.terminal_bonus == 0.0:
+            meta["expected_seconds_from_start"] = -float(solution.values[0])
+    return policy_from_choices(mdp, solution.choice, method, meta)

@@ -6,17 +6,25 @@ An assembly spec is a YAML file (see `models/assemblies/flange.yaml`) with these
 - ``base``: ``symbol`` and number of ``slots`` of the fixture everything is built on.
 - ``parts``: symbol -> ``name``, ``count``, ``footprint`` (base slots it covers, adjacent) and,
   for a part others sit on, ``host: {tag}`` (the tag written in tokens of parts on it). A host
-  offers one seat over each base slot it covers.
+  offers one seat over each base slot it covers. Optional ``bolt_time``: seconds the operator
+  takes to bolt one such part (default `DEFAULT_BOLT_TIME`; used by time-aware cost tables).
 - ``mounts``: list of ``{part, to, count}``: how many of a part go on the base or on a host part.
   The counts of a part add up to its ``count``.
 - ``precedence`` (optional): ``complete_first: [H, ...]`` — once a host H is placed, the parts
   that go on it come next; ``before: [[A, B], ...]`` — every A is placed before any B.
 - ``goal``: which complete configurations are correct; ``min_gap: [{parts: [A, B], slots: g}]``
-  (any A and B at least g slots apart) and/or ``correct: [[token, ...], ...]`` (explicit list).
-  Complete configurations that fail the goal are *wrong* (a mistake that breaks no constraint).
+  (any A and B at least g slots apart) and/or ``correct: [[token, ...], ...]`` (an explicit
+  list of configurations, e.g. ``correct: [[F3, S12, F01], [F1, S23, F03]]``). Given both, they
+  combine with AND: a complete configuration is correct only if it keeps every ``min_gap`` rule
+  *and* is in ``correct`` (so a ``correct`` entry that breaks a rule is refused: it could never
+  be correct). Complete configurations that fail the goal are *wrong* (a mistake that breaks no
+  constraint). Every ``correct`` entry must be buildable: known tokens, one per part, no two on
+  one slot or seat, each part on a host together with its host.
 - ``mistakes`` (optional): ``[{part, to}]`` placements the operator may confuse with another
   free seat of the same kind.
 - ``state_names`` (optional): labels for states, keyed by their space-separated task sequence.
+- ``cell`` (optional): the physical cell's layout (plate and tray poses, slot pitch, part model
+  files; see `hrc_drake/layout.py`). The task layer keeps it as is; it is not in `spec_hash`.
 
 Nothing here is specific to the flange case: another base or product is another file.
 """
@@ -34,9 +42,12 @@ from typing import Any
 import yaml
 
 from hrc_drake.resources import default_assembly
-from hrc_drake.tasks.tokens import UNDO, placement_token
+from hrc_drake.tasks.tokens import UNDO, Placement, placement_token
 
 BASE = "base"
+# Seconds the operator takes to bolt a part when its spec gives no `bolt_time`: the robot's
+# bolting hold in the cell (MotionOptions.hold_time).
+DEFAULT_BOLT_TIME = 5.0
 _SYMBOL = re.compile(r"^[A-Z][A-Za-z]*$")
 
 
@@ -53,6 +64,8 @@ class PartType:
     count: int
     footprint: int
     host_tag: str | None = None
+    bolt_time: float | None = None
+    """Seconds the operator takes to bolt one part (None: `DEFAULT_BOLT_TIME`)."""
 
     @property
     def is_host(self) -> bool:
@@ -100,6 +113,9 @@ class AssemblySpec:
     mistakes: tuple[tuple[str, str], ...]
     state_names: Mapping[str, str]
     source: str = "<memory>"
+    cell: Mapping[str, Any] | None = None
+    """The `cell:` section as parsed YAML: the physical cell's layout (read by the cell layer,
+    not part of the MDP, so not in `spec_hash`)."""
 
     def part(self, symbol: str) -> PartType:
         """The part type with this symbol; SpecError if there is none."""
@@ -120,7 +136,12 @@ class AssemblySpec:
         """The content that determines states and rewards (no labels, no file name)."""
         return {
             "base": {"symbol": self.base_symbol, "slots": self.slots},
-            "parts": [[p.symbol, p.count, p.footprint, p.host_tag] for p in self.parts],
+            # bolt_time only when set, so that specs without it keep their hash (and policies).
+            "parts": [
+                [p.symbol, p.count, p.footprint, p.host_tag]
+                + ([] if p.bolt_time is None else [p.bolt_time])
+                for p in self.parts
+            ],
             "mounts": [[m.part, m.on, m.count] for m in self.mounts],
             "complete_first": list(self.complete_first),
             "before": [list(pair) for pair in self.before],
@@ -138,6 +159,45 @@ class AssemblySpec:
         """A hash of the semantic content: policies record it to refuse a mismatched spec."""
         text = json.dumps(self.semantic_dict(), sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    def placement(self, token: str) -> Placement:
+        """What a task token places: part symbol, base slots under it, host symbol and tag.
+
+        The one reading of tokens in the project; SpecError naming the valid tokens if `token`
+        is not a placement of this spec (``undo`` is not a placement).
+        """
+        table = self._placement_table()
+        if token not in table:
+            raise SpecError(
+                f"{self.source}: {token!r} is not a placement of assembly {self.name!r}; "
+                f"placements are {', '.join(table)}"
+            )
+        return table[token]
+
+    def placement_of(self, part: str, slots: tuple[int, ...], host: str | None = None) -> Placement:
+        """The placement of `part` over base `slots` (on the base, or on host part `host`)."""
+        for placement in self._placement_table().values():
+            if (placement.part, placement.slots, placement.host) == (part, tuple(slots), host):
+                return placement
+        where = "the base" if host is None else host
+        raise SpecError(
+            f"{self.source}: no placement of {part!r} on {where} over slots {list(slots)}"
+        )
+
+    def _placement_table(self) -> dict[str, Placement]:
+        cached = self.__dict__.get("_placements_cache")
+        if cached is None:
+            cached = {
+                token: Placement(
+                    part=mount.part,
+                    slots=slots,
+                    host=None if mount.on == BASE else mount.on,
+                    host_tag=None if mount.on == BASE else self.part(mount.on).host_tag,
+                )
+                for token, mount, slots in self.placements()
+            }
+            object.__setattr__(self, "_placements_cache", cached)
+        return cached
 
     def placements(self) -> list[tuple[str, Mount, tuple[int, ...]]]:
         """Every placement token the spec allows, in canonical order, with its mount and slots.
@@ -204,7 +264,17 @@ def parse_spec(data: Any, source: str = "<memory>") -> AssemblySpec:
     """Validate a spec given as parsed YAML; SpecError naming the key and problem if invalid."""
     _check_keys(
         data,
-        {"name", "base", "parts", "mounts", "precedence", "goal", "mistakes", "state_names"},
+        {
+            "name",
+            "base",
+            "parts",
+            "mounts",
+            "precedence",
+            "goal",
+            "mistakes",
+            "state_names",
+            "cell",
+        },
         source,
         "",
     )
@@ -227,7 +297,7 @@ def parse_spec(data: Any, source: str = "<memory>") -> AssemblySpec:
             raise _fail(
                 source, key, "a part symbol is a capital letter and letters, not the base's"
             )
-        _check_keys(desc, {"name", "count", "footprint", "host"}, source, key + ".")
+        _check_keys(desc, {"name", "count", "footprint", "host", "bolt_time"}, source, key + ".")
         count = _positive_int(_require(desc, "count", source, key + "."), source, key + ".count")
         footprint = _positive_int(desc.get("footprint", 1), source, key + ".footprint")
         if footprint > slots:
@@ -242,7 +312,19 @@ def parse_spec(data: Any, source: str = "<memory>") -> AssemblySpec:
             host_tag = str(desc["host"].get("tag", symbol))
             if not host_tag or not re.fullmatch(r"[0-9A-Za-z]+", host_tag):
                 raise _fail(source, key + ".host.tag", "must be letters or digits")
-        parts.append(PartType(symbol, str(desc.get("name", symbol)), count, footprint, host_tag))
+        bolt_time = None
+        if "bolt_time" in desc:
+            bolt_time = desc["bolt_time"]
+            number = isinstance(bolt_time, int | float) and not isinstance(bolt_time, bool)
+            if not number or not 0 < bolt_time < float("inf"):
+                raise _fail(
+                    source,
+                    key + ".bolt_time",
+                    f"must be a positive number of seconds, got {bolt_time!r}",
+                )
+            bolt_time = float(bolt_time)
+        name_ = str(desc.get("name", symbol))
+        parts.append(PartType(symbol, name_, count, footprint, host_tag, bolt_time))
     by_symbol = {p.symbol: p for p in parts}
 
     raw_mounts = _require(data, "mounts", source, "")
@@ -338,7 +420,7 @@ def parse_spec(data: Any, source: str = "<memory>") -> AssemblySpec:
         rules.append(GapRule((pair[0], pair[1]), gap))
     correct = None
     if goal_data.get("correct") is not None:
-        correct = tuple(frozenset(c) for c in goal_data["correct"])
+        correct = _correct_shape(goal_data["correct"], source)
     if not rules and not correct:
         raise _fail(source, "goal", "no goal: give `min_gap` rules and/or `correct` configurations")
 
@@ -365,26 +447,111 @@ def parse_spec(data: Any, source: str = "<memory>") -> AssemblySpec:
         before=tuple(before),
         goal=Goal(tuple(rules), correct),
         mistakes=tuple(mistakes),
-        state_names={str(k or "").strip(): str(v) for k, v in names.items()},
+        state_names={" ".join(str(k or "").split()): str(v) for k, v in names.items()},
         source=source,
+        cell=_cell_section(data.get("cell"), source),
     )
-    tokens = {t for t, _, _ in spec.placements()}
     for i, config in enumerate(correct or ()):
-        for token in sorted(config):
-            if token not in tokens:
-                raise _fail(
-                    source,
-                    f"goal.correct[{i}]",
-                    f"unknown task {token!r} (slot out of range or part unknown); "
-                    f"tasks are {sorted(tokens)}",
-                )
-        if len(config) != spec.total_parts:
-            raise _fail(
-                source,
-                f"goal.correct[{i}]",
-                f"has {len(config)} parts but a complete assembly has {spec.total_parts}",
-            )
+        _check_correct_entry(spec, config, f"goal.correct[{i}]")
     return spec
+
+
+_CORRECT_FORM = (
+    "expected a list of configurations, each a list of task tokens, e.g. "
+    "`correct: [[F3, S12, F01], [F1, S23, F03]]`"
+)
+
+
+def _correct_shape(raw: Any, source: str) -> tuple[frozenset[str], ...]:
+    """`goal.correct` as configurations; SpecError showing the expected form if it is not."""
+    if not isinstance(raw, list) or not raw or all(isinstance(t, str) for t in raw):
+        got = "an empty list" if raw == [] else f"{raw!r}"
+        if isinstance(raw, list) and raw:
+            got += " (a flat list: put each configuration in its own [...])"
+        raise _fail(source, "goal.correct", f"{_CORRECT_FORM}; got {got}")
+    out = []
+    for i, entry in enumerate(raw):
+        key = f"goal.correct[{i}]"
+        if not isinstance(entry, list) or not all(isinstance(t, str) for t in entry):
+            raise _fail(source, key, f"{_CORRECT_FORM}; got {entry!r}")
+        repeated = sorted({t for t in entry if entry.count(t) > 1})
+        if repeated:
+            raise _fail(source, key, f"{entry} lists {repeated[0]!r} twice; one token per part")
+        out.append(frozenset(entry))
+    return tuple(out)
+
+
+def _check_correct_entry(spec: AssemblySpec, config: frozenset[str], key: str) -> None:
+    """SpecError naming `key` if the configuration cannot be built or breaks a min_gap rule."""
+    listed = sorted(config)
+    mounts = {token: mount for token, mount, _ in spec.placements()}
+    for token in listed:
+        if token not in mounts:
+            raise _fail(
+                spec.source,
+                key,
+                f"{listed}: unknown task {token!r} (slot out of range or part unknown); "
+                f"tasks are {sorted(mounts)}",
+            )
+    if len(config) != spec.total_parts:
+        raise _fail(
+            spec.source,
+            key,
+            f"{listed} has {len(config)} parts but a complete assembly has {spec.total_parts}",
+        )
+    for mount in spec.mounts:
+        placed = [t for t in listed if mounts[t] == mount]
+        if len(placed) != mount.count:
+            raise _fail(
+                spec.source,
+                key,
+                f"{listed} puts {len(placed)} {mount.part!r} on {mount.on} but the mounts put "
+                f"{mount.count} there; it can never be built",
+            )
+    where = {t: spec.placement(t) for t in listed}
+    on_base = [t for t in listed if where[t].host is None]
+    for a in on_base:
+        for b in on_base:
+            shared = sorted(set(where[a].slots) & set(where[b].slots))
+            if a < b and shared:
+                raise _fail(
+                    spec.source,
+                    key,
+                    f"{listed}: {a} and {b} both occupy base slot {shared[0]}; it can never "
+                    "be built",
+                )
+    for t in listed:
+        host = where[t].host
+        if host is not None and not any(
+            where[h].part == host and where[t].slots[0] in where[h].slots for h in on_base
+        ):
+            raise _fail(
+                spec.source,
+                key,
+                f"{listed}: {t} sits on {host!r} over slot {where[t].slots[0]} but no {host!r} "
+                "covers that slot; it can never be built",
+            )
+    for r, rule in enumerate(spec.goal.min_gap):
+        for a in listed:
+            for b in listed:
+                if a == b or (where[a].part, where[b].part) != rule.parts:
+                    continue
+                gap = min(abs(x - y) for x in where[a].slots for y in where[b].slots)
+                if gap < rule.slots:
+                    raise _fail(
+                        spec.source,
+                        key,
+                        f"{listed} breaks goal.min_gap[{r}] ({a} and {b} are {gap} slot(s) "
+                        f"apart, the rule asks at least {rule.slots}): `min_gap` and `correct` "
+                        "combine with AND, so this entry can never be correct; drop the entry "
+                        "or the rule",
+                    )
+
+
+def _cell_section(cell: Any, source: str) -> Mapping[str, Any] | None:
+    if cell is not None and not isinstance(cell, Mapping):
+        raise _fail(source, "cell", "must be a mapping of layout values (see hrc_drake/layout.py)")
+    return cell
 
 
 def _check_precedence_cycles(before: list[tuple[str, str]], source: str) -> None:

@@ -1,0 +1,340 @@
+"""Cost tables: the time of every task edge, (state, task) -> seconds, for time-aware decisions.
+
+A task's time is the robot's planned motion (pick, carry, place, release, retreat, home to home)
+plus the operator's part: the part's bolting time for a placement (``bolt_time`` in the spec,
+`DEFAULT_BOLT_TIME` if unset), and an unbolting time, taken equal to the bolting time, for an
+undo (the operator removes the bolts, then the robot returns the part to the tray). The table is
+keyed by the state (its task sequence) because the robot's path depends on what is in place and
+which part is moved: ``undo`` from ``(F1, S23)`` returns the square, from ``(S23, F02)`` a flange.
+
+A cost table file is JSON (written atomically)::
+
+    {"format": "hrc_drake.costs", "version": 1,
+     "spec_name": "flange", "spec_hash": "...", "cell_hash": "...",
+     "entries": [{"state": ["F1"], "task": "S23", "seconds": 12.04,
+                  "robot": 7.04, "operator": 5.0}, ...],   # one per task edge
+     "checksum": sha256 of the canonical JSON of everything above}
+
+``robot`` and ``operator`` are optional; when present they add up to ``seconds``. The spec hash
+ties a table to the assembly it was made for, the cell hash to the robot, cell frames and motion
+options it was planned with (see `hrc_drake.cell.costs.cell_hash`). This module imports no Drake:
+tables are computed by `hrc_drake.cell.costs` and used here by the MDP, the solver and `evaluate`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hrc_drake.atomic import atomic_write_text
+from hrc_drake.tasks.graph import StateKind, StateSpace, UnknownStateError
+from hrc_drake.tasks.mdp import MdpConfig, build_mdp
+from hrc_drake.tasks.spec import DEFAULT_BOLT_TIME, AssemblySpec
+from hrc_drake.tasks.tokens import UNDO
+
+FORMAT = "hrc_drake.costs"
+VERSION = 1
+
+Edge = tuple[tuple[str, ...], str]  # (state as its task sequence, task token)
+
+
+class CostTableError(ValueError):
+    """A cost table that cannot be used: corrupted, of another version, spec or cell."""
+
+
+@dataclass(frozen=True)
+class EdgeCost:
+    """Time of one task edge [s], and its parts when known (robot motion, operator's work)."""
+
+    seconds: float
+    robot: float | None = None
+    operator: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class CostTable:
+    """Seconds per task edge of one assembly, planned in one cell.
+
+    `entries` maps ``(state, task)`` — the state as its task sequence, the task a token or
+    ``"undo"`` — to an `EdgeCost`. Pass a table as ``Rewards(edge_costs=table)`` to make the MDP
+    time-aware (each task's reward is minus its seconds).
+    """
+
+    spec_hash: str
+    cell_hash: str
+    entries: Mapping[Edge, EdgeCost]
+    spec_name: str = ""
+
+    def seconds(self, state: tuple[str, ...] | list[str], task: str) -> float:
+        """Seconds of `task` from `state`; KeyError naming the edge if the table has none."""
+        return self.cost(state, task).seconds
+
+    def cost(self, state: tuple[str, ...] | list[str], task: str) -> EdgeCost:
+        """The `EdgeCost` of `task` from `state`; KeyError naming the edge if missing."""
+        key = (tuple(state), task)
+        try:
+            return self.entries[key]
+        except KeyError:
+            raise KeyError(
+                f"cost table has no entry for task {task!r} from state {list(key[0])}; "
+                "make a table for this assembly with `hrc-drake costs --out FILE`"
+            ) from None
+
+    def __len__(self) -> int:
+        return len(self.entries)
+
+    def __iter__(self) -> Iterator[Edge]:
+        return iter(self.entries)
+
+    def matches(self, spec: AssemblySpec) -> None:
+        """Raise CostTableError unless this table was made for `spec`."""
+        if spec.spec_hash != self.spec_hash:
+            raise CostTableError(
+                f"cost table was made for assembly {self.spec_name!r} (spec hash "
+                f"{self.spec_hash}), not for {spec.name!r} from {spec.source} (hash "
+                f"{spec.spec_hash}); make a new one with `hrc-drake costs --assembly "
+                f"{spec.source} --out FILE`"
+            )
+
+    def missing(self, space: StateSpace) -> list[Edge]:
+        """Task edges of `space` that the table lacks (every edge the MDP can take)."""
+        return [edge for edge in task_edges(space) if edge not in self.entries]
+
+    def sequence_seconds(self, sequence: tuple[str, ...] | list[str]) -> float:
+        """Seconds of doing `sequence` from the empty base, task after task."""
+        seq = tuple(sequence)
+        return sum(self.seconds(seq[:i], seq[i]) for i in range(len(seq)))
+
+
+def task_edges(space: StateSpace) -> list[Edge]:
+    """Every (state, task) edge of the state graph, in state order: placements, then undo.
+
+    Includes undo from terminal states (the graph has a reverse for every edge, and the cell
+    may be asked to take a finished part back), so that a table covers what the motion layer
+    can be asked to do.
+    """
+    return [(space.sequence(s), task) for s in range(space.n_states) for task, _ in space.tasks(s)]
+
+
+def operator_seconds(spec: AssemblySpec, state: tuple[str, ...], task: str) -> float:
+    """The operator's time for a task edge: bolting the part placed, or unbolting the part undone.
+
+    Unbolting is taken to last as long as bolting (our assumption; nothing is published).
+    """
+    if task == UNDO:
+        if not state:
+            raise ValueError("undo from the empty base: nothing to unbolt")
+        token = state[-1]
+    else:
+        token = task
+    return bolt_time(spec, spec.placement(token).part)
+
+
+def bolt_time(spec: AssemblySpec, symbol: str) -> float:
+    """Seconds the operator takes to bolt one part of type `symbol` (spec or default)."""
+    part = spec.part(symbol)
+    return DEFAULT_BOLT_TIME if part.bolt_time is None else float(part.bolt_time)
+
+
+def table_from_seconds(
+    space: StateSpace, seconds: Mapping[Edge, float], cell_hash: str = "by-hand"
+) -> CostTable:
+    """A CostTable for `space` from plain seconds per edge (tests, hand-made tables)."""
+    return CostTable(
+        spec_hash=space.spec.spec_hash,
+        cell_hash=cell_hash,
+        entries={(tuple(s), t): EdgeCost(float(v)) for (s, t), v in seconds.items()},
+        spec_name=space.spec.name,
+    )
+
+
+def _payload(table: CostTable) -> dict[str, Any]:
+    entries = []
+    for (state, task), cost in sorted(table.entries.items(), key=lambda kv: (len(kv[0][0]), kv[0])):
+        entry: dict[str, Any] = {"state": list(state), "task": task, "seconds": cost.seconds}
+        if cost.robot is not None:
+            entry["robot"] = cost.robot
+        if cost.operator is not None:
+            entry["operator"] = cost.operator
+        entries.append(entry)
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "spec_name": table.spec_name,
+        "spec_hash": table.spec_hash,
+        "cell_hash": table.cell_hash,
+        "entries": entries,
+    }
+
+
+def _checksum(payload: Mapping[str, Any]) -> str:
+    text = json.dumps(payload, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def cost_table_json(table: CostTable) -> dict[str, Any]:
+    """The JSON object of a cost table file (with its checksum)."""
+    payload = _payload(table)
+    payload["checksum"] = _checksum(payload)
+    return payload
+
+
+def save_cost_table(table: CostTable, path: str | Path) -> None:
+    """Save atomically, with the spec and cell hashes and a checksum of the content."""
+    atomic_write_text(Path(path), json.dumps(cost_table_json(table), indent=1) + "\n")
+
+
+def _number(value: Any, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise TypeError(f"{what} must be a number, got {value!r}")
+    if value < 0:
+        raise ValueError(f"{what} must be >= 0, got {value!r}")
+    return float(value)
+
+
+def load_cost_table(path: str | Path, space: StateSpace, cell_hash: str | None = None) -> CostTable:
+    """Load a cost table made for `space`'s spec (and, if given, that cell hash).
+
+    CostTableError with the fix if the file is missing, corrupted (not JSON, checksum, bad
+    entry), of another version or another spec or cell, names a task that is not feasible, or
+    lacks an edge the MDP can take.
+    """
+    path = Path(path)
+    fix = f"make a new one with `hrc-drake costs --out {path}`"
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise CostTableError(f"cost table {path} not found; {fix}") from None
+    try:
+        payload = json.loads(text)
+    except json.JSONDecodeError as err:
+        raise CostTableError(f"cost table {path} is corrupted (not JSON: {err}); {fix}") from None
+    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
+        raise CostTableError(f"{path} is not an hrc_drake cost table; {fix}")
+    if payload.get("version") != VERSION:
+        raise CostTableError(
+            f"cost table {path} has format version {payload.get('version')!r}; this hrc_drake "
+            f"reads version {VERSION}; {fix}"
+        )
+    checksum = payload.pop("checksum", None)
+    if checksum != _checksum(payload):
+        raise CostTableError(f"cost table {path} is corrupted (checksum mismatch); {fix}")
+    try:
+        entries = {}
+        for i, e in enumerate(payload["entries"]):
+            key = (tuple(e["state"]), str(e["task"]))
+            if key in entries:
+                raise ValueError(f"entry {i} repeats task {key[1]!r} from {list(key[0])}")
+            entries[key] = EdgeCost(
+                _number(e["seconds"], f"entry {i} seconds"),
+                None if e.get("robot") is None else _number(e["robot"], f"entry {i} robot"),
+                None
+                if e.get("operator") is None
+                else _number(e["operator"], f"entry {i} operator"),
+            )
+        table = CostTable(
+            spec_hash=str(payload["spec_hash"]),
+            cell_hash=str(payload["cell_hash"]),
+            entries=entries,
+            spec_name=str(payload.get("spec_name", "")),
+        )
+    except (KeyError, TypeError, ValueError) as err:
+        raise CostTableError(f"cost table {path} is corrupted (bad entry: {err}); {fix}") from None
+    try:
+        table.matches(space.spec)
+    except CostTableError as err:
+        raise CostTableError(f"{path}: {err}") from None
+    if cell_hash is not None and table.cell_hash != cell_hash:
+        raise CostTableError(
+            f"cost table {path} was planned for another cell (cell hash {table.cell_hash}, "
+            f"this cell {cell_hash}); {fix}"
+        )
+    for state, task in table.entries:
+        try:
+            s = space.index(state)
+        except UnknownStateError:
+            raise CostTableError(
+                f"cost table {path} names {list(state)}, not a state of {space.spec.name!r}; {fix}"
+            ) from None
+        if task not in {t for t, _ in space.tasks(s)}:
+            raise CostTableError(
+                f"cost table {path} gives task {task!r} from {list(state)}, where it is not "
+                f"feasible; {fix}"
+            )
+    missing = [
+        (s, t)
+        for s, t in table.missing(space)
+        if space.state_kind(space.index(s)) != StateKind.TERMINAL
+    ]
+    if missing:
+        state, task = missing[0]
+        raise CostTableError(
+            f"cost table {path} has no entry for task {task!r} from {list(state)} "
+            f"({len(missing)} edges missing); {fix}"
+        )
+    return table
+
+
+def shortest_sequences(space: StateSpace) -> list[tuple[str, ...]]:
+    """Sequences from the empty base to a terminal state in the fewest tasks (no undo).
+
+    For the flange case: the four the paper calls optimal, equivalent under -1 per task.
+    """
+    terminal = np.flatnonzero(space.kind == StateKind.TERMINAL)
+    fewest = int(space.depth[terminal].min())
+    return [space.sequence(int(s)) for s in terminal if space.depth[s] == fewest]
+
+
+def cost_summary(
+    space: StateSpace, table: CostTable, config: MdpConfig | None = None
+) -> dict[str, Any]:
+    """The shortest sequences ranked by seconds, and the choices of the unit-cost and the
+    time-aware exact policies, as JSON-ready data.
+
+    Per sequence: ``seconds`` when every task goes as proposed, and ``expected_seconds``
+    when the operator misplaces parts as `config` says (default `MdpConfig`, gamma 1): the value of
+    starting with the sequence's first task and acting optimally (time-aware, gamma 1) after.
+    The time-aware choice minimises the expected seconds; its ``tasks`` are the route when the
+    operator follows the robot.
+    """
+    from hrc_drake.tasks.decide import run_decisions
+    from hrc_drake.tasks.policy import policy_from_choices
+    from hrc_drake.tasks.solve import exact_policy, solve_exact, timed_config
+
+    mdp = build_mdp(space, timed_config(table, config))
+    solution = solve_exact(mdp)
+    first_q = {mdp.task_name(e): -float(solution.q[e]) for e in mdp.edges_of(0)}
+
+    def row(seq: tuple[str, ...]) -> dict[str, Any]:
+        states = [space.index(seq[:i]) for i in range(len(seq) + 1)]
+        return {
+            "states": " ".join(space.name(s) for s in states),
+            "tasks": list(seq),
+            "seconds": round(table.sequence_seconds(seq), 3),
+            "task_seconds": [round(table.seconds(seq[:i], seq[i]), 3) for i in range(len(seq))],
+            "expected_seconds": round(first_q[seq[0]], 3) if seq else 0.0,
+        }
+
+    ranked = sorted(
+        (row(seq) for seq in shortest_sequences(space)),
+        key=lambda r: (r["seconds"], r["expected_seconds"]),
+    )
+    unit, _ = run_decisions(space, exact_policy(space))
+    timed, _ = run_decisions(space, policy_from_choices(mdp, solution.choice, "exact/time"))
+    return {
+        "assembly": space.spec.name,
+        "spec_hash": table.spec_hash,
+        "cell_hash": table.cell_hash,
+        "edges": len(table),
+        "mistake_prob": mdp.config.mistake_prob,
+        "shortest_sequences": ranked,
+        "unit_cost_choice": row(unit[-1]),
+        "time_aware_choice": row(timed[-1]),
+    }
