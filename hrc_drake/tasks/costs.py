@@ -23,7 +23,6 @@ tables are computed by `hrc_drake.cell.costs` and used here by the MDP, the solv
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 from collections.abc import Iterator, Mapping
@@ -34,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from hrc_drake.atomic import atomic_write_text
+from hrc_drake.tasks.datafile import load_checked_json, with_checksum
 from hrc_drake.tasks.graph import StateKind, StateSpace, UnknownStateError
 from hrc_drake.tasks.mdp import MdpConfig, build_mdp
 from hrc_drake.tasks.spec import DEFAULT_BOLT_TIME, AssemblySpec
@@ -174,16 +174,9 @@ def _payload(table: CostTable) -> dict[str, Any]:
     }
 
 
-def _checksum(payload: Mapping[str, Any]) -> str:
-    text = json.dumps(payload, sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
 def cost_table_json(table: CostTable) -> dict[str, Any]:
     """The JSON object of a cost table file (with its checksum)."""
-    payload = _payload(table)
-    payload["checksum"] = _checksum(payload)
-    return payload
+    return with_checksum(_payload(table))
 
 
 def save_cost_table(table: CostTable, path: str | Path) -> None:
@@ -208,24 +201,9 @@ def load_cost_table(path: str | Path, space: StateSpace, cell_hash: str | None =
     """
     path = Path(path)
     fix = f"make a new one with `hrc-drake costs --out {path}`"
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise CostTableError(f"cost table {path} not found; {fix}") from None
-    try:
-        payload = json.loads(text)
-    except json.JSONDecodeError as err:
-        raise CostTableError(f"cost table {path} is corrupted (not JSON: {err}); {fix}") from None
-    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
-        raise CostTableError(f"{path} is not an hrc_drake cost table; {fix}")
-    if payload.get("version") != VERSION:
-        raise CostTableError(
-            f"cost table {path} has format version {payload.get('version')!r}; this hrc_drake "
-            f"reads version {VERSION}; {fix}"
-        )
-    checksum = payload.pop("checksum", None)
-    if checksum != _checksum(payload):
-        raise CostTableError(f"cost table {path} is corrupted (checksum mismatch); {fix}")
+    payload = load_checked_json(
+        path, what="cost table", fmt=FORMAT, version=VERSION, fix=fix, error=CostTableError
+    )
     try:
         entries = {}
         for i, e in enumerate(payload["entries"]):

@@ -11,8 +11,6 @@ A policy file is JSON::
 
 from __future__ import annotations
 
-import hashlib
-import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from hrc_drake.atomic import atomic_write_text
+from hrc_drake.tasks.datafile import load_checked_json, save_checked_json
 from hrc_drake.tasks.graph import StateSpace, UnknownStateError
 from hrc_drake.tasks.mdp import SequenceMDP
 from hrc_drake.tasks.spec import AssemblySpec
@@ -106,16 +104,9 @@ def _payload(policy: Policy) -> dict[str, Any]:
     }
 
 
-def _checksum(payload: Mapping[str, Any]) -> str:
-    text = json.dumps(payload, sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
 def save_policy(policy: Policy, path: str | Path) -> None:
     """Save atomically, with the spec hash and a checksum of the content."""
-    payload = _payload(policy)
-    payload["checksum"] = _checksum(payload)
-    atomic_write_text(Path(path), json.dumps(payload, indent=1, sort_keys=True) + "\n")
+    save_checked_json(path, _payload(policy))
 
 
 def load_policy(path: str | Path, space: StateSpace) -> Policy:
@@ -127,27 +118,9 @@ def load_policy(path: str | Path, space: StateSpace) -> Policy:
             f"policy file {path} is a directory; pass a policy file (e.g. {path / 'policy.json'}"
             f"), made with `hrc-drake solve --out {path / 'policy.json'}` or `hrc-drake train`"
         )
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise PolicyFileError(f"policy file {path} not found; {fix}") from None
-    except (OSError, UnicodeDecodeError) as err:
-        reason = err.strerror if isinstance(err, OSError) and err.strerror else str(err)
-        raise PolicyFileError(f"policy file {path} cannot be read ({reason}); {fix}") from None
-    try:
-        payload = json.loads(text)
-    except json.JSONDecodeError as err:
-        raise PolicyFileError(f"policy file {path} is corrupted (not JSON: {err}); {fix}") from None
-    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
-        raise PolicyFileError(f"{path} is not an hrc_drake policy file; {fix}")
-    if payload.get("version") != VERSION:
-        raise PolicyFileError(
-            f"policy file {path} has format version {payload.get('version')!r}; this hrc_drake "
-            f"reads version {VERSION}; {fix}"
-        )
-    checksum = payload.pop("checksum", None)
-    if checksum != _checksum(payload):
-        raise PolicyFileError(f"policy file {path} is corrupted (checksum mismatch); {fix}")
+    payload = load_checked_json(
+        path, what="policy file", fmt=FORMAT, version=VERSION, fix=fix, error=PolicyFileError
+    )
     try:
         policy = Policy(
             spec_name=payload["spec"]["name"],

@@ -1,0 +1,71 @@
+"""Versioned, checksummed JSON files (policies, cost tables): one writer and one reader.
+
+A file is a JSON object with `format`, `version` and a `checksum` of the rest; it is written
+atomically. Reading refuses, with a one-line error that ends with the fix, a directory, a
+missing or unreadable file, a file that is not JSON, another format, another version, and a
+checksum that does not match (a file edited or cut short).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from hrc_drake.atomic import atomic_write_text
+
+
+def checksum(payload: Mapping[str, Any]) -> str:
+    """SHA-256 of the payload's canonical JSON."""
+    text = json.dumps(payload, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def with_checksum(payload: Mapping[str, Any]) -> dict[str, Any]:
+    """A copy of `payload` with its `checksum` added."""
+    out = dict(payload)
+    out["checksum"] = checksum(payload)
+    return out
+
+
+def save_checked_json(path: str | Path, payload: Mapping[str, Any]) -> None:
+    """Write `payload` with its checksum to `path`, atomically."""
+    text = json.dumps(with_checksum(payload), indent=1, sort_keys=True) + "\n"
+    atomic_write_text(Path(path), text)
+
+
+def load_checked_json(
+    path: str | Path, *, what: str, fmt: str, version: int, fix: str, error: type[Exception]
+) -> dict[str, Any]:
+    """The payload of a file written by `save_checked_json` (without its checksum).
+
+    `what` names the kind of file in messages ("policy file"), `fix` says how to make a good
+    one; problems raise `error`.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise error(f"{what} {path} is a directory; pass a file (e.g. {path / 'file.json'}); {fix}")
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise error(f"{what} {path} not found; {fix}") from None
+    except (OSError, UnicodeDecodeError) as err:
+        reason = err.strerror if isinstance(err, OSError) and err.strerror else str(err)
+        raise error(f"{what} {path} cannot be read ({reason}); {fix}") from None
+    try:
+        payload = json.loads(text)
+    except json.JSONDecodeError as err:
+        raise error(f"{what} {path} is corrupted (not JSON: {err}); {fix}") from None
+    if not isinstance(payload, dict) or payload.get("format") != fmt:
+        raise error(f"{path} is not an hrc_drake {what}; {fix}")
+    if payload.get("version") != version:
+        raise error(
+            f"{what} {path} has format version {payload.get('version')!r}; this hrc_drake "
+            f"reads version {version}; {fix}"
+        )
+    stored = payload.pop("checksum", None)
+    if stored != checksum(payload):
+        raise error(f"{what} {path} is corrupted (checksum mismatch); {fix}")
+    return payload
