@@ -134,7 +134,7 @@ def test_entries_that_are_not_edges_or_missing_are_refused(tmp_path, flange_spac
     entries = dict(table.entries)
     entries[("F1",), "F2"] = EdgeCost(1.0)
     save_cost_table(replace(table, entries=entries), path)
-    with pytest.raises(CostTableError, match="'F2' from \\['F1'\\], where it is not feasible"):
+    with pytest.raises(CostTableError, match="task 'F2' in \\['F1'\\], where it is not feasible"):
         load_cost_table(path, flange_space)
     entries = {k: v for k, v in table.entries.items() if k != (("F1",), "S23")}
     save_cost_table(replace(table, entries=entries), path)

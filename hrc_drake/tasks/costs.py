@@ -33,8 +33,8 @@ from typing import Any
 import numpy as np
 
 from hrc_drake.atomic import atomic_write_text
-from hrc_drake.tasks.datafile import load_checked_json, with_checksum
-from hrc_drake.tasks.graph import StateKind, StateSpace, UnknownStateError
+from hrc_drake.tasks.datafile import first_infeasible, load_checked_json, with_checksum
+from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.mdp import MdpConfig, build_mdp
 from hrc_drake.tasks.spec import DEFAULT_BOLT_TIME, AssemblySpec
 from hrc_drake.tasks.tokens import UNDO
@@ -234,18 +234,9 @@ def load_cost_table(path: str | Path, space: StateSpace, cell_hash: str | None =
             f"cost table {path} was planned for another cell (cell hash {table.cell_hash}, "
             f"this cell {cell_hash}); {fix}"
         )
-    for state, task in table.entries:
-        try:
-            s = space.index(state)
-        except UnknownStateError:
-            raise CostTableError(
-                f"cost table {path} names {list(state)}, not a state of {space.spec.name!r}; {fix}"
-            ) from None
-        if task not in {t for t, _ in space.tasks(s)}:
-            raise CostTableError(
-                f"cost table {path} gives task {task!r} from {list(state)}, where it is not "
-                f"feasible; {fix}"
-            )
+    problem = first_infeasible(space, table.entries)
+    if problem is not None:
+        raise CostTableError(f"cost table {path} {problem}; {fix}")
     missing = [
         (s, t)
         for s, t in table.missing(space)

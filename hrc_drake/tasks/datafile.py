@@ -69,3 +69,16 @@ def load_checked_json(
     if stored != checksum(payload):
         raise error(f"{what} {path} is corrupted (checksum mismatch); {fix}")
     return payload
+
+
+def first_infeasible(space, pairs) -> str | None:
+    """The first (state, task) of `pairs` that is not a feasible task of `space`, described;
+    None when every pair is feasible."""
+    for state, task in pairs:
+        try:
+            index = space.index(state)
+        except KeyError:
+            return f"names {list(state)}, not a state of {space.spec.name!r}"
+        if task not in {t for t, _ in space.tasks(index)}:
+            return f"gives task {task!r} in {list(state)}, where it is not feasible"
+    return None

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from hrc_drake.tasks.datafile import load_checked_json, save_checked_json
+from hrc_drake.tasks.datafile import first_infeasible, load_checked_json, save_checked_json
 from hrc_drake.tasks.graph import StateSpace, UnknownStateError
 from hrc_drake.tasks.mdp import SequenceMDP
 from hrc_drake.tasks.spec import AssemblySpec
@@ -135,16 +135,7 @@ def load_policy(path: str | Path, space: StateSpace) -> Policy:
             f"policy file {path} is corrupted (bad entry: {err}); {fix}"
         ) from None
     policy.matches(space.spec)
-    for seq, task in policy.table.items():
-        try:
-            state = space.index(seq)
-        except UnknownStateError:
-            raise PolicyFileError(
-                f"policy file {path} names {list(seq)}, not a state of {space.spec.name!r}; {fix}"
-            ) from None
-        if task not in {t for t, _ in space.tasks(state)}:
-            raise PolicyFileError(
-                f"policy file {path} proposes {task!r} in {list(seq)}, where it is not "
-                f"feasible; {fix}"
-            )
+    problem = first_infeasible(space, policy.table.items())
+    if problem is not None:
+        raise PolicyFileError(f"policy file {path} {problem}; {fix}")
     return policy
