@@ -55,6 +55,8 @@ def test_simulate_json_has_the_documented_keys(capsys):
         (["--scenario-text", "{{run: {{max_steps: 2.5}}}}"], "max_steps"),
         (["--operator", "1:F9"], "'F9' is not a placement"),
         (["--operator", "1-F3"], "STEP:TASK"),
+        (["--operator", "7:F1"], "step(s) 7:F1 come after the end of the run"),
+        (["--operator", "1:S23,2:F1"], "'F1' is not feasible"),
         (["--scenario", "no-such-row"], "not found; known scenarios"),
         (["--policy", "{tmp}"], "{tmp}"),
         (["--assembly", "{tmp}/none.yaml"], "none.yaml"),

@@ -9,10 +9,13 @@ from pathlib import Path
 
 from hrc_drake.cell.run import run_scenario
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+from hrc_drake.hri.operator import ScriptedOperator
 from hrc_drake.hri.scenario import Scenario, with_operator_script
 from hrc_drake.paths import UsageError, check_output_path
+from hrc_drake.tasks.decide import check_script_within_run, run_decisions
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.policy import load_policy
+from hrc_drake.tasks.solve import exact_policy
 from hrc_drake.tasks.spec import load_spec
 from hrc_drake.tasks.tokens import UNDO
 
@@ -54,18 +57,18 @@ def simulate_command(args) -> int:
         if d.task != UNDO:
             space.spec.placement(d.task)
     policy = load_policy(scenario.policy, space) if scenario.policy else None
+    if scenario.script:
+        # The decision loop predicts a scripted run; refuse a script that cannot apply before
+        # simulating it (an infeasible task, or steps past the end of the run).
+        predicted = policy or exact_policy(space)
+        _, decisions = run_decisions(space, predicted, ScriptedOperator(scenario.script))
+        check_script_within_run(scenario.script, decisions)
     result = run_scenario(scenario, policy, record=record, progress=True, still=still)
     problems = []
     if still is not None and result.sim_time < args.still_time:
         problems.append(
             f"--still-time {args.still_time} s is past the end of the run "
             f"({result.sim_time:.1f} s simulated); choose a time within it"
-        )
-    late = sorted(k for k in scenario.script if k > len(result.tasks))
-    if late and result.done:
-        problems.append(
-            f"the operator script has step {late[0]}, but the run ended after "
-            f"{len(result.tasks)} steps; script steps within the run"
         )
     if args.json:
         json.dump(result.to_json(), sys.stdout, indent=1)

@@ -43,6 +43,8 @@ def load_cell_scenario(
         if not scenario.name:
             scenario.name = path.stem
     texts = [scenario_text] if isinstance(scenario_text, str) else list(scenario_text or ())
+    if texts:
+        source = f"{source} with --scenario-text"
     for text in texts:
         try:
             scenario = yaml_load_typed(schema=Scenario, data=text, defaults=scenario)
