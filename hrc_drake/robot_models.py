@@ -25,6 +25,20 @@ UR3_JOINTS: tuple[str, ...] = (
 UR3_VELOCITY_LIMITS: tuple[float, ...] = (math.pi,) * 3 + (2 * math.pi,) * 3
 UR3_EFFORT_LIMITS: tuple[float, ...] = (56.0, 56.0, 28.0, 12.0, 12.0, 12.0)
 RG2_MAX_OPENING = 0.110
+# Pad centre from the RG2's mounting face at a 45 mm opening (the oval flanges' width), by
+# forward kinematics of OnRobot/onrobot-ros2 onrobot_rg2.urdf; our fixed tcp stands there.
+RG2_PAD_CENTRE_AT_45_MM = 0.2105
+# The UR3's own link surface radii (Universal_Robots_ROS2_Description, meshes/ur3/collision):
+# the collision shapes are these plus a few millimetres, not the UR5 radii of ROS
+# physical_parameters.yaml.
+UR3_SURFACE_RADII: dict[str, float] = {
+    "shoulder_link": 0.045,
+    "upper_arm_link": 0.046,  # joint housings; the tube is 0.038
+    "forearm_link": 0.038,  # elbow housing; the tube is 0.027
+    "wrist_1_link": 0.032,
+    "wrist_2_link": 0.032,
+    "wrist_3_link": 0.032,
+}
 RG2_FINGER_JOINTS: tuple[str, ...] = ("left_finger_joint", "right_finger_joint")
 
 ROBOT_DIRECTIVES = "cell/robot.dmd.yaml"

@@ -14,8 +14,10 @@ from hrc_drake.resources import package_uri
 from hrc_drake.robot_models import (
     RG2_FINGER_JOINTS,
     RG2_MAX_OPENING,
+    RG2_PAD_CENTRE_AT_45_MM,
     UR3_EFFORT_LIMITS,
     UR3_JOINTS,
+    UR3_SURFACE_RADII,
     UR3_VELOCITY_LIMITS,
     add_robot,
     make_parser,
@@ -201,7 +203,10 @@ def test_gripper_mass_and_frames(scene: RobotScene) -> None:
     X_tool0_tcp = plant.CalcRelativeTransform(
         context, plant.GetFrameByName("tool0", scene.ur3), plant.GetFrameByName("tcp", scene.rg2)
     )
-    np.testing.assert_allclose(X_tool0_tcp.translation(), [0.0, 0.0, 0.19], atol=1e-12)
+    # The tcp is where the RG2's pads are at the oval flanges' 45 mm width (within 1 mm).
+    np.testing.assert_allclose(
+        X_tool0_tcp.translation(), [0.0, 0.0, RG2_PAD_CENTRE_AT_45_MM], atol=1e-3
+    )
     np.testing.assert_allclose(X_tool0_tcp.rotation().matrix(), np.eye(3), atol=1e-12)
 
 
@@ -284,4 +289,16 @@ def test_folded_elbow_does_collide(scene: RobotScene) -> None:
     # Guards the test above against filters that hide everything.
     scene.set(np.array([0.0, -math.pi / 2, 2.6, 0.0, 0.0, 0.0]))
     pairs = {frozenset(pair) for pair in scene.colliding_pairs()}
-    assert frozenset({"ur3::shoulder_link", "ur3::wrist_2_link"}) in pairs
+    # With the UR3's own (thin) links, the folded wrist meets the upper arm's housings.
+    assert frozenset({"ur3::upper_arm_link", "ur3::wrist_2_link"}) in pairs
+
+
+def test_link_shapes_follow_the_ur3_not_the_ur5(scene: RobotScene) -> None:
+    """Every UR3 link's collision shapes are its real surface plus at most 5 mm."""
+    plant, inspector = scene.plant, scene.inspector
+    for link, surface in UR3_SURFACE_RADII.items():
+        body = plant.GetBodyByName(link, scene.ur3)
+        radii = [inspector.GetShape(g).radius() for g in plant.GetCollisionGeometriesForBody(body)]
+        assert radii, link
+        assert max(radii) <= surface + 0.005, (link, radii)
+        assert max(radii) >= surface, (link, radii)

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 import numpy as np
-from pydrake.trajectories import PiecewisePolynomial
+from pydrake.trajectories import PiecewisePolynomial, Trajectory
 
 from hrc_drake.motion.scene import Layout
 
@@ -72,7 +72,8 @@ class Plan:
         task: the task token (`F1`, `S23`, `F03`, `undo`, ...).
         instance: the part model instance moved.
         configuration: the tokens in place before the task.
-        trajectory: the six UR3 joint positions over [0, duration] (joint order of the model).
+        trajectory: the six UR3 joint positions over [0, duration] (joint order of the model),
+            exact: a CompositeTrajectory of retimed paths and still pieces.
         gripper: opening between the finger insides [m] over [0, duration] (1×1).
         t_in_place: the part reaches its target and is held from then on.
         t_release: the gripper starts opening; the robot holds still in between.
@@ -85,7 +86,7 @@ class Plan:
     task: str
     instance: str
     configuration: frozenset[str]
-    trajectory: PiecewisePolynomial
+    trajectory: Trajectory
     gripper: PiecewisePolynomial
     t_in_place: float
     t_release: float

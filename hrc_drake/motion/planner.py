@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.math import RigidTransform, RotationMatrix
-from pydrake.trajectories import PiecewisePolynomial
+from pydrake.trajectories import CompositeTrajectory, PiecewisePolynomial, Trajectory
 
 from hrc_drake.cell_models import CellDesign, CellModelError
 from hrc_drake.motion.ik import UnreachableError, solve_ik
@@ -100,14 +100,14 @@ def resolve_task(
 
 
 class _Timeline:
-    """Accumulates arm motions and still intervals into one trajectory."""
+    """Chains arm motions and still intervals into one exact trajectory (no resampling): each
+    retimed move is a `PathParameterizedTrajectory`, each still interval a constant piece, and
+    the plan a `CompositeTrajectory` of them."""
 
-    def __init__(self, q0: np.ndarray, rate: float, opening: float):
+    def __init__(self, q0: np.ndarray, opening: float):
         self.t = 0.0
-        self.times = [0.0]
-        self.q = [np.asarray(q0, dtype=float)]
-        self.qdot = [np.zeros(len(q0))]
-        self.rate = rate
+        self.q_end = np.asarray(q0, dtype=float)
+        self.pieces: list[Trajectory] = []
         self.segments: list[Segment] = []
         self.phases: list[CheckPhase] = []
         self.motions: list[MotionTiming] = []
@@ -115,14 +115,8 @@ class _Timeline:
         self.gripper_values = [opening]
 
     def move(self, name: str, retimed: Retimed, free: tuple | None = None) -> None:
-        n = max(2, int(np.ceil(retimed.duration * self.rate)) + 1)
-        for t in np.linspace(0.0, retimed.duration, n)[1:]:
-            q, qdot = retimed.sample(t)
-            self.times.append(self.t + t)
-            self.q.append(q)
-            self.qdot.append(qdot)
-        self.q[-1] = retimed.end
-        self.qdot[-1] = np.zeros(len(self.q[-1]))
+        self.pieces.append(retimed.trajectory())
+        self.q_end = retimed.end
         kto, constrained = (None, False) if free is None else (free[0].end_time(), free[1])
         self.motions.append(
             MotionTiming(name, self.t, retimed.duration, retimed.optimal_duration, kto, constrained)
@@ -132,10 +126,9 @@ class _Timeline:
     def wait(self, duration: float) -> None:
         if duration <= 0.0:
             return
+        q = self.q_end.reshape(-1, 1)
+        self.pieces.append(PiecewisePolynomial.ZeroOrderHold([0.0, duration], np.hstack([q, q])))
         self.t += duration
-        self.times.append(self.t)
-        self.q.append(self.q[-1].copy())
-        self.qdot.append(np.zeros(len(self.q[-1])))
 
     def gripper(self, opening: float, duration: float) -> None:
         self.gripper_times.append(self.t)
@@ -150,10 +143,8 @@ class _Timeline:
     def phase(self, start: float, layout: Layout, allowed: tuple[tuple[str, str], ...]) -> None:
         self.phases.append(CheckPhase(start, self.t, layout, allowed))
 
-    def trajectory(self) -> PiecewisePolynomial:
-        return PiecewisePolynomial.CubicHermite(
-            np.array(self.times), np.column_stack(self.q), np.column_stack(self.qdot)
-        )
+    def trajectory(self) -> CompositeTrajectory:
+        return CompositeTrajectory.AlignAndConcatenate(self.pieces)
 
     def gripper_trajectory(self) -> PiecewisePolynomial:
         times = [*self.gripper_times, self.t]
@@ -364,7 +355,7 @@ class MotionPlanner:
         def timed(scene: PlanningScene, path) -> Retimed:
             return retime(scene, path, self.limits, opts)
 
-        line = _Timeline(q_home, 2.0 * opts.validation_rate, opening)
+        line = _Timeline(q_home, opening)
         t0 = line.t
         line.move("home to pre-grasp", timed(pick, approach[0]), approach)
         line.phase(t0, pick.layout, ())

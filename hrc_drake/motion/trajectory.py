@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -10,7 +11,12 @@ from pydrake.multibody.inverse_kinematics import MinimumDistanceLowerBoundConstr
 from pydrake.multibody.optimization import CalcGridPointsOptions, Toppra
 from pydrake.planning import KinematicTrajectoryOptimization
 from pydrake.solvers import SnoptSolver
-from pydrake.trajectories import BsplineTrajectory, PiecewisePolynomial, Trajectory
+from pydrake.trajectories import (
+    BsplineTrajectory,
+    PathParameterizedTrajectory,
+    PiecewisePolynomial,
+    Trajectory,
+)
 
 from hrc_drake.motion.ik import solve_ik
 from hrc_drake.motion.options import MotionOptions
@@ -211,6 +217,17 @@ class Retimed:
     def reversed(self) -> Retimed:
         """The same motion run backwards."""
         return replace(self, reverse=not self.reverse)
+
+    def trajectory(self) -> PathParameterizedTrajectory:
+        """The motion as one exact trajectory over [0, duration]: the path under Toppra's time
+        scaling, slowed by `fraction` (and reversed for a reversed motion); no resampling."""
+        s_of_t = copy.deepcopy(self.s_of_t)
+        s_of_t.shiftRight(-s_of_t.start_time())
+        if self.reverse:
+            s_of_t.ReverseTime()
+            s_of_t.shiftRight(self.optimal_duration)
+        s_of_t.ScaleTime(1.0 / self.fraction)
+        return PathParameterizedTrajectory(self.path, s_of_t)
 
     def sample(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(q, q̇) at plan time t ∈ [0, duration]."""
