@@ -385,6 +385,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--still", type=Path, default=None, help="PNG of the cell at --still-time")
     p.add_argument("--still-time", type=float, default=10.0, help="simulated time of --still")
+    p.add_argument(
+        "--live",
+        action="store_true",
+        help="you are the operator: serve Meshcat (open the printed URL), run at the wall "
+        "clock's pace and wait for your click at every task boundary",
+    )
+    from hrc_drake.evaluate import add_evaluate_parser
+
+    add_evaluate_parser(add)
     return parser
 
 

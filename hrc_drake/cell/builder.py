@@ -31,7 +31,7 @@ from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.scenario import plant_config
 from hrc_drake.cell.slot_monitor import CellConfiguration, SlotMonitor
 from hrc_drake.cell_models import CellDesign, add_cell_models, check_cell_models
-from hrc_drake.hri.scenario import Scenario
+from hrc_drake.hri.scenario import BodyConfig, Scenario
 from hrc_drake.motion.poses import CellFrames, layout_poses, seat_pose
 from hrc_drake.motion.scene import read_cell_frames
 from hrc_drake.robot_models import RG2_MAX_OPENING, UR3_JOINTS
@@ -74,6 +74,9 @@ class CellScenario:
             side; its image is the exported output `camera.rgb_image`.
         recording_path: if set (and meshcat), `simulate_cell` saves the run there as HTML.
         simulation_duration: default duration of `simulate_cell` [s].
+        operator_body: if set, the operator's kinematic body (`hrc_drake.cell.operator_body`):
+            input `operator.status` (the Supervisor's status), output `operator.spheres`.
+        operator_script: the body's script (default: `BoltingScript` of `operator_body`).
     """
 
     design: CellDesign | None = None
@@ -88,6 +91,8 @@ class CellScenario:
     camera: bool = False
     recording_path: str | None = None
     simulation_duration: float = 0.5
+    operator_body: BodyConfig | None = None
+    operator_script: object | None = None
 
 
 @dataclass(frozen=True)
@@ -334,6 +339,22 @@ def build_cell(scenario: CellScenario | None = None) -> CellStation:
         builder.ExportOutput(plant.get_state_output_port(ur3), "ur3.state")
         builder.ExportOutput(plant.get_state_output_port(rg2), "rg2.state")
 
+    if scenario.operator_body is not None and scenario.include_robot:
+        from hrc_drake.cell.operator_body import OperatorBody
+
+        parts = {name: instances[name] for name in design.instance_names}
+        body = builder.AddNamedSystem(
+            "operator_body",
+            OperatorBody(
+                scene_graph, plant, parts, scenario.operator_body, scenario.operator_script
+            ),
+        )
+        builder.Connect(
+            body.GetOutputPort("geometry_pose"), scene_graph.get_source_pose_port(body.source_id)
+        )
+        builder.Connect(plant.get_body_poses_output_port(), body.GetInputPort("body_poses"))
+        builder.ExportInput(body.GetInputPort("status"), "operator.status")
+        builder.ExportOutput(body.GetOutputPort("spheres"), "operator.spheres")
     if scenario.camera:
         _add_camera(builder, scene_graph)
     meshcat = visualizer = None

@@ -51,19 +51,24 @@ def simulate_command(args) -> int:
         if args.still_time < 0:
             raise UsageError(f"--still-time {args.still_time}: give a time >= 0 s")
         still = (args.still_time, check_output_path(args.still, "--still", (".png",)))
+    if getattr(args, "live", False) and args.operator is not None:
+        raise UsageError("--live with --operator: in a live run you are the operator; drop one")
     scenario = _scenario(args)
     space = generate_states(load_spec(scenario.assembly_path))
     for d in scenario.operator.deviations:
         if d.task != UNDO:
             space.spec.placement(d.task)
     policy = load_policy(scenario.policy, space) if scenario.policy else None
-    if scenario.script:
+    live = getattr(args, "live", False)
+    if scenario.script and not live:
         # The decision loop predicts a scripted run; refuse a script that cannot apply before
         # simulating it (an infeasible task, or steps past the end of the run).
         predicted = policy or exact_policy(space)
         _, decisions = run_decisions(space, predicted, ScriptedOperator(scenario.script))
         check_script_within_run(scenario.script, decisions)
-    result = run_scenario(scenario, policy, record=record, progress=True, still=still)
+    result = run_scenario(
+        scenario, policy, record=record, progress=not live, still=still, live=live
+    )
     problems = []
     if still is not None and result.sim_time < args.still_time:
         problems.append(
@@ -86,6 +91,13 @@ def simulate_command(args) -> int:
             f"  {result.sim_time:.1f} s simulated in {result.wall_time:.1f} s "
             f"(real-time factor {result.real_time_factor or 0:.2f})"
         )
+        if result.safety is not None:
+            figures = result.safety.to_json()
+            print(
+                f"  safety: least separation {figures['min_separation']} m, "
+                f"{figures['violations']} violation(s), slowed {figures['slowed_time']} s, "
+                f"stopped {figures['stopped_time']} s"
+            )
         if result.collisions:
             print("  unexpected contacts:", *result.collisions[:5], sep="\n    ")
         if result.recording:

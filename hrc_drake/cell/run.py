@@ -24,6 +24,7 @@ from pydrake.systems.framework import DiagramBuilder, EventStatus
 
 from hrc_drake.atomic import atomic_write_bytes
 from hrc_drake.cell.builder import CellScenario, CellStation, build_cell, save_meshcat_html
+from hrc_drake.cell.safety import SafetyLog, SeparationMonitor
 from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options, plant_config
 from hrc_drake.cell.supervisor import Mode, Planner, Supervisor, SupervisorStatus, TaskRecord, Weld
 from hrc_drake.cell_models import CellDesign
@@ -63,6 +64,11 @@ class RunResult:
     """Per task: wall seconds the robot waited on the planner after the operator's answer."""
     plan_ready: tuple[bool, ...] = ()
     """Per task: the plan was ready (planned ahead) when the operator answered."""
+    safety: SafetyLog | None = None
+    """Separation monitoring figures (None: the scenario has no operator body)."""
+    speed_changes: tuple[tuple[float, str], ...] = ()
+    """(simulated time, "moving" | "slowed" | "stopped") each time the robot's speed state
+    changes (with the operator body)."""
 
     @property
     def real_time_factor(self) -> float | None:
@@ -109,6 +115,7 @@ class RunResult:
             "wall_time": round(self.wall_time, 3),
             "real_time_factor": None if rtf is None else round(rtf, 3),
             "recording": str(self.recording) if self.recording else None,
+            "safety": self.safety.to_json() if self.safety is not None else None,
         }
 
 
@@ -185,6 +192,9 @@ def run_scenario(
     still: tuple[float, str | Path] | None = None,
     scenario_text: str | None = None,
     operator: Operator | None = None,
+    body_script=None,
+    live: bool = False,
+    on_prompt=None,
 ) -> RunResult:
     """Run one scenario through the full cell diagram until a terminal state (or a failure).
 
@@ -192,6 +202,10 @@ def run_scenario(
     `policy` replaces the scenario's. `planner` replaces the motion layer's `plan_task` (tests
     use it to misplace a part). `still=(t, path)` saves a camera image at simulated time t.
     `operator` (a callable `(step, state, proposal) -> task`) replaces the scenario's.
+    `body_script` replaces the operator body's (`hrc_drake.cell.operator_body.BodyScript`).
+    `live`: a person is the operator, through Meshcat buttons (`hrc_drake.hri.live`); the run
+    serves Meshcat, prints its URL and paces itself to the wall clock; `on_prompt` is handed to
+    the `LiveOperator` (tests inject clicks from it).
     CellModelError (before any simulation) if the spec does not fit the cell."""
     if not isinstance(scenario, Scenario):
         scenario = load_cell_scenario(scenario, scenario_text)
@@ -199,19 +213,23 @@ def run_scenario(
     policy = policy or scenario_policy(scenario, space)
     policy.matches(space.spec)
     design = cell_design(scenario, space.spec)
-    motion = shared_planner(motion_options(scenario), design)
+    options = motion_options(scenario)
+    motion = shared_planner(options, design)
     home_opening = RG2_MAX_OPENING * 0.8
+    with_body = scenario.body.enabled
 
     station = build_cell(
         CellScenario(
             design=design,
             plant_config=plant_config(scenario),
-            meshcat=record is not None,
+            meshcat=record is not None or live,
             ur3_initial_positions=[float(x) for x in motion.q_home],
             rg2_initial_opening=home_opening,
             hydroelastic_modulus=scenario.physics.hydroelastic_modulus,
             mesh_resolution_hint=scenario.physics.mesh_resolution_hint,
             camera=still is not None,
+            operator_body=scenario.body if with_body else None,
+            operator_script=body_script,
         )
     )
     builder = DiagramBuilder()
@@ -237,6 +255,9 @@ def run_scenario(
         return planner(configuration, task, last, layout)
 
     run = scenario.run
+    simulator_cell: list[Simulator] = []
+    if live:
+        operator = _live_operator(station, space, simulator_cell, on_prompt)
     supervisor = builder.AddNamedSystem(
         "supervisor",
         Supervisor(
@@ -249,6 +270,7 @@ def run_scenario(
             period=run.period,
             settle_time=run.settle_time,
             max_steps=run.max_steps,
+            joint_acceleration=options.joint_acceleration_limit,
         ),
     )
     builder.Connect(
@@ -260,11 +282,36 @@ def run_scenario(
     builder.Connect(
         supervisor.GetOutputPort("rg2.desired_opening"), cell.GetInputPort("rg2.desired_opening")
     )
+    separation = None
+    if with_body:
+        separation = builder.AddNamedSystem(
+            "separation_monitor",
+            SeparationMonitor(
+                station.plant,
+                station.scene_graph,
+                [station.instances["ur3"], station.instances["rg2"]],
+                {name: station.instances[name] for name in design.instance_names},
+                scenario.safety,
+                options.joint_acceleration_limit,
+                run.period,
+            ),
+        )
+        status_out = supervisor.GetOutputPort("status")
+        builder.Connect(status_out, cell.GetInputPort("operator.status"))
+        builder.Connect(status_out, separation.GetInputPort("status"))
+        builder.Connect(cell.GetOutputPort("plant_state"), separation.GetInputPort("plant_state"))
+        builder.Connect(cell.GetOutputPort("query_object"), separation.GetInputPort("query_object"))
+        builder.Connect(cell.GetOutputPort("operator.spheres"), separation.GetInputPort("body"))
+        builder.Connect(
+            separation.GetOutputPort("speed_limit"), supervisor.GetInputPort("speed_limit")
+        )
     diagram = builder.Build()
     diagram.set_name("hrc_closed_loop")
 
     simulator = Simulator(diagram)
+    simulator_cell.append(simulator)
     root = simulator.get_mutable_context()
+    lights = _StackLight(station.meshcat) if with_body else None
     plant = station.plant
     plant_context = plant.GetMyMutableContextFromRoot(root)
     station_context = station.diagram.GetMyContextFromRoot(root)
@@ -282,7 +329,7 @@ def run_scenario(
         """During the hold, plan what the policy will propose once this task is done."""
         plan_now = status.plan
         step = status.step
-        if step in planned_ahead or now - status.plan_start < plan_now.t_in_place:
+        if step in planned_ahead or status.plan_time(now) < plan_now.t_in_place:
             return
         planned_ahead.add(step)
         _proposed, indicated, part = status.pending
@@ -315,6 +362,8 @@ def run_scenario(
             next_watch[0] = now + run.period
             handled = status.pending[2] if status.pending else None
             watch.check(contacts.Eval(station_context), handled, now)
+        if lights is not None:
+            lights.show(status, now)
         if run.plan_ahead and planner is None and status.mode == Mode.EXECUTE and status.plan:
             plan_ahead(status, now)
         if pending_still[0] is not None and now >= pending_still[0][0]:
@@ -334,6 +383,9 @@ def run_scenario(
             _plan_ahead_quietly(motion, frozenset(), first, None, {})
     if record is not None:
         station.visualizer.StartRecording()
+    if live:
+        simulator.set_target_realtime_rate(1.0)
+        print(f"live: open {station.meshcat.web_url()} in a web browser", flush=True)
     start = time.perf_counter()
     simulator.Initialize()
     status: SupervisorStatus = status_port.Eval(supervisor_context)
@@ -385,7 +437,71 @@ def run_scenario(
         events=status.events,
         idle=tuple(idle),
         plan_ready=tuple(ready),
+        safety=separation.log(separation.GetMyContextFromRoot(root)) if separation else None,
+        speed_changes=tuple(lights.changes) if lights is not None else (),
     )
+
+
+_LAMPS = {"moving": (0.1, 0.8, 0.2), "slowed": (1.0, 0.7, 0.0), "stopped": (0.9, 0.1, 0.1)}
+
+
+class _StackLight:
+    """The speed the separation monitor allows over time (`changes`), and with Meshcat a stack
+    light beside the robot (also in recordings): green for the plan's own speed, amber while the
+    monitor slows the robot, red while it stops it."""
+
+    def __init__(self, meshcat):
+        from pydrake.geometry import Cylinder, Rgba, Sphere
+        from pydrake.math import RigidTransform
+
+        self.meshcat, self.state = meshcat, None
+        self.changes: list[tuple[float, str]] = []
+        if meshcat is None:
+            return
+        meshcat.SetObject("/safety/pole", Cylinder(0.008, 0.3), Rgba(0.3, 0.3, 0.3, 1.0))
+        meshcat.SetTransform("/safety/pole", RigidTransform([-0.15, 0.25, 0.15]))
+        for k, (name, rgb) in enumerate(_LAMPS.items()):
+            meshcat.SetObject(f"/safety/{name}", Sphere(0.025), Rgba(*rgb, 1.0))
+            meshcat.SetTransform(f"/safety/{name}", RigidTransform([-0.15, 0.25, 0.32 + 0.055 * k]))
+            meshcat.SetProperty(f"/safety/{name}", "visible", False, 0.0)
+
+    def show(self, status: SupervisorStatus, now: float) -> None:
+        """Light the lamp of the robot's state at `now` (recorded at that time)."""
+        # The speed the monitor allows, also during the hold (a monitored stop: red while the
+        # person is within S_p of the still robot).
+        state = "moving"
+        if status.speed < 1.0 - 1e-9:
+            state = "stopped" if status.speed <= 1e-9 else "slowed"
+        if state == self.state:
+            return
+        self.state = state
+        self.changes.append((round(now, 3), state))
+        if self.meshcat is None:
+            return
+        for name in _LAMPS:
+            self.meshcat.SetProperty(f"/safety/{name}", "visible", name == state, now)
+
+
+def _live_operator(station: CellStation, space, simulator_cell: list, on_prompt):
+    """A LiveOperator on the station's Meshcat; after each answer the real-time pacing starts
+    afresh, so that the simulation does not race to catch up the time the person took."""
+    from hrc_drake.hri.live import LiveOperator
+    from hrc_drake.motion.poses import part_pose
+
+    def place(task, state):
+        try:
+            return part_pose(station.frames, task, list(state))
+        except (KeyError, ValueError):
+            return None
+
+    def clock() -> float:
+        return simulator_cell[0].get_context().get_time() if simulator_cell else 0.0
+
+    def after_answer() -> None:
+        if simulator_cell:
+            simulator_cell[0].ResetStatistics()
+
+    return LiveOperator(station.meshcat, space, place, clock, on_prompt, after_answer)
 
 
 def _plan_ahead_quietly(motion: MotionPlanner, configuration, task, last, layout) -> None:

@@ -10,6 +10,14 @@ At a task boundary the Supervisor
 5. after the task, learns what really happened from the SlotMonitor — the part may sit in
    another seat than planned — and only then moves the MDP state on.
 
+The robot follows its plan in plan time `tau`, which advances at the speed scale s ∈ [0, 1] that
+the separation monitor (`hrc_drake.cell.safety`) allows on the optional `speed_limit` input: the
+robot slows down by scaling its trajectory's time, stops with s = 0 and resumes as s ramps back,
+never faster than the arm's joint acceleration limit allows. While the plan holds the part still
+for bolting, `tau` runs with simulated time whatever s is (a monitored stop); at the end of
+the hold the robot moves on only when s > 0. All stage logic (grasp and bolt welds, release)
+reads `tau`.
+
 Grasping and bolting are weld constraints of the plant. A Drake system cannot write another
 system's parameters from its events, so the Supervisor publishes the welds it wants on its
 `welds` port; the simulator's monitor (`hrc_drake.cell.run`) stops the simulation at the step
@@ -90,11 +98,20 @@ class SupervisorStatus:
     history: tuple[TaskRecord, ...] = ()
     error: str | None = None
     events: tuple[str, ...] = field(default_factory=tuple)
+    tau: float = 0.0  # plan time at `tau_time` (simulated time)
+    tau_time: float = 0.0
+    rate: float = 1.0  # d tau / dt from `tau_time` on
+    speed: float = 1.0  # the speed scale s the robot runs at (1: the plan's own speed)
 
     def __deepcopy__(self, memo) -> SupervisorStatus:
         # Drake copies abstract values at every update and output evaluation; this value is
         # immutable (its plan's trajectories are never modified), so the copy is itself.
         return self
+
+    def plan_time(self, now: float) -> float:
+        """The plan time `tau` at simulated time `now` (clamped to the plan)."""
+        tau = self.tau + self.rate * (now - self.tau_time)
+        return float(np.clip(tau, 0.0, self.plan.duration)) if self.plan is not None else tau
 
     @property
     def visited(self) -> list[tuple[str, ...]]:
@@ -105,7 +122,8 @@ class SupervisorStatus:
 class Supervisor(LeafSystem):
     """Task-level state machine of the cell (see the module docstring).
 
-    Input ports: `slot_configuration` (CellConfiguration). Output ports: `ur3.desired_state`
+    Input ports: `slot_configuration` (CellConfiguration), `speed_limit` (1: the speed scale the
+    separation monitor allows; unconnected, 1). Output ports: `ur3.desired_state`
     (12), `rg2.desired_opening` (1), `welds` (frozenset[Weld]), `status` (SupervisorStatus).
     """
 
@@ -120,25 +138,41 @@ class Supervisor(LeafSystem):
         period: float = 0.02,
         settle_time: float = 0.3,
         max_steps: int = 30,
+        joint_acceleration: float = 5.0,
     ):
         super().__init__()
         policy.matches(space.spec)
         self._space, self._policy, self._operator, self._planner = space, policy, operator, planner
         self._settle_time, self._max_steps = settle_time, max_steps
+        self._period, self._joint_acceleration = period, joint_acceleration
         self._config_port = self.DeclareAbstractInputPort(
             "slot_configuration", AbstractValue.Make(CellConfiguration())
         )
         initial = SupervisorStatus(
             q_hold=tuple(float(x) for x in home), opening_hold=float(home_opening)
         )
+        self._speed_port = self.DeclareVectorInputPort("speed_limit", BasicVector(1))
         self._status_index = self.DeclareAbstractState(AbstractValue.Make(initial))
-        self.DeclareVectorOutputPort("ur3.desired_state", BasicVector(12), self._calc_arm)
-        self.DeclareVectorOutputPort("rg2.desired_opening", BasicVector(1), self._calc_gripper)
-        self.DeclareAbstractOutputPort(
-            "welds", lambda: AbstractValue.Make(frozenset()), self._calc_welds
+        # Outputs depend on the state and time only (no feedthrough): the separation monitor
+        # reads `status` and feeds `speed_limit` back without an algebraic loop.
+        deps = {self.time_ticket(), self.abstract_state_ticket(self._status_index)}
+        self.DeclareVectorOutputPort(
+            "ur3.desired_state", BasicVector(12), self._calc_arm, prerequisites_of_calc=deps
+        )
+        self.DeclareVectorOutputPort(
+            "rg2.desired_opening", BasicVector(1), self._calc_gripper, prerequisites_of_calc=deps
         )
         self.DeclareAbstractOutputPort(
-            "status", lambda: AbstractValue.Make(SupervisorStatus()), self._calc_status
+            "welds",
+            lambda: AbstractValue.Make(frozenset()),
+            self._calc_welds,
+            prerequisites_of_calc=deps,
+        )
+        self.DeclareAbstractOutputPort(
+            "status",
+            lambda: AbstractValue.Make(SupervisorStatus()),
+            self._calc_status,
+            prerequisites_of_calc=deps,
         )
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
 
@@ -149,9 +183,9 @@ class Supervisor(LeafSystem):
     def _calc_arm(self, context, output) -> None:
         s = self._status(context)
         if s.mode == Mode.EXECUTE and s.plan is not None:
-            tau = float(np.clip(context.get_time() - s.plan_start, 0.0, s.plan.duration))
+            tau = s.plan_time(context.get_time())
             q = s.plan.trajectory.value(tau).ravel()
-            v = s.plan.trajectory.EvalDerivative(tau, 1).ravel()
+            v = s.plan.trajectory.EvalDerivative(tau, 1).ravel() * s.rate
             if tau >= s.plan.duration:
                 v = np.zeros_like(v)
             output.SetFromVector(np.concatenate([q, v]))
@@ -161,7 +195,7 @@ class Supervisor(LeafSystem):
     def _calc_gripper(self, context, output) -> None:
         s = self._status(context)
         if s.mode == Mode.EXECUTE and s.plan is not None:
-            output.SetFromVector([s.plan.gripper_opening(context.get_time() - s.plan_start)])
+            output.SetFromVector([s.plan.gripper_opening(s.plan_time(context.get_time()))])
         else:
             output.SetFromVector([s.opening_hold])
 
@@ -176,7 +210,9 @@ class Supervisor(LeafSystem):
         status = self._status(context)
         config = self._config_port.Eval(context)
         now = context.get_time()
+        limit = self._speed_port.Eval(context)[0] if self._speed_port.HasValue(context) else 1.0
         try:
+            status = self._advance(status, float(np.clip(limit, 0.0, 1.0)), now)
             if status.mode == Mode.DECIDE:
                 status = self._decide(status, config, now)
             elif status.mode == Mode.EXECUTE:
@@ -186,6 +222,21 @@ class Supervisor(LeafSystem):
         except SupervisorError as err:
             status = replace(status, mode=Mode.FAILED, error=str(err), plan=None)
         state.get_mutable_abstract_state(self._status_index).set_value(status)
+
+    def _advance(self, s: SupervisorStatus, limit: float, now: float) -> SupervisorStatus:
+        """Move the plan time to `now`, then ramp the speed scale toward `limit` (no faster
+        than the joint acceleration limit allows at the plan's speed) and set the rate on."""
+        if s.mode != Mode.EXECUTE or s.plan is None:
+            return replace(s, speed=limit)
+        plan = s.plan
+        tau = s.plan_time(now)
+        qdot = np.abs(plan.trajectory.EvalDerivative(min(tau, plan.duration), 1)).max()
+        step = self._joint_acceleration * self._period / max(qdot, 1e-9)
+        speed = float(np.clip(limit, s.speed - step, s.speed + step))
+        hold = next((g for g in plan.segments if g.stage == Stage.HOLD), None)
+        # The hold is a monitored stop: the arm stands still, its time runs on.
+        holding = hold is not None and hold.start <= tau and tau + self._period <= hold.end
+        return replace(s, tau=tau, tau_time=now, speed=speed, rate=1.0 if holding else speed)
 
     def _decide(self, s: SupervisorStatus, config: CellConfiguration, now: float):
         space = self._space
@@ -230,6 +281,9 @@ class Supervisor(LeafSystem):
             step=step,
             plan=plan,
             plan_start=now,
+            tau=0.0,
+            tau_time=now,
+            rate=s.speed,
             pending=(proposed, indicated, plan.instance),
             tokens_before=tokens,
             bolt_seat=None,
@@ -238,7 +292,7 @@ class Supervisor(LeafSystem):
 
     def _execute(self, s: SupervisorStatus, config: CellConfiguration, now: float):
         plan = s.plan
-        tau = now - s.plan_start
+        tau = s.plan_time(now)
         part = plan.instance
         grasp, welds = Weld("grasp", part), set(s.welds)
         grasped_at = plan.segment(Stage.GRASP).end

@@ -16,7 +16,7 @@ more YAML merged on top (`--scenario-text "{motion: {hold_time: 0.5}}"`).
     expected:
       published: ["1", "4", "8", "4", "1", "2", "7", "10"]
       minimum_effort: ["1", "4", "8", "11"]
-    motion: {hold_time: 5.0}         # optional sections: cell, motion, physics, run
+    motion: {hold_time: 5.0}         # optional: cell, motion, physics, run, safety, body
 """
 
 import dataclasses
@@ -128,6 +128,58 @@ class RunConfig:
 
 
 @dataclass
+class SafetyConfig:
+    """Speed and separation monitoring (ISO/TS 15066 5.5.4): S_p = v_h (T_r + T_s) + v_r T_r +
+    S_s + C + Z_d + Z_r, at every Supervisor update.
+
+    Attributes:
+        enabled: monitor the separation and scale the robot's speed (off: the robot ignores the
+            operator's body, which is still drawn and measured).
+        human_speed: v_h [m/s] when the body is not tracked (ISO/TS 15066 5.5.4.2.3 and
+            ISO 13855: 1.6 m/s for a person whose speed is not monitored).
+        track_human_speed: the simulated body is tracked exactly: v_h is its measured speed
+            toward the robot (the TS allows a monitored speed); off, `human_speed` throughout.
+        reaction_time: T_r [s], the robot's reaction time (0.1 s is a common assumption).
+        intrusion: C [m]; 0 when the distance is taken to the body itself.
+        human_uncertainty: Z_d [m], the body's position uncertainty (a tracked hand).
+        robot_uncertainty: Z_r [m]; 0 for the simulated robot.
+        slow_band: m above S_p within which the robot already slows down.
+        moving_speed: rad/s; a robot joint faster than this counts as moving (violations).
+    """
+
+    enabled: bool = True
+    human_speed: float = 1.6
+    track_human_speed: bool = True
+    reaction_time: float = 0.1
+    intrusion: float = 0.0
+    human_uncertainty: float = 0.05
+    robot_uncertainty: float = 0.0
+    slow_band: float = 0.05
+    moving_speed: float = 0.01
+
+
+@dataclass
+class BodyConfig:
+    """The operator's kinematic body (hand, forearm, upper arm, torso, head) beside the table.
+
+    Attributes:
+        enabled: put the body in the scene (off: no body, no monitoring).
+        stance: [x, y] of the operator's torso axis in world [m] (the table edge is x = 0.75).
+        rest_hand: [x, y, z] of the waiting hand in world [m].
+        reach_offset: [x, y, z] of the hand from the held part while bolting [m].
+        hand_speed: the hand's peak speed [m/s].
+        reach_time: seconds of the reach and of the withdrawal (shortened to fit the hold).
+    """
+
+    enabled: bool = True
+    stance: list[float] = field(default_factory=lambda: [0.90, -0.05])
+    rest_hand: list[float] = field(default_factory=lambda: [0.70, 0.10, 0.06])
+    reach_offset: list[float] = field(default_factory=lambda: [0.14, 0.0, 0.04])
+    hand_speed: float = 1.6
+    reach_time: float = 0.6
+
+
+@dataclass
 class Scenario:
     """One run of the cell (or of the decision loop): see the module docstring.
 
@@ -146,6 +198,8 @@ class Scenario:
     motion: MotionConfig = field(default_factory=MotionConfig)
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     run: RunConfig = field(default_factory=RunConfig)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
+    body: BodyConfig = field(default_factory=BodyConfig)
 
     @property
     def assembly_path(self) -> Path:
@@ -217,6 +271,15 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
     for key in ("period", "settle_time", "max_sim_time"):
         if getattr(scenario.run, key) <= 0:
             raise fail(f"run.{key}", "must be > 0")
+    for key in ("human_speed", "reaction_time", "intrusion", "human_uncertainty"):
+        if getattr(scenario.safety, key) < 0:
+            raise fail(f"safety.{key}", "must be >= 0")
+    for key in ("stance", "rest_hand", "reach_offset"):
+        want = 2 if key == "stance" else 3
+        if len(getattr(scenario.body, key)) != want:
+            raise fail(f"body.{key}", f"give {want} coordinates in metres")
+    if not 0 < scenario.body.hand_speed <= 2.0:
+        raise fail("body.hand_speed", "give a speed in (0, 2] m/s (1.6 m/s: ISO 13855)")
     if scenario.cell is not None:
         try:
             scenario.cell.check("cell")
