@@ -112,7 +112,7 @@ def test_slow_operator_takes_longer(space, costs):
     assert slow["mean_tasks"] == fast["mean_tasks"]
 
 
-def _without_wall(report):
+def _simulated_figures(report):
     return {k: v for k, v in report.items() if not k.startswith("wall_") and k != "workers"}
 
 
@@ -120,7 +120,7 @@ def test_serial_and_parallel_give_the_same_report(space, costs):
     s = setup(space, costs, "mpc", "mistake-prone", p="0.4")
     serial = evaluate(s, runs=20)
     parallel = evaluate(s, runs=20, workers=2)
-    assert _without_wall(serial) == _without_wall(parallel)
+    assert _simulated_figures(serial) == _simulated_figures(parallel)
     assert serial["mean_undos"] > 0
 
 

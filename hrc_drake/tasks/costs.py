@@ -33,7 +33,12 @@ from typing import Any
 import numpy as np
 
 from hrc_drake.atomic import atomic_write_text
-from hrc_drake.tasks.datafile import first_infeasible, load_checked_json, with_checksum
+from hrc_drake.tasks.datafile import (
+    check_made_for,
+    first_infeasible,
+    load_checked_json,
+    with_checksum,
+)
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.mdp import MdpConfig, build_mdp
 from hrc_drake.tasks.spec import DEFAULT_BOLT_TIME, AssemblySpec
@@ -95,13 +100,8 @@ class CostTable:
 
     def matches(self, spec: AssemblySpec) -> None:
         """Raise CostTableError unless this table was made for `spec`."""
-        if spec.spec_hash != self.spec_hash:
-            raise CostTableError(
-                f"cost table was made for assembly {self.spec_name!r} (spec hash "
-                f"{self.spec_hash}), not for {spec.name!r} from {spec.source} (hash "
-                f"{spec.spec_hash}); make a new one with `hrc-drake costs --assembly "
-                f"{spec.source} --out FILE`"
-            )
+        fix = f"make a new one with `hrc-drake costs --assembly {spec.source} --out FILE`"
+        check_made_for("cost table", self.spec_name, self.spec_hash, spec, fix, CostTableError)
 
     def missing(self, space: StateSpace) -> list[Edge]:
         """Task edges of `space` that the table lacks (every edge the MDP can take)."""

@@ -82,3 +82,14 @@ def first_infeasible(space, pairs) -> str | None:
         if task not in {t for t, _ in space.tasks(index)}:
             return f"gives task {task!r} in {list(state)}, where it is not feasible"
     return None
+
+
+def check_made_for(
+    what: str, made_name: str, made_hash: str, spec, fix: str, error: type[Exception]
+) -> None:
+    """Raise `error` unless a file made for the spec `made_name`/`made_hash` fits `spec`."""
+    if spec.spec_hash != made_hash:
+        raise error(
+            f"{what} was made for assembly {made_name!r} (spec hash {made_hash}), not for "
+            f"{spec.name!r} from {spec.source} (hash {spec.spec_hash}); {fix}"
+        )

@@ -18,7 +18,12 @@ from typing import Any
 
 import numpy as np
 
-from hrc_drake.tasks.datafile import first_infeasible, load_checked_json, save_checked_json
+from hrc_drake.tasks.datafile import (
+    check_made_for,
+    first_infeasible,
+    load_checked_json,
+    save_checked_json,
+)
 from hrc_drake.tasks.graph import StateSpace, UnknownStateError
 from hrc_drake.tasks.mdp import SequenceMDP
 from hrc_drake.tasks.spec import AssemblySpec
@@ -56,12 +61,10 @@ class Policy:
 
     def matches(self, spec: AssemblySpec) -> None:
         """Raise PolicyFileError unless this policy was made for `spec`."""
-        if spec.spec_hash != self.spec_hash:
-            raise PolicyFileError(
-                f"policy was made for assembly {self.spec_name!r} (spec hash {self.spec_hash}), "
-                f"not for {spec.name!r} from {spec.source} (hash {spec.spec_hash}); make a new "
-                f"one with `hrc-drake solve --assembly {spec.source} --out FILE` or `train`"
-            )
+        fix = (
+            f"make a new one with `hrc-drake solve --assembly {spec.source} --out FILE` or `train`"
+        )
+        check_made_for("policy", self.spec_name, self.spec_hash, spec, fix, PolicyFileError)
 
 
 @dataclass(frozen=True)
