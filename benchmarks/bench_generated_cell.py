@@ -108,7 +108,8 @@ def main() -> None:
         "",
         "Command: `python benchmarks/bench_generated_cell.py`. The cell (plate, tray, parts) is "
         "generated from each assembly spec; full settings (5 ms SAP, 5 s bolting holds, TCP "
-        "<= 0.25 m/s); the operator follows the robot.",
+        "<= 0.25 m/s), the operator's body and separation monitoring on (the defaults); the "
+        "operator follows the robot.",
         "",
         "| assembly | slots | route | terminal, 0 collisions | build [s] | reach check [s] | "
         "simulated [s] | RTF incl. planning | RTF plans cached |",
