@@ -7,15 +7,13 @@ import json
 import sys
 from pathlib import Path
 
-from hrc_drake.cell.run import run_scenario
+from hrc_drake.cell.run import run_scenario, scenario_policy
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 from hrc_drake.hri.operator import ScriptedOperator
 from hrc_drake.hri.scenario import Scenario, with_operator_script
 from hrc_drake.paths import UsageError, check_output_path
 from hrc_drake.tasks.decide import check_script_within_run, run_decisions
 from hrc_drake.tasks.graph import generate_states
-from hrc_drake.tasks.policy import load_policy
-from hrc_drake.tasks.solve import exact_policy
 from hrc_drake.tasks.spec import load_spec
 from hrc_drake.tasks.tokens import UNDO
 
@@ -29,13 +27,11 @@ def _scenario(args) -> Scenario:
         name = DEFAULT_SCENARIO
     scenario = load_cell_scenario(name, overrides)
     if args.assembly is not None:
-        if not Path(args.assembly).is_file():
-            raise UsageError(f"--assembly {args.assembly}: no such file")
+        # A missing file is refused by `load_spec`, before anything is built.
         scenario = dataclasses.replace(scenario, assembly=str(args.assembly))
         if args.scenario is None:
             scenario.name = Path(args.assembly).stem
             scenario.description = f"assembly {args.assembly}, operator follows the robot"
-            scenario.expected = dataclasses.replace(scenario.expected, published=[])
     if args.operator is not None:
         scenario = with_operator_script(scenario, args.operator)
     if args.policy is not None:
@@ -58,13 +54,12 @@ def simulate_command(args) -> int:
     for d in scenario.operator.deviations:
         if d.task != UNDO:
             space.spec.placement(d.task)
-    policy = load_policy(scenario.policy, space) if scenario.policy else None
+    policy = scenario_policy(scenario, space)
     live = getattr(args, "live", False)
     if scenario.script and not live:
         # The decision loop predicts a scripted run; refuse a script that cannot apply before
         # simulating it (an infeasible task, or steps past the end of the run).
-        predicted = policy or exact_policy(space)
-        _, decisions = run_decisions(space, predicted, ScriptedOperator(scenario.script))
+        _, decisions = run_decisions(space, policy, ScriptedOperator(scenario.script))
         check_script_within_run(scenario.script, decisions)
     result = run_scenario(
         scenario, policy, record=record, progress=not live, still=still, live=live
