@@ -1,7 +1,7 @@
-"""Monte Carlo evaluation of a decider against an operator population, at task level.
+"""Monte Carlo evaluation of a decider against an operator population, at task or cell level.
 
-A run starts from the empty base: the decider proposes, the operator model answers, each task
-takes its time from the cost table (the operator's part scaled by the model's
+At task level, a run starts from the empty base: the decider proposes, the operator model
+answers, each task takes its time from the cost table (the operator's part scaled by the model's
 ``bolt_scale(step)``, for `slow`), plus `deviation_seconds` whenever the operator did not perform
 the proposal (see `hrc_drake.tasks.deciders`); the run ends in a terminal state, or after
 `MAX_TASKS` tasks (not completed). Run i is seeded from (seed, i) and the decider is reset
@@ -11,6 +11,16 @@ Times are simulated seconds, so the report does not depend on the machine; wall-
 are under ``wall_*`` keys. Robot idle time at task boundaries is 0 at task level: the cell plans
 the predicted tasks ahead while the operator bolts, so a plan is ready at each boundary.
 Time figures (mean, p95, worst) are over the completed runs.
+
+At cell level (``--cell``, `hrc_drake.cell.evaluate`) each run is a closed-loop simulation of the
+physical cell: times are the cell's simulated seconds, and the robot's idle time at a boundary is
+the wall time it waited for the planner after the operator's answer (``plan_ready_rate``: the
+share of boundaries whose plan was made ahead, while the operator bolted).
+
+Runs spread over local processes (``workers``) or, with ``ray``, over a Ray cluster (the optional
+extra ``hrc_drake[ray]``): each worker builds its own decider (and, at cell level, its own
+diagram per run), and results are gathered by run index, so the report is the same whichever
+way it runs (but for the ``wall_*`` figures and, at cell level, the measured idle time).
 """
 
 from __future__ import annotations
@@ -37,13 +47,18 @@ MAX_TASKS = 100
 
 @dataclass(frozen=True)
 class RunResult:
-    """One run: whether it finished, its simulated seconds, tasks, undos and deviations."""
+    """One run: whether it finished, its simulated seconds, tasks, undos and deviations; at cell
+    level also the idle seconds and plan readiness per boundary, the error and collisions."""
 
     completed: bool
     seconds: float
     tasks: int
     undos: int
     deviations: int
+    idle: tuple[float, ...] = ()
+    plan_ready: tuple[bool, ...] = ()
+    error: str | None = None
+    collisions: int = 0
 
 
 def run_seed(seed: int, run: int) -> int:
@@ -104,6 +119,8 @@ class Setup:
     params: dict[str, Any]
     seed: int
     deviation_seconds: float = DEVIATION_SECONDS
+    cell: Any = None
+    """None: task level; an `hrc_drake.cell.evaluate.CellOptions`: runs through the cell."""
 
 
 _WORKER: dict[str, Any] = {}
@@ -116,6 +133,10 @@ def _prepare(setup: Setup) -> None:
     _WORKER["decider"] = make_decider(
         setup.decider, setup.space, setup.costs, setup.seed, setup.deviation_seconds
     )
+    if setup.cell is not None:
+        from hrc_drake.cell.evaluate import evaluation_scenario
+
+        _WORKER["scenario"] = evaluation_scenario(setup.cell, setup.space.spec)
 
 
 def _play(run: int) -> RunResult:
@@ -124,21 +145,134 @@ def _play(run: int) -> RunResult:
     operator = make_operator_model(
         setup.operator_model, setup.space, seed=run_seed(setup.seed, run), **setup.params
     )
+    if setup.cell is not None:
+        from hrc_drake.cell.evaluate import play_cell_run
+
+        return play_cell_run(_WORKER["scenario"], setup.space, decider, operator)
     return simulate_run(setup.space, setup.costs, decider, operator, setup.deviation_seconds)
 
 
-def evaluate(setup: Setup, runs: int, workers: int = 1, progress=None) -> dict[str, Any]:
-    """Play `runs` runs (over `workers` processes) and summarise them (see `summarise`)."""
+def _play_many(runs: list[int]) -> list[RunResult]:
+    return [_play(i) for i in runs]
+
+
+class _RayWorker:
+    """A Ray actor: prepares once (its own decider; cell runs build their own diagrams)."""
+
+    def __init__(self, setup: Setup):
+        _prepare(setup)
+
+    def play(self, runs: list[int]) -> list[RunResult]:
+        return _play_many(runs)
+
+
+def _chunks(runs: int, workers: int, per_worker: int = 4) -> list[list[int]]:
+    """Run indices in contiguous chunks, about `per_worker` per worker."""
+    size = max(1, -(-runs // (per_worker * workers)))
+    return [list(range(i, min(i + size, runs))) for i in range(0, runs, size)]
+
+
+def _check_reachable(address: str | None, timeout: float = 3.0) -> None:
+    """UsageError unless a ``host:port`` (or ``ray://host:port``) address answers: Ray itself
+    waits minutes for a cluster that is not there."""
+    if not address or address == "auto":
+        return
+    import socket
+
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not port.isdigit():
+        raise UsageError(
+            f"--ray {address}: give the cluster's address as HOST:PORT (e.g. 10.0.0.5:6379, "
+            "as `ray start --head` prints it), or no address for a local cluster"
+        )
+    try:
+        socket.create_connection((host, int(port)), timeout=timeout).close()
+    except OSError as err:
+        raise UsageError(
+            f"--ray {address}: no Ray cluster answers there ({err}); start one with "
+            "`ray start --head` or give no address for a local cluster"
+        ) from None
+
+
+def _run_ray(setup: Setup, runs: int, workers: int | None, address: str | None, progress):
+    try:
+        import ray
+    except ImportError:
+        raise UsageError(
+            "--ray needs Ray, which is not installed: pip install 'hrc_drake[ray]'"
+        ) from None
+    started = not ray.is_initialized()
+    if started:
+        import logging
+
+        _check_reachable(address)
+
+        try:
+            ray.init(
+                address=address or None,
+                include_dashboard=False,
+                log_to_driver=False,
+                logging_level=logging.WARNING,
+            )
+        except (ConnectionError, RuntimeError, ValueError) as err:
+            where = address or "a local Ray instance"
+            raise UsageError(
+                f"--ray {address or ''}: cannot start or reach {where}: {err}; give the address "
+                "of a running cluster (ray start --head prints it), or no address for a local one"
+            ) from None
+    try:
+        if workers is None:
+            workers = max(1, int(ray.cluster_resources().get("CPU", 1)))
+        actor = ray.remote(num_cpus=1)(_RayWorker)
+        actors = [actor.remote(setup) for _ in range(workers)]
+        chunks = _chunks(runs, workers)
+        pending = {actors[k % workers].play.remote(chunk): chunk for k, chunk in enumerate(chunks)}
+        results: list[RunResult | None] = [None] * runs
+        done = 0
+        while pending:
+            ready, _ = ray.wait(list(pending), num_returns=1)
+            chunk = pending.pop(ready[0])
+            for i, result in zip(chunk, ray.get(ready[0]), strict=True):
+                results[i] = result
+            done += len(chunk)
+            if progress is not None:
+                progress(done, runs)
+        return results, workers
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def evaluate(
+    setup: Setup,
+    runs: int,
+    workers: int | None = 1,
+    progress=None,
+    ray: bool = False,
+    ray_address: str | None = None,
+) -> dict[str, Any]:
+    """Play `runs` runs and summarise them (see `summarise`): in this process (`workers` 1),
+    over `workers` local processes, or with `ray` on a Ray cluster (`ray_address`; None: a
+    local one) over `workers` actors (None: one per CPU of the cluster)."""
     if runs < 1:
         raise UsageError(f"--runs {runs}: give at least 1 run")
-    if workers < 1:
+    if workers is not None and workers < 1:
         raise UsageError(f"--workers {workers}: give at least 1 worker")
     # Fail fast, in this process, on a bad decider, model or parameter.
-    make_operator_model(setup.operator_model, setup.space, seed=0, **setup.params)
+    operator = make_operator_model(setup.operator_model, setup.space, seed=0, **setup.params)
     if setup.decider not in DECIDERS:
         make_decider(setup.decider, setup.space, setup.costs)
+    if setup.cell is not None:
+        from hrc_drake.cell.evaluate import check_cell_operator, evaluation_scenario
+
+        check_cell_operator(operator, setup.operator_model)
+        evaluation_scenario(setup.cell, setup.space.spec)
     start = time.perf_counter()
-    if workers == 1:
+    if ray:
+        results, workers = _run_ray(setup, runs, workers, ray_address, progress)
+        backend = "ray"
+    elif workers in (None, 1):
+        workers, backend = 1, "serial"
         _prepare(setup)
         results = []
         for i in range(runs):
@@ -148,14 +282,21 @@ def evaluate(setup: Setup, runs: int, workers: int = 1, progress=None) -> dict[s
     else:
         import multiprocessing
 
+        backend = "processes"
         ctx = multiprocessing.get_context("spawn")
+        chunks = _chunks(runs, workers)
+        results = []
         with ctx.Pool(workers, initializer=_prepare, initargs=(setup,)) as pool:
-            results = pool.map(_play, range(runs), chunksize=max(1, runs // (4 * workers)))
+            for chunk in pool.imap(_play_many, chunks):
+                results.extend(chunk)
+                if progress is not None:
+                    progress(len(results), runs)
     wall = time.perf_counter() - start
     report = summarise(setup, results)
     report["wall_seconds"] = round(wall, 3)
-    report["wall_runs_per_second"] = round(runs / wall, 1) if wall > 0 else None
+    report["wall_runs_per_second"] = round(runs / wall, 3) if wall > 0 else None
     report["workers"] = workers
+    report["backend"] = backend
     return report
 
 
@@ -167,7 +308,7 @@ def summarise(setup: Setup, results: list[RunResult]) -> dict[str, Any]:
     def fig(x):
         return None if x is None else round(float(x), 3)
 
-    return {
+    report = {
         "decider": setup.decider,
         "operator_model": setup.operator_model,
         "params": dict(setup.params),
@@ -184,8 +325,26 @@ def summarise(setup: Setup, results: list[RunResult]) -> dict[str, Any]:
         "mean_idle": 0.0,
         "deviation_seconds": setup.deviation_seconds,
         "seed": setup.seed,
+        "level": "task" if setup.cell is None else "cell",
         "times": [round(r.seconds, 3) for r in done],
     }
+    if setup.cell is not None:
+        idle = [x for r in results for x in r.idle]
+        ready = [x for r in results for x in r.plan_ready]
+        errors = sorted({r.error for r in results if r.error and not r.completed})
+        report.update(
+            {
+                # The cell's robot waits for the answer before it moves: no deviation time.
+                "deviation_seconds": 0.0,
+                "mean_idle": round(float(np.mean(idle)), 4) if idle else 0.0,
+                "p95_idle": round(float(np.percentile(idle, 95)), 4) if idle else 0.0,
+                "plan_ready_rate": round(float(np.mean(ready)), 4) if ready else None,
+                "collisions": int(sum(r.collisions for r in results)),
+                "scenario": setup.cell.scenario,
+                "errors": errors[:5],
+            }
+        )
+    return report
 
 
 def parse_params(items: list[str] | None) -> dict[str, str]:
@@ -232,23 +391,45 @@ def cmd_evaluate(args) -> int:
     plot = None if args.plot is None else check_output_path(args.plot, "--plot", PLOT_SUFFIXES)
     if args.decider not in DECIDERS:
         raise UsageError(f"unknown decider {args.decider!r}; known deciders: {', '.join(DECIDERS)}")
+    cell_only = [f for f, v in (("--lean", args.lean), ("--scenario", args.scenario)) if v]
+    if args.scenario_text:
+        cell_only.append("--scenario-text")
+    if cell_only and not args.cell:
+        raise UsageError(f"{', '.join(cell_only)}: only for runs through the cell; add --cell")
     space = generate_states(load_spec(args.assembly))
     params = parse_params(args.param)
     make_operator_model(args.operator_model, space, seed=0, **params)
+    cell = None
+    if args.cell:
+        from hrc_drake.cell.evaluate import DEFAULT_BASE_SCENARIO, CellOptions
+        from hrc_drake.cell.scenario import LEAN
+
+        overrides = [t for t in (LEAN if args.lean else None, *(args.scenario_text or [])) if t]
+        cell = CellOptions(args.scenario or DEFAULT_BASE_SCENARIO, tuple(overrides))
+    runs = args.runs if args.runs is not None else (DEFAULT_CELL_RUNS if cell else DEFAULT_RUNS)
     if args.costs is not None:
         costs = load_cost_table(args.costs, space)
     else:
         from hrc_drake.cell.costs import default_cost_table
 
         costs = default_cost_table(space)
-    setup = Setup(space, costs, args.decider, args.operator_model, params, args.seed)
-    if args.json:
-        report = evaluate(setup, args.runs, args.workers)
-    else:
-        from hrc_drake.progress import ProgressLine
+    setup = Setup(space, costs, args.decider, args.operator_model, params, args.seed, cell=cell)
+    from hrc_drake.cell_models import CellModelError
+    from hrc_drake.progress import ProgressLine
 
-        with ProgressLine("evaluate", unit="run") as line:
-            report = evaluate(setup, args.runs, args.workers, progress=line.update)
+    level = "cell" if cell else "evaluate"
+    with ProgressLine(f"{level} {args.decider} vs {args.operator_model}", unit="run") as line:
+        try:
+            report = evaluate(
+                setup,
+                runs,
+                args.workers,
+                progress=line.update,
+                ray=args.ray is not None,
+                ray_address=args.ray or None,
+            )
+        except CellModelError as err:
+            raise UsageError(str(err)) from None
     if plot is not None:
         plot_times(report, plot)
     report.pop("times")
@@ -261,6 +442,8 @@ def cmd_evaluate(args) -> int:
     return 0
 
 
+DEFAULT_RUNS = 1000
+DEFAULT_CELL_RUNS = 20
 PLOT_SUFFIXES = (".png", ".pdf", ".svg")
 
 
@@ -273,8 +456,44 @@ def add_evaluate_parser(add) -> None:
         required=True,
         help="follows, random, habitual, mistake-prone, change-of-mind, slow",
     )
-    p.add_argument("--runs", type=int, default=1000)
-    p.add_argument("--workers", type=int, default=1, help="local processes")
+    p.add_argument(
+        "--runs",
+        type=int,
+        default=None,
+        help=f"runs (default {DEFAULT_RUNS}; with --cell {DEFAULT_CELL_RUNS})",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="local processes (default 1); with --ray, Ray actors (default one per CPU)",
+    )
+    p.add_argument(
+        "--ray",
+        nargs="?",
+        const="",
+        default=None,
+        metavar="ADDRESS",
+        help="spread the runs on a Ray cluster at ADDRESS (no address: a local one); needs the "
+        "extra hrc_drake[ray]",
+    )
+    p.add_argument(
+        "--cell",
+        action="store_true",
+        help="run through the physical cell (closed-loop simulations; dozens, not thousands)",
+    )
+    p.add_argument(
+        "--scenario",
+        default=None,
+        help="with --cell: the base scenario (default row1-optimal; its operator is replaced)",
+    )
+    p.add_argument("--lean", action="store_true", help="with --cell: short holds (tests)")
+    p.add_argument(
+        "--scenario-text",
+        action="append",
+        default=None,
+        help="with --cell: YAML overrides of the base scenario",
+    )
     p.add_argument("--plot", type=Path, default=None, help="histogram of assembly times")
     p.add_argument("--costs", type=Path, default=None, help="cost table (default: the cell's)")
     p.add_argument(

@@ -195,6 +195,8 @@ def run_scenario(
     body_script=None,
     live: bool = False,
     on_prompt=None,
+    on_task=None,
+    motion_planner: MotionPlanner | None = None,
 ) -> RunResult:
     """Run one scenario through the full cell diagram until a terminal state (or a failure).
 
@@ -205,7 +207,11 @@ def run_scenario(
     `body_script` replaces the operator body's (`hrc_drake.cell.operator_body.BodyScript`).
     `live`: a person is the operator, through Meshcat buttons (`hrc_drake.hri.live`); the run
     serves Meshcat, prints its URL and paces itself to the wall clock; `on_prompt` is handed to
-    the `LiveOperator` (tests inject clicks from it).
+    the `LiveOperator` (tests inject clicks from it). `on_task(record)` hears every task as the
+    cell observed it (a `TaskRecord`). `motion_planner` replaces the process's shared planner
+    (`shared_planner`), e.g. a fresh one so that a run does not use plans cached by others.
+    While the operator bolts, the run plans the tasks the policy predicts next: its
+    `predicted_tasks(state)` (most likely first) if it has one, else its `next_task(state)`.
     CellModelError (before any simulation) if the spec does not fit the cell."""
     if not isinstance(scenario, Scenario):
         scenario = load_cell_scenario(scenario, scenario_text)
@@ -214,7 +220,11 @@ def run_scenario(
     policy.matches(space.spec)
     design = cell_design(scenario, space.spec)
     options = motion_options(scenario)
-    motion = shared_planner(options, design)
+    if motion_planner is None:
+        motion = shared_planner(options, design)
+    else:
+        motion = motion_planner
+        check_reach(motion)
     home_opening = RG2_MAX_OPENING * 0.8
     with_body = scenario.body.enabled
 
@@ -271,6 +281,7 @@ def run_scenario(
             settle_time=run.settle_time,
             max_steps=run.max_steps,
             joint_acceleration=options.joint_acceleration_limit,
+            on_task=on_task,
         ),
     )
     builder.Connect(
@@ -324,6 +335,11 @@ def run_scenario(
     pending_still = [still]
     next_watch = [0.0]
     planned_ahead: set[int] = set()
+    predict = getattr(policy, "predicted_tasks", None)
+
+    def predicted_tasks(state: tuple[str, ...]) -> list[str]:
+        tasks = predict(state) if predict is not None else [policy.next_task(state)]
+        return [t for t in tasks if t is not None]
 
     def plan_ahead(status: SupervisorStatus, now: float) -> None:
         """During the hold, plan what the policy will propose once this task is done."""
@@ -346,9 +362,9 @@ def run_scenario(
             return
         if space.kind[index] == StateKind.TERMINAL:
             return
-        task = policy.next_task(state)
         last = state[-1] if state else None
-        _plan_ahead_quietly(motion, frozenset(layout.values()), task, last, layout)
+        for task in predicted_tasks(state):
+            _plan_ahead_quietly(motion, frozenset(layout.values()), task, last, layout)
 
     def constraint(weld: Weld):
         if weld.kind == "grasp":
@@ -378,9 +394,9 @@ def run_scenario(
     simulator.set_monitor(monitor)
     if run.plan_ahead and planner is None:
         # The robot's first proposal is planned before the operator answers.
-        first = policy.next_task(())
-        if first is not None and first != UNDO:
-            _plan_ahead_quietly(motion, frozenset(), first, None, {})
+        for first in predicted_tasks(()):
+            if first != UNDO:
+                _plan_ahead_quietly(motion, frozenset(), first, None, {})
     if record is not None:
         station.visualizer.StartRecording()
     if live:

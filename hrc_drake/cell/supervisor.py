@@ -125,6 +125,9 @@ class Supervisor(LeafSystem):
     Input ports: `slot_configuration` (CellConfiguration), `speed_limit` (1: the speed scale the
     separation monitor allows; unconnected, 1). Output ports: `ur3.desired_state`
     (12), `rg2.desired_opening` (1), `welds` (frozenset[Weld]), `status` (SupervisorStatus).
+    `policy` needs `next_task(state)` and `matches(spec)` (a `Policy`, or a decider wrapped by
+    `hrc_drake.cell.evaluate.DeciderPolicy`); `on_task(record)`, if given, hears every task as
+    the cell observed it (a learning decider updates its operator model from it).
     """
 
     def __init__(
@@ -139,10 +142,12 @@ class Supervisor(LeafSystem):
         settle_time: float = 0.3,
         max_steps: int = 30,
         joint_acceleration: float = 5.0,
+        on_task: Callable[[TaskRecord], None] | None = None,
     ):
         super().__init__()
         policy.matches(space.spec)
         self._space, self._policy, self._operator, self._planner = space, policy, operator, planner
+        self._on_task = on_task
         self._settle_time, self._max_steps = settle_time, max_steps
         self._period, self._joint_acceleration = period, joint_acceleration
         self._config_port = self.DeclareAbstractInputPort(
@@ -363,6 +368,8 @@ class Supervisor(LeafSystem):
             start_time=s.plan_start,
             end_time=now,
         )
+        if self._on_task is not None:
+            self._on_task(record)
         event = f"{now:.2f}: cell shows {observed}; state {' '.join(next_state) or '(start)'}"
         return replace(
             s,

@@ -1,0 +1,130 @@
+"""Monte Carlo runs through the physical cell: the cell side of `hrc-drake evaluate --cell`.
+
+A cell run is one closed-loop simulation (`hrc_drake.cell.run.run_scenario`) of a base scenario
+(default `row1-optimal`, with the evaluated assembly) in which the decider proposes at every task
+boundary (`DeciderPolicy`), the population's operator model answers, and the decider learns from
+each task as the cell observed it (from contact, not from the answer). Every run builds its own
+diagram and its own motion planner: no run uses plans that another run cached, so runs are
+independent and the same seeds give the same report however the runs are spread over processes
+or machines (Drake diagrams do not pickle, so each worker builds its own anyway).
+
+What a cell run reports, beside the task-level figures: its time is the cell's simulated time
+(motion, bolting holds and the parts settling); a deviation adds nothing to it (the cell's robot
+waits for the operator's answer before it moves); the robot's idle time at each boundary is the
+wall time it waited for the planner after the answer (0 when the task was planned ahead while the
+operator bolted), and whether that plan was ready is recorded per boundary.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+from hrc_drake.paths import UsageError
+from hrc_drake.tasks.graph import StateKind, StateSpace
+from hrc_drake.tasks.policy import PolicyFileError
+from hrc_drake.tasks.spec import AssemblySpec
+from hrc_drake.tasks.tokens import UNDO
+
+DEFAULT_BASE_SCENARIO = "row1-optimal"
+# Planning ahead: the operator answers the model predicts with at least this probability, most
+# likely first, at most this many per boundary (each plan takes ~0.2 s of the ~5 s of bolting).
+PREDICT_PROBABILITY = 0.1
+PREDICT_AT_MOST = 3
+
+
+class DeciderPolicy:
+    """A decider as the Supervisor's policy: proposals from the decider, predictions of the
+    operator's answer (for planning ahead) from its operator model, if it has one."""
+
+    def __init__(self, decider, space: StateSpace):
+        self.decider = decider
+        self.space = space
+
+    def next_task(self, state: tuple[str, ...]) -> str | None:
+        """The decider's proposal in `state`; None in a terminal state."""
+        if self.space.kind[self.space.index(state)] == StateKind.TERMINAL:
+            return None
+        return self.decider.propose(tuple(state))
+
+    def predicted_tasks(self, state: tuple[str, ...]) -> list[str]:
+        """The tasks the operator may perform in `state`, most likely first: the proposal, and
+        with an operator model (`mpc`) the answers it expects with probability >= 0.1."""
+        proposal = self.next_task(state)
+        if proposal is None:
+            return []
+        model = getattr(self.decider, "model", None)
+        if model is None:
+            return [proposal]
+        probs = model.outcome_probabilities(tuple(state), proposal)
+        ranked = sorted(probs, key=lambda t: (-probs[t], t != proposal, t))
+        return [t for t in ranked if probs[t] >= PREDICT_PROBABILITY][:PREDICT_AT_MOST]
+
+    def observe(self, record) -> None:
+        """The Supervisor's `on_task`: the decider learns what the cell observed."""
+        self.decider.observe(record.state, record.proposed, record.observed)
+
+    def matches(self, spec: AssemblySpec) -> None:
+        """PolicyFileError unless the decider was made for `spec`."""
+        if spec.spec_hash != self.space.spec.spec_hash:
+            raise PolicyFileError(
+                f"the decider was made for assembly {self.space.spec.name!r}, not {spec.name!r}"
+            )
+
+
+@dataclass(frozen=True)
+class CellOptions:
+    """Which cell runs an evaluation: a base scenario and YAML overrides (picklable)."""
+
+    scenario: str = DEFAULT_BASE_SCENARIO
+    overrides: tuple[str, ...] = ()
+
+
+def evaluation_scenario(options: CellOptions, spec: AssemblySpec):
+    """The base scenario with the overrides, for the assembly `spec` (its source file)."""
+    from hrc_drake.cell.scenario import load_cell_scenario
+
+    scenario = load_cell_scenario(options.scenario, list(options.overrides))
+    if spec.source and Path(spec.source).is_file():
+        scenario = dataclasses.replace(scenario, assembly=str(spec.source))
+    return scenario
+
+
+def check_cell_operator(operator, model_name: str) -> None:
+    """UsageError for an operator model the cell cannot play: one whose bolting time changes
+    (`slow`), since the cell's plans hold every part for the scenario's `motion.hold_time`."""
+    scale = getattr(operator, "bolt_scale", None)
+    if scale is not None and any(scale(step) != 1.0 for step in (1, 2, 5)):
+        raise UsageError(
+            f"operator model {model_name!r} changes the bolting time along the run; the cell "
+            "holds each part for the scenario's motion.hold_time, so evaluate it at task level "
+            "(drop --cell)"
+        )
+
+
+def play_cell_run(scenario, space: StateSpace, decider, operator):
+    """One run of `decider` against `operator` through the cell; the decider is not reset.
+    Returns an `hrc_drake.evaluate.RunResult` with the cell's idle times."""
+    from hrc_drake.cell.run import run_scenario
+    from hrc_drake.cell.scenario import cell_design, motion_options
+    from hrc_drake.evaluate import RunResult
+    from hrc_drake.motion.planner import MotionPlanner
+
+    policy = DeciderPolicy(decider, space)
+    planner = MotionPlanner(motion_options(scenario), design=cell_design(scenario, space.spec))
+    result = run_scenario(
+        scenario, policy, operator=operator, on_task=policy.observe, motion_planner=planner
+    )
+    tasks = result.tasks
+    return RunResult(
+        completed=bool(result.done),
+        seconds=float(result.sim_time),
+        tasks=len(tasks),
+        undos=sum(t.observed == UNDO for t in tasks),
+        deviations=sum(t.indicated != t.proposed for t in tasks),
+        idle=tuple(float(x) for x in result.idle[: len(tasks)]),
+        plan_ready=tuple(bool(x) for x in result.plan_ready[: len(tasks)]),
+        error=result.error,
+        collisions=len(result.collisions),
+    )

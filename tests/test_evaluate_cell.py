@@ -1,0 +1,129 @@
+"""`hrc-drake evaluate --cell` and `--ray`: deciders against operator populations through the
+physical cell, and runs spread on Ray.
+
+The cell runs use lean settings (short holds); a hand-made cost table keeps the deciders free
+of motion planning before the runs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from hrc_drake.cell.evaluate import CellOptions, DeciderPolicy
+from hrc_drake.cell.scenario import LEAN
+from hrc_drake.cli import main
+from hrc_drake.evaluate import Setup, _play, _prepare, evaluate, summarise
+from hrc_drake.resources import models_dir
+from hrc_drake.tasks.costs import table_from_seconds, task_edges
+from hrc_drake.tasks.deciders import make_decider
+from hrc_drake.tasks.graph import StateKind, generate_states
+from hrc_drake.tasks.policy import PolicyFileError
+from hrc_drake.tasks.spec import load_spec
+from hrc_drake.tasks.tokens import UNDO
+
+# Seed 2 of mpc against a mistake-prone operator (p = 0.5): run 0 follows (3 tasks), run 1
+# misplaces a flange once, which the robot takes back (5 tasks).
+SEED = 2
+NO_BODY = "{body: {enabled: false}}"  # faster; the operator's body is tested elsewhere
+
+
+@pytest.fixture(scope="module")
+def space():
+    return generate_states(load_spec())
+
+
+@pytest.fixture(scope="module")
+def costs(space):
+    seconds = {}
+    for state, task in task_edges(space):
+        if task == UNDO:
+            seconds[state, task] = 8.0
+        else:
+            seconds[state, task] = 10.0 + 0.2 * space.tokens.index(task)
+    return table_from_seconds(space, seconds)
+
+
+def _keys(report, *names):
+    return {k: report[k] for k in names}
+
+
+DECISIONS = ("runs", "completed", "completion_rate", "mean_tasks", "mean_undos", "mean_deviations")
+
+
+@pytest.mark.slow
+def test_cell_runs_play_the_task_level_runs_and_are_independent(space, costs):
+    task = Setup(space, costs, "mpc", "mistake-prone", {"p": "0.5"}, SEED)
+    cell = dataclasses.replace(task, cell=CellOptions(overrides=(LEAN, NO_BODY)))
+    expected = evaluate(task, 2)
+    assert expected["mean_deviations"] == 0.5  # the seed does exercise a mistake
+    report = evaluate(cell, 2)
+    # The cell observes what the operator did, the decider learns from it, and the decisions
+    # are those of the task level, run for run.
+    assert _keys(report, *DECISIONS) == _keys(expected, *DECISIONS)
+    assert report["level"] == "cell" and report["collisions"] == 0 and report["errors"] == []
+    assert report["deviation_seconds"] == 0.0
+    # Simulated seconds of the cell: three lean tasks take well over 15 s, five over 25 s.
+    assert 15.0 < min(report["times"]) < 25.0 < max(report["times"]) < 60.0
+    assert 0.0 <= report["plan_ready_rate"] <= 1.0 and report["mean_idle"] >= 0.0
+    # Run 1 alone in a fresh process state gives what it gave after run 0: runs share no plans
+    # and no decider memory, so the way runs are spread does not change the report.
+    _prepare(cell)
+    alone = summarise(cell, [_play(1)])
+    assert alone["times"] == report["times"][1:]
+    assert alone["mean_tasks"] == 5.0 and alone["mean_undos"] == 1.0
+
+
+def test_decider_policy_proposes_predicts_and_learns(space, costs):
+    decider = make_decider("mpc", space, costs)
+    policy = DeciderPolicy(decider, space)
+    policy.matches(space.spec)
+    first = policy.next_task(())
+    assert policy.predicted_tasks(()) == [first]  # nothing learned: the proposal only
+    other = next(t for t, _ in space.tasks(0) if t != first)
+
+    @dataclasses.dataclass
+    class Record:
+        state: tuple
+        proposed: str
+        observed: str
+
+    for _ in range(3):
+        policy.observe(Record((), first, other))
+    predicted = policy.predicted_tasks(())
+    # After three overrides the model expects the operator's own choice; planning ahead plans
+    # it (most likely first) besides what the robot proposes.
+    assert predicted[0] == other and policy.next_task(()) in predicted
+    terminal = int(np.flatnonzero(space.kind == StateKind.TERMINAL)[0])
+    assert policy.next_task(space.sequence(terminal)) is None
+    two = generate_states(load_spec(models_dir() / "assemblies" / "four-slot.yaml"))
+    with pytest.raises(PolicyFileError, match="made for assembly"):
+        policy.matches(two.spec)
+
+
+def test_cell_options_are_refused_without_cell_and_slow_in_the_cell(capsys):
+    args = ["evaluate", "--decider", "exact", "--operator-model", "follows", "--lean"]
+    assert main(args) == 2
+    assert "add --cell" in capsys.readouterr().err
+    args = ["evaluate", "--decider", "exact", "--operator-model", "slow", "--cell", "--runs", "1"]
+    assert main(args) == 2
+    assert "drop --cell" in capsys.readouterr().err
+    args = ["evaluate", "--decider", "exact", "--operator-model", "follows", "--ray", "bad"]
+    assert main(args) == 2
+    assert "HOST:PORT" in capsys.readouterr().err
+
+
+def test_ray_gives_the_serial_report(space, costs, capsys):
+    pytest.importorskip("ray")
+    setup = Setup(space, costs, "mpc", "mistake-prone", {"p": "0.3"}, 7)
+    serial = evaluate(setup, 40)
+    spread = evaluate(setup, 40, workers=2, ray=True)
+    assert spread["backend"] == "ray" and spread["workers"] == 2
+    same = [k for k in serial if not k.startswith("wall") and k not in ("workers", "backend")]
+    assert _keys(spread, *same) == _keys(serial, *same)
+    assert serial["mean_deviations"] > 0  # the runs differ from one another
+    capsys.readouterr()
+    json.dumps(spread)
