@@ -8,8 +8,10 @@ the proposal (see `hrc_drake.tasks.deciders`); the run ends in a terminal state,
 before it, so runs are independent: serial and ``--workers K`` give the same report.
 
 Times are simulated seconds, so the report does not depend on the machine; wall-clock figures
-are under ``wall_*`` keys. Robot idle time at task boundaries is 0 at task level: the cell plans
-the predicted tasks ahead while the operator bolts, so a plan is ready at each boundary.
+are under ``wall_*`` keys. Robot idle time at a task boundary: while the operator bolts, the cell
+plans the tasks the decider predicts (`predicted_tasks`: the proposal, and with an operator model
+its likely answers); at task level a boundary whose task was among them costs no idle time, any
+other the motion layer's median planning time (`PLANNING_SECONDS`).
 Time figures (mean, p95, worst) are over the completed runs.
 
 At cell level (``--cell``, `hrc_drake.cell.evaluate`) each run is a closed-loop simulation of the
@@ -43,6 +45,13 @@ from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.tokens import UNDO
 
 MAX_TASKS = 100
+# Seconds the robot stands idle at a boundary whose task was not planned ahead: the motion
+# layer's median planning time per task (benchmarks/reports/motion.md).
+PLANNING_SECONDS = 0.21
+# Planning ahead: the answers an operator model expects with at least this probability, most
+# likely first, at most this many per boundary (each plan takes ~0.2 s of the ~5 s of bolting).
+PREDICT_PROBABILITY = 0.1
+PREDICT_AT_MOST = 3
 
 
 @dataclass(frozen=True)
@@ -66,6 +75,18 @@ def run_seed(seed: int, run: int) -> int:
     return int(np.random.SeedSequence([seed, run]).generate_state(1)[0])
 
 
+def predicted_tasks(decider, state: tuple[str, ...], proposal: str) -> list[str]:
+    """What to plan ahead for `state`: the tasks the operator may perform, most likely first —
+    the proposal, and with an operator model (`mpc`) every answer it expects with probability
+    >= `PREDICT_PROBABILITY` (at most `PREDICT_AT_MOST`)."""
+    model = getattr(decider, "model", None)
+    if model is None:
+        return [proposal]
+    probs = model.outcome_probabilities(tuple(state), proposal)
+    ranked = sorted(probs, key=lambda t: (-probs[t], t != proposal, t))
+    return [t for t in ranked if probs[t] >= PREDICT_PROBABILITY][:PREDICT_AT_MOST]
+
+
 def simulate_run(
     space: StateSpace,
     costs: CostTable,
@@ -76,13 +97,16 @@ def simulate_run(
 ) -> RunResult:
     """Play one run from the empty base (the decider is not reset: it keeps what it learned)."""
     index, seconds, undos, deviations = 0, 0.0, 0, 0
+    ready: list[bool] = []
     scale = getattr(operator, "bolt_scale", None)
     for step in range(1, max_tasks + 1):
         if space.kind[index] == StateKind.TERMINAL:
-            return RunResult(True, seconds, step - 1, undos, deviations)
+            return _task_result(True, seconds, step - 1, undos, deviations, ready)
         state = space.sequence(index)
         proposal = decider.propose(state)
+        planned = predicted_tasks(decider, state, proposal)
         performed = operator(step, state, proposal)
+        ready.append(performed in planned)
         feasible = dict(space.tasks(index))
         if performed not in feasible:
             raise UsageError(
@@ -105,7 +129,13 @@ def simulate_run(
         decider.observe(state, proposal, performed)
         index = feasible[performed]
     done = space.kind[index] == StateKind.TERMINAL
-    return RunResult(bool(done), seconds, max_tasks, undos, deviations)
+    return _task_result(bool(done), seconds, max_tasks, undos, deviations, ready)
+
+
+def _task_result(done, seconds, tasks, undos, deviations, ready: list[bool]) -> RunResult:
+    # Idle at a boundary: none when the task was planned ahead, else the planning time.
+    idle = tuple(0.0 if r else PLANNING_SECONDS for r in ready)
+    return RunResult(done, seconds, tasks, undos, deviations, idle, tuple(ready))
 
 
 @dataclass(frozen=True)
@@ -304,6 +334,8 @@ def summarise(setup: Setup, results: list[RunResult]) -> dict[str, Any]:
     """The JSON report of a list of runs."""
     done = [r for r in results if r.completed]
     times = np.array([r.seconds for r in done])
+    idle = [x for r in results for x in r.idle]
+    ready = [x for r in results for x in r.plan_ready]
 
     def fig(x):
         return None if x is None else round(float(x), 3)
@@ -322,23 +354,20 @@ def summarise(setup: Setup, results: list[RunResult]) -> dict[str, Any]:
         "mean_tasks": fig(np.mean([r.tasks for r in results])),
         "mean_undos": fig(np.mean([r.undos for r in results])),
         "mean_deviations": fig(np.mean([r.deviations for r in results])),
-        "mean_idle": 0.0,
+        "mean_idle": round(float(np.mean(idle)), 4) if idle else 0.0,
+        "p95_idle": round(float(np.percentile(idle, 95)), 4) if idle else 0.0,
+        "plan_ready_rate": round(float(np.mean(ready)), 4) if ready else None,
         "deviation_seconds": setup.deviation_seconds,
         "seed": setup.seed,
         "level": "task" if setup.cell is None else "cell",
         "times": [round(r.seconds, 3) for r in done],
     }
     if setup.cell is not None:
-        idle = [x for r in results for x in r.idle]
-        ready = [x for r in results for x in r.plan_ready]
         errors = sorted({r.error for r in results if r.error and not r.completed})
         report.update(
             {
                 # The cell's robot waits for the answer before it moves: no deviation time.
                 "deviation_seconds": 0.0,
-                "mean_idle": round(float(np.mean(idle)), 4) if idle else 0.0,
-                "p95_idle": round(float(np.percentile(idle, 95)), 4) if idle else 0.0,
-                "plan_ready_rate": round(float(np.mean(ready)), 4) if ready else None,
                 "collisions": int(sum(r.collisions for r in results)),
                 "scenario": setup.cell.scenario,
                 "errors": errors[:5],

@@ -28,10 +28,6 @@ from hrc_drake.tasks.spec import AssemblySpec
 from hrc_drake.tasks.tokens import UNDO
 
 DEFAULT_BASE_SCENARIO = "row1-optimal"
-# Planning ahead: the operator answers the model predicts with at least this probability, most
-# likely first, at most this many per boundary (each plan takes ~0.2 s of the ~5 s of bolting).
-PREDICT_PROBABILITY = 0.1
-PREDICT_AT_MOST = 3
 
 
 class DeciderPolicy:
@@ -49,17 +45,12 @@ class DeciderPolicy:
         return self.decider.propose(tuple(state))
 
     def predicted_tasks(self, state: tuple[str, ...]) -> list[str]:
-        """The tasks the operator may perform in `state`, most likely first: the proposal, and
-        with an operator model (`mpc`) the answers it expects with probability >= 0.1."""
+        """The tasks to plan ahead for `state`, most likely first
+        (`hrc_drake.evaluate.predicted_tasks`)."""
+        from hrc_drake.evaluate import predicted_tasks
+
         proposal = self.next_task(state)
-        if proposal is None:
-            return []
-        model = getattr(self.decider, "model", None)
-        if model is None:
-            return [proposal]
-        probs = model.outcome_probabilities(tuple(state), proposal)
-        ranked = sorted(probs, key=lambda t: (-probs[t], t != proposal, t))
-        return [t for t in ranked if probs[t] >= PREDICT_PROBABILITY][:PREDICT_AT_MOST]
+        return [] if proposal is None else predicted_tasks(self.decider, state, proposal)
 
     def observe(self, record) -> None:
         """The Supervisor's `on_task`: the decider learns what the cell observed."""
