@@ -57,14 +57,7 @@ PLOT = Path(__file__).parent.parent / "docs" / "evaluation.png"
 
 def plot_means(table: dict, path: Path) -> None:
     """Mean and p95 simulated seconds per population: the paper's agent against ours."""
-    import io
-
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from hrc_drake.atomic import atomic_write_bytes
+    from hrc_drake.tasks.plots import plt, save_figure
 
     deciders = ["paper-q", "time", "mpc", "worst-case"]
     fig, ax = plt.subplots(figsize=(8, 3.8))
@@ -80,11 +73,7 @@ def plot_means(table: dict, path: Path) -> None:
     ax.set_ylabel("assembly time [s] (bar: mean, tick: p95)")
     ax.set_title("flange case, task level: the paper's Q-learning agent against ours")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    atomic_write_bytes(path, buf.getvalue())
+    save_figure(fig, path, dpi=110)
 
 
 class HabitOracle:

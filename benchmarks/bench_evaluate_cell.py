@@ -17,14 +17,13 @@ Usage: ``python benchmarks/bench_evaluate_cell.py [--runs 12] [--workers 2] [--d
 from __future__ import annotations
 
 import argparse
-import io
 import json
 import time
 from pathlib import Path
 
 import numpy as np
 
-from hrc_drake.atomic import atomic_write_bytes, atomic_write_text
+from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.costs import default_cost_table
 from hrc_drake.cell.evaluate import CellOptions
 from hrc_drake.evaluate import Setup, evaluate
@@ -80,10 +79,7 @@ def _progress(decider, population):
 
 def plot(results: dict, path: Path) -> None:
     """Mean cell time per decider and population (bars; ticks: the task level's prediction)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from hrc_drake.tasks.plots import plt, save_figure
 
     deciders = [d for d in DECIDERS if any(f"{d}|{p}" in results for p in POPULATIONS)]
     fig, ax = plt.subplots(figsize=(8, 3.8))
@@ -99,11 +95,7 @@ def plot(results: dict, path: Path) -> None:
     ax.set_ylabel("assembly time [s], from 30 s\n(bar: cell, tick: task level)")
     ax.set_title("flange case in the cell: the paper's Q-learning agent against ours")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    atomic_write_bytes(path, buf.getvalue())
+    save_figure(fig, path, dpi=110)
 
 
 def report(results: dict, seed: int) -> str:

@@ -27,7 +27,6 @@ way it runs (but for the ``wall_*`` figures and, at cell level, the measured idl
 
 from __future__ import annotations
 
-import io
 import json
 import sys
 import time
@@ -389,27 +388,17 @@ def parse_params(items: list[str] | None) -> dict[str, str]:
 
 def plot_times(report: dict[str, Any], path: Path) -> None:
     """Histogram of the completed runs' assembly times (``report["times"]``)."""
-    import matplotlib
+    from hrc_drake.tasks.plots import plt, save_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from hrc_drake.atomic import atomic_write_bytes
-
-    times = report["times"]
     fig, ax = plt.subplots(figsize=(6, 3.5))
-    ax.hist(times, bins=30, color="tab:blue")
+    ax.hist(report["times"], bins=30, color="tab:blue")
     ax.set_xlabel("assembly time [s] (simulated)")
     ax.set_ylabel("runs")
     ax.set_title(
         f"{report['decider']} vs {report['operator_model']}: {report['completed']}/"
         f"{report['runs']} completed"
     )
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format=path.suffix.lstrip(".").lower())
-    plt.close(fig)
-    atomic_write_bytes(path, buf.getvalue())
+    save_figure(fig, path)
 
 
 def cmd_evaluate(args) -> int:

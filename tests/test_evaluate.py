@@ -19,33 +19,22 @@ from hrc_drake.hri.populations import (
 )
 from hrc_drake.paths import UsageError
 from hrc_drake.resources import models_dir
-from hrc_drake.tasks.costs import save_cost_table, table_from_seconds, task_edges
+from hrc_drake.tasks.costs import save_cost_table
 from hrc_drake.tasks.deciders import MpcDecider, make_decider
-from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.operator_model import OnlineOperatorModel
-from hrc_drake.tasks.spec import load_spec
 from hrc_drake.tasks.tokens import UNDO
 
 FLANGE = models_dir() / "assemblies" / "flange.yaml"
 
 
 @pytest.fixture(scope="module")
-def space():
-    return generate_states(load_spec(FLANGE))
+def space(flange_space):
+    return flange_space
 
 
 @pytest.fixture(scope="module")
-def costs(space):
-    """Seconds per edge: placements 10-11.4 s by token, the square on 2-3 a little slower."""
-    seconds = {}
-    for state, task in task_edges(space):
-        if task == UNDO:
-            seconds[state, task] = 8.0
-        else:
-            seconds[state, task] = 10.0 + 0.2 * space.tokens.index(task)
-            if task == "S23":
-                seconds[state, task] += 0.3
-    return table_from_seconds(space, seconds)
+def costs(toy_costs):
+    return toy_costs
 
 
 def setup(space, costs, decider, model, **params):

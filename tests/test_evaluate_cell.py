@@ -18,12 +18,10 @@ from hrc_drake.cell.scenario import LEAN
 from hrc_drake.cli import main
 from hrc_drake.evaluate import Setup, _play, _prepare, evaluate, summarise
 from hrc_drake.resources import models_dir
-from hrc_drake.tasks.costs import table_from_seconds, task_edges
 from hrc_drake.tasks.deciders import make_decider
 from hrc_drake.tasks.graph import StateKind, generate_states
 from hrc_drake.tasks.policy import PolicyFileError
 from hrc_drake.tasks.spec import load_spec
-from hrc_drake.tasks.tokens import UNDO
 
 # Seed 2 of mpc against a mistake-prone operator (p = 0.5): run 0 follows (3 tasks), run 1
 # misplaces a flange once, which the robot takes back (5 tasks).
@@ -32,19 +30,13 @@ NO_BODY = "{body: {enabled: false}}"  # faster; the operator's body is tested el
 
 
 @pytest.fixture(scope="module")
-def space():
-    return generate_states(load_spec())
+def space(flange_space):
+    return flange_space
 
 
 @pytest.fixture(scope="module")
-def costs(space):
-    seconds = {}
-    for state, task in task_edges(space):
-        if task == UNDO:
-            seconds[state, task] = 8.0
-        else:
-            seconds[state, task] = 10.0 + 0.2 * space.tokens.index(task)
-    return table_from_seconds(space, seconds)
+def costs(toy_costs):
+    return toy_costs
 
 
 def _keys(report, *names):

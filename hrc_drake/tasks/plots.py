@@ -27,7 +27,9 @@ FORMATS = (".png", ".pdf", ".svg")
 """File suffixes the figures can be written as (matplotlib picks the backend by format)."""
 
 
-def _save(fig, path: str | Path) -> None:
+def save_figure(fig, path: str | Path, dpi: int = 120) -> None:
+    """Write `fig` to `path` (.png, .pdf or .svg) atomically, with the same bytes for the same
+    figure; closes the figure. ValueError naming the formats for another suffix."""
     suffix = Path(path).suffix.lower()
     if suffix not in FORMATS:
         plt.close(fig)
@@ -37,7 +39,7 @@ def _save(fig, path: str | Path) -> None:
     metadata = {".pdf": {"CreationDate": None}, ".svg": {"Date": None}}.get(suffix)
     buffer = io.BytesIO()
     with matplotlib.rc_context({"svg.hashsalt": "hrc_drake"}):
-        fig.savefig(buffer, format=suffix[1:], dpi=120, bbox_inches="tight", metadata=metadata)
+        fig.savefig(buffer, format=suffix[1:], dpi=dpi, bbox_inches="tight", metadata=metadata)
     plt.close(fig)
     atomic_write_bytes(Path(path), buffer.getvalue())
 
@@ -99,7 +101,7 @@ def plot_state_graph(space: StateSpace, path: str | Path) -> None:
     ax.legend(handles=handles, loc="lower left", fontsize=8)
     ax.set_title(f"{space.spec.name}: {space.n_states} states (dashed: undo)")
     ax.axis("off")
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def plot_learning_curve(result: LearningResult, path: str | Path, window: int = 20) -> None:
@@ -120,4 +122,4 @@ def plot_learning_curve(result: LearningResult, path: str | Path, window: int = 
         f"Q-learning, {result.schedule} schedule, seed {result.seed}: {result.episodes} episodes"
     )
     ax.legend()
-    _save(fig, path)
+    save_figure(fig, path)
