@@ -25,6 +25,7 @@ from pathlib import Path
 
 from hrc_drake.hri.operator import ScriptedOperator, StochasticOperator, parse_operator_script
 from hrc_drake.layout import CellLayout
+from hrc_drake.motion.options import MotionOptions
 from hrc_drake.resources import models_dir, scenarios_dir
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.typed_yaml import TypedYamlError, load_typed
@@ -71,6 +72,9 @@ class Expected:
     minimum_effort: list[str] = field(default_factory=list)
 
 
+_MOTION = MotionOptions()  # the defaults live there (Drake-free module)
+
+
 @dataclass
 class MotionConfig:
     """Motion-layer settings a scenario may change (the rest: `motion.options.MotionOptions`).
@@ -82,10 +86,10 @@ class MotionConfig:
         seed: seed of the random IK starts.
     """
 
-    hold_time: float = 5.0
-    tcp_speed_limit: float = 0.25
-    approach_distance: float = 0.06
-    seed: int = 0
+    hold_time: float = _MOTION.hold_time
+    tcp_speed_limit: float = _MOTION.tcp_speed_limit
+    approach_distance: float = _MOTION.approach_distance
+    seed: int = _MOTION.seed
 
 
 @dataclass
