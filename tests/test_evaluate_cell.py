@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import sys
 
 import numpy as np
 import pytest
@@ -17,6 +18,7 @@ from hrc_drake.cell.evaluate import CellOptions, DeciderPolicy
 from hrc_drake.cell.scenario import LEAN
 from hrc_drake.cli import main
 from hrc_drake.evaluate import Setup, _play, _prepare, evaluate, summarise
+from hrc_drake.paths import UsageError
 from hrc_drake.resources import models_dir
 from hrc_drake.tasks.deciders import make_decider
 from hrc_drake.tasks.graph import StateKind, generate_states
@@ -119,3 +121,10 @@ def test_ray_gives_the_serial_report(space, costs, capsys):
     assert serial["mean_deviations"] > 0  # the runs differ from one another
     capsys.readouterr()
     json.dumps(spread)
+
+
+def test_ray_missing_is_a_clear_error(space, costs, monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` raises ImportError
+    setup = Setup(space, costs, "exact", "follows", {}, 0)
+    with pytest.raises(UsageError, match=r"pip install 'hrc_drake\[ray\]'"):
+        evaluate(setup, 2, ray=True)
