@@ -31,16 +31,6 @@ SEED = 2
 NO_BODY = "{body: {enabled: false}}"  # faster; the operator's body is tested elsewhere
 
 
-@pytest.fixture(scope="module")
-def space(flange_space):
-    return flange_space
-
-
-@pytest.fixture(scope="module")
-def costs(toy_costs):
-    return toy_costs
-
-
 def _keys(report, *names):
     return {k: report[k] for k in names}
 
@@ -49,8 +39,8 @@ DECISIONS = ("runs", "completed", "completion_rate", "mean_tasks", "mean_undos",
 
 
 @pytest.mark.slow
-def test_cell_runs_play_the_task_level_runs_and_are_independent(space, costs):
-    task = Setup(space, costs, "mpc", "mistake-prone", {"p": "0.5"}, SEED)
+def test_cell_runs_play_the_task_level_runs_and_are_independent(flange_space, toy_costs):
+    task = Setup(flange_space, toy_costs, "mpc", "mistake-prone", {"p": "0.5"}, SEED)
     cell = dataclasses.replace(task, cell=CellOptions(overrides=(LEAN, NO_BODY)))
     expected = evaluate(task, 2)
     assert expected["mean_deviations"] == 0.5  # the seed does exercise a mistake
@@ -71,13 +61,13 @@ def test_cell_runs_play_the_task_level_runs_and_are_independent(space, costs):
     assert alone["mean_tasks"] == 5.0 and alone["mean_undos"] == 1.0
 
 
-def test_decider_policy_proposes_predicts_and_learns(space, costs):
-    decider = make_decider("mpc", space, costs)
-    policy = DeciderPolicy(decider, space)
-    policy.matches(space.spec)
+def test_decider_policy_proposes_predicts_and_learns(flange_space, toy_costs):
+    decider = make_decider("mpc", flange_space, toy_costs)
+    policy = DeciderPolicy(decider, flange_space)
+    policy.matches(flange_space.spec)
     first = policy.next_task(())
     assert policy.predicted_tasks(()) == [first]  # nothing learned: the proposal only
-    other = next(t for t, _ in space.tasks(0) if t != first)
+    other = next(t for t, _ in flange_space.tasks(0) if t != first)
 
     @dataclasses.dataclass
     class Record:
@@ -91,8 +81,8 @@ def test_decider_policy_proposes_predicts_and_learns(space, costs):
     # After three overrides the model expects the operator's own choice; planning ahead plans
     # it (most likely first) besides what the robot proposes.
     assert predicted[0] == other and policy.next_task(()) in predicted
-    terminal = int(np.flatnonzero(space.kind == StateKind.TERMINAL)[0])
-    assert policy.next_task(space.sequence(terminal)) is None
+    terminal = int(np.flatnonzero(flange_space.kind == StateKind.TERMINAL)[0])
+    assert policy.next_task(flange_space.sequence(terminal)) is None
     two = generate_states(load_spec(models_dir() / "assemblies" / "four-slot.yaml"))
     with pytest.raises(PolicyFileError, match="made for assembly"):
         policy.matches(two.spec)
@@ -110,9 +100,9 @@ def test_cell_options_are_refused_without_cell_and_slow_in_the_cell(capsys):
     assert "HOST:PORT" in capsys.readouterr().err
 
 
-def test_ray_gives_the_serial_report(space, costs, capsys):
+def test_ray_gives_the_serial_report(flange_space, toy_costs, capsys):
     pytest.importorskip("ray")
-    setup = Setup(space, costs, "mpc", "mistake-prone", {"p": "0.3"}, 7)
+    setup = Setup(flange_space, toy_costs, "mpc", "mistake-prone", {"p": "0.3"}, 7)
     serial = evaluate(setup, 40)
     spread = evaluate(setup, 40, workers=2, ray=True)
     assert spread["backend"] == "ray" and spread["workers"] == 2
@@ -123,8 +113,8 @@ def test_ray_gives_the_serial_report(space, costs, capsys):
     json.dumps(spread)
 
 
-def test_ray_missing_is_a_clear_error(space, costs, monkeypatch):
+def test_ray_missing_is_a_clear_error(flange_space, toy_costs, monkeypatch):
     monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` raises ImportError
-    setup = Setup(space, costs, "exact", "follows", {}, 0)
+    setup = Setup(flange_space, toy_costs, "exact", "follows", {}, 0)
     with pytest.raises(UsageError, match=r"pip install 'hrc_drake\[ray\]'"):
         evaluate(setup, 2, ray=True)
