@@ -55,8 +55,9 @@ PREDICT_AT_MOST = 3
 
 @dataclass(frozen=True)
 class RunResult:
-    """One run: whether it finished, its simulated seconds, tasks, undos and deviations; at cell
-    level also the idle seconds and plan readiness per boundary, the error and collisions."""
+    """One run: whether it finished, its simulated seconds, tasks, undos and deviations, the
+    robot's idle seconds and whether the plan was ready, per boundary; at cell level also the
+    run's error and its robot collisions."""
 
     completed: bool
     seconds: float
@@ -406,7 +407,11 @@ def cmd_evaluate(args) -> int:
     from hrc_drake.tasks.graph import generate_states
     from hrc_drake.tasks.spec import load_spec
 
-    plot = None if args.plot is None else check_output_path(args.plot, "--plot", PLOT_SUFFIXES)
+    plot = None
+    if args.plot is not None:
+        from hrc_drake.tasks.plots import FORMATS
+
+        plot = check_output_path(args.plot, "--plot", FORMATS)
     if args.decider not in DECIDERS:
         raise UsageError(f"unknown decider {args.decider!r}; known deciders: {', '.join(DECIDERS)}")
     cell_only = [f for f, v in (("--lean", args.lean), ("--scenario", args.scenario)) if v]
@@ -432,8 +437,13 @@ def cmd_evaluate(args) -> int:
 
         costs = default_cost_table(space)
     setup = Setup(space, costs, args.decider, args.operator_model, params, args.seed, cell=cell)
-    from hrc_drake.cell_models import CellModelError
     from hrc_drake.progress import ProgressLine
+
+    misfits: tuple[type[Exception], ...] = ()  # none at task level (which needs no Drake)
+    if cell is not None:
+        from hrc_drake.cell_models import CellModelError
+
+        misfits = (CellModelError,)
 
     level = "cell" if cell else "evaluate"
     with ProgressLine(f"{level} {args.decider} vs {args.operator_model}", unit="run") as line:
@@ -446,7 +456,7 @@ def cmd_evaluate(args) -> int:
                 ray=args.ray is not None,
                 ray_address=args.ray or None,
             )
-        except CellModelError as err:
+        except misfits as err:
             raise UsageError(str(err)) from None
     if plot is not None:
         plot_times(report, plot)
@@ -462,7 +472,6 @@ def cmd_evaluate(args) -> int:
 
 DEFAULT_RUNS = 1000
 DEFAULT_CELL_RUNS = 20
-PLOT_SUFFIXES = (".png", ".pdf", ".svg")
 
 
 def add_evaluate_parser(add) -> None:
