@@ -414,6 +414,14 @@ def cmd_evaluate(args) -> int:
         plot = check_output_path(args.plot, "--plot", FORMATS)
     if args.decider not in DECIDERS:
         raise UsageError(f"unknown decider {args.decider!r}; known deciders: {', '.join(DECIDERS)}")
+    unused = ["--gamma"] if args.gamma is not None else []
+    if args.mistake_prob != 0.05:  # the common option's default
+        unused.append("--mistake-prob")
+    if unused:
+        raise UsageError(
+            f"{', '.join(unused)}: not used by evaluate (each decider has its own model); set "
+            "the operator population's parameters with --param, e.g. --param p=0.3"
+        )
     cell_only = [f for f, v in (("--lean", args.lean), ("--scenario", args.scenario)) if v]
     if args.scenario_text:
         cell_only.append("--scenario-text")

@@ -178,6 +178,7 @@ def test_cli_evaluate_json_and_plot(tmp_path, cost_file, capsys):
         (["--decider", "mpc", "--operator-model", "lazy"], "unknown operator model 'lazy'"),
         (["--decider", "mpc", "--operator-model", "slow", "--param", "p=1"], "no parameter 'p'"),
         (["--decider", "mpc", "--operator-model", "slow", "--param", "p"], "KEY=VALUE"),
+        (["--decider", "mpc", "--operator-model", "slow", "--mistake-prob", "0.3"], "--param"),
     ],
 )
 def test_cli_errors_are_one_line(cost_file, capsys, extra, message):
