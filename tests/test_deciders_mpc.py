@@ -11,7 +11,7 @@ from hrc_drake.evaluate import simulate_run
 from hrc_drake.hri.populations import make_operator_model
 from hrc_drake.resources import models_dir
 from hrc_drake.tasks.costs import operator_seconds, table_from_seconds, task_edges
-from hrc_drake.tasks.deciders import MpcDecider, subtree
+from hrc_drake.tasks.deciders import MpcDecider, subtree_levels
 from hrc_drake.tasks.graph import StateKind, generate_states
 from hrc_drake.tasks.spec import load_spec, parse_spec
 from hrc_drake.tasks.tokens import UNDO
@@ -21,7 +21,8 @@ def reference_q(decider: MpcDecider, state: int, values: np.ndarray):
     """Jacobi value iteration over the subtree below `state`, one Python row per proposal:
     expected seconds of every answer the model gives, plus the deviation cost."""
     space, mdp = decider.space, decider.mdp
-    states = [int(s) for s in subtree(space, state) if space.kind[s] != StateKind.TERMINAL]
+    below = np.concatenate(subtree_levels(space, state))
+    states = [int(s) for s in below if space.kind[s] != StateKind.TERMINAL]
     rows = {}
     for s in states:
         tasks = space.tasks(s)

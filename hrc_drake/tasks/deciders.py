@@ -99,11 +99,6 @@ def subtree_levels(space: StateSpace, state: int) -> list[np.ndarray]:
         levels.append(frontier)
 
 
-def subtree(space: StateSpace, state: int) -> np.ndarray:
-    """`state` and every state below it (placements only), by depth (ids ascending)."""
-    return np.concatenate(subtree_levels(space, state))
-
-
 def _unit_mdp(space: StateSpace, costs: CostTable, mistake_prob: float) -> SequenceMDP:
     return build_mdp(space, timed_config(costs, MdpConfig(gamma=1.0, mistake_prob=mistake_prob)))
 
