@@ -32,7 +32,9 @@ def main() -> None:
     lines = [
         "# Closed-loop cell",
         "",
-        "Command: `python benchmarks/bench_closed_loop.py`.",
+        f"Command: `python benchmarks/bench_closed_loop.py --rows {args.rows}`. The plans come "
+        "from the runs' planning worker (a process beside the controller, one per set of "
+        "options).",
         "",
         "## Full settings (5 s bolting holds, TCP <= 0.25 m/s), every Table 2 row",
         "",
@@ -66,7 +68,7 @@ def main() -> None:
     lines += [
         "## Lean settings (0.5 s holds), as in pytest",
         "",
-        f"Nine-row suite: {sum(sims):.1f} s simulated in {wall:.1f} s wall "
+        f"{len(rows)}-row suite: {sum(sims):.1f} s simulated in {wall:.1f} s wall "
         "(plans cached from the full runs above only where the options match: none, so "
         "this includes planning).",
         "",

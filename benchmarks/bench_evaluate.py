@@ -32,7 +32,14 @@ sys.path.insert(0, str(Path(__file__).parent))
 from generated import generated_spec
 
 from hrc_drake.atomic import atomic_write_text
-from hrc_drake.evaluate import Setup, evaluate, run_seed, simulate_run, summarise
+from hrc_drake.evaluate import (
+    Setup,
+    evaluate,
+    plot_decider_means,
+    run_seed,
+    simulate_run,
+    summarise,
+)
 from hrc_drake.hri.populations import default_habit, make_operator_model
 from hrc_drake.resources import models_dir
 from hrc_drake.tasks.costs import operator_seconds, table_from_seconds, task_edges
@@ -56,24 +63,16 @@ PLOT = Path(__file__).parent.parent / "docs" / "evaluation.png"
 
 
 def plot_means(table: dict, path: Path) -> None:
-    """Mean and p95 simulated seconds per population: the paper's agent against ours."""
-    from hrc_drake.tasks.plots import plt, save_figure
-
-    deciders = ["paper-q", "time", "mpc", "worst-case"]
-    fig, ax = plt.subplots(figsize=(8, 3.8))
-    width = 0.8 / len(deciders)
-    for k, d in enumerate(deciders):
-        x = np.arange(len(MODELS)) + (k - (len(deciders) - 1) / 2) * width
-        mean = [table[d, m]["mean_time"] for m in MODELS]
-        p95 = [table[d, m]["p95_time"] for m in MODELS]
-        ax.bar(x, mean, width, label=d)
-        ax.scatter(x, p95, marker="_", color="black", s=60, zorder=3)
-    ax.set_xticks(np.arange(len(MODELS)), MODELS)
-    ax.set_yscale("log")
-    ax.set_ylabel("assembly time [s] (bar: mean, tick: p95)")
-    ax.set_title("flange case, task level: the paper's Q-learning agent against ours")
-    ax.legend(fontsize=8)
-    save_figure(fig, path, dpi=110)
+    """Mean and p95 simulated seconds per population, every decider (the paper's agent, the
+    exact unit-cost policy and ours), on linear axes fitted to each population
+    (`hrc_drake.evaluate.plot_decider_means`)."""
+    plot_decider_means(
+        table,
+        list(DECIDERS),
+        MODELS,
+        path,
+        "flange case, task level, 10,000 runs per pair: the paper's Q-learning agent against ours",
+    )
 
 
 class HabitOracle:

@@ -8,14 +8,14 @@ The plate, the tray and the parts are generated from the spec; `--placements` se
 """
 
 import argparse
+import dataclasses
 from pathlib import Path
 
 import matplotlib.image
 import numpy as np
 
-from hrc_drake.cell import CellScenario, build_cell, simulate_cell
-from hrc_drake.cell_models import CellDesign
-from hrc_drake.tasks.spec import load_spec
+from hrc_drake.cell import make_cell_station, simulate_station, station_scenario
+from hrc_drake.hri.scenario import BodyConfig, Scenario
 
 
 def main() -> None:
@@ -26,16 +26,22 @@ def main() -> None:
     parser.add_argument("--settle", type=float, default=0.2, help="seconds simulated first")
     args = parser.parse_args()
 
-    design = CellDesign.of(load_spec(args.assembly))
+    # The cell alone: the operator's body would stand in front of the camera.
+    scenario = Scenario(body=BodyConfig(enabled=False))
+    if args.assembly is not None:
+        scenario = dataclasses.replace(scenario, assembly=str(args.assembly))
     placements = dict(item.split("=") for item in args.placements.split(",") if item)
-    station = build_cell(CellScenario(design=design, initial_placements=placements, camera=True))
+    camera = dataclasses.replace(scenario.station.camera, enabled=True)
+    scenario = station_scenario(scenario, initial_placements=placements, camera=camera)
+    station = make_cell_station(scenario)
+    design = station.design
     print(f"{design.spec.name}: {design.slots} slots, parts {', '.join(design.instance_names)}")
 
     context = station.create_default_context()
-    simulate_cell(station, context, args.settle)
+    simulate_station(station, context, args.settle)
     print("the SlotMonitor reads:", sorted(station.configuration(context).tokens()) or "empty")
 
-    image = station.diagram.GetOutputPort("camera.rgb_image").Eval(context)
+    image = station.diagram.GetOutputPort("sim.camera.rgb_image").Eval(context)
     matplotlib.image.imsave(args.out, np.array(image.data, copy=True)[:, :, :3])
     print(f"wrote {args.out}")
 

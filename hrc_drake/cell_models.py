@@ -14,7 +14,8 @@ Geometry (metres):
   the seat floor, its underside `SEAT_GAP` above the surrounding surface. So the part's weight is
   carried by the seat floor alone, and a seat frame sits where the part's underside (its body
   origin) is when seated: `X_W_part = X_W_seat` holds at rest.
-- Every collision geometry is compliant hydroelastic (`HYDRO_MODULUS`). A rigid tray was tried
+- Every collision geometry is compliant hydroelastic (its material is the scenario's
+  `physics.contact`, applied by the station). A rigid tray was tried
   first: a 67 g oval flange resting on it (compliant box on rigid box) was thrown out of its
   pocket within 0.1 s at a 5 ms step, while compliant-on-compliant rests.
 - Part shapes follow the part's role in the spec: a host part (others mount on it) is a plate
@@ -39,8 +40,13 @@ from pydrake.multibody.tree import ModelInstanceIndex
 
 from hrc_drake.layout import CellLayout, layout_from
 from hrc_drake.resources import package_uri
-from hrc_drake.robot_models import add_robot, make_parser
+from hrc_drake.robot_models import GRIPPER, UR3, add_robot, make_parser
 from hrc_drake.tasks.spec import AssemblySpec
+
+# Model instance names of the cell's fixed models (the parts are named by `CellDesign`).
+PLATE = "base_plate"
+TRAY = "tray"
+TABLE = "table"
 
 POCKET_DEPTH = 0.004
 SEAT_GAP = 0.0005
@@ -61,10 +67,6 @@ TRAY_EDGE_ROOM = 0.030  # from the tray's end to the first part's edge
 TRAY_COLUMN_GAP = 0.0625  # between the edges of parts in neighbouring columns: two fingers' room
 TRAY_ROW_GAP = 0.015  # between the ends of parts lying end to end in one column
 
-HYDRO_MODULUS = 2.0e7
-RESOLUTION_HINT = 0.01
-DISSIPATION = 10.0
-MU_STATIC, MU_DYNAMIC = 0.6, 0.5
 ALUMINIUM_DENSITY = 2700.0
 
 # Height of the gripper's tcp above a part's underside when it holds the part. The RG2 pads reach
@@ -89,33 +91,24 @@ def _v(values) -> str:
     return " ".join(_f(v) for v in values)
 
 
-def _proximity(compliant: bool, hint: bool = False) -> str:
-    lines = ["        <drake:proximity_properties>"]
+def _proximity(compliant: bool) -> str:
+    # A compliant geometry states nothing: compliance and the whole material (modulus, mesh
+    # size, dissipation, friction) are the scenario's `physics.contact`, which the station hands
+    # to Drake as SceneGraphConfig defaults. Only a rigid geometry says so.
     if compliant:
-        lines += [
-            "          <drake:compliant_hydroelastic/>",
-            f"          <drake:hydroelastic_modulus>{HYDRO_MODULUS:g}</drake:hydroelastic_modulus>",
-        ]
-        if hint:
-            hint_tag = "drake:mesh_resolution_hint"
-            lines.append(f"          <{hint_tag}>{RESOLUTION_HINT}</{hint_tag}>")
-    else:
-        lines.append("          <drake:rigid_hydroelastic/>")
-    lines += [
-        f"          <drake:hunt_crossley_dissipation>{DISSIPATION}"
-        "</drake:hunt_crossley_dissipation>",
-        f"          <drake:mu_static>{MU_STATIC}</drake:mu_static>",
-        f"          <drake:mu_dynamic>{MU_DYNAMIC}</drake:mu_dynamic>",
-        "        </drake:proximity_properties>",
-    ]
-    return "\n".join(lines)
+        return ""
+    return (
+        "\n        <drake:proximity_properties>\n"
+        "          <drake:rigid_hydroelastic/>\n"
+        "        </drake:proximity_properties>"
+    )
 
 
 def _collision_box(box: Box, compliant: bool) -> str:
     return (
         f'      <collision name="{box.name}">\n'
         f"        <pose>{_v(box.centre)} 0 0 0</pose>\n"
-        f"        <geometry><box><size>{_v(box.size)}</size></box></geometry>\n"
+        f"        <geometry><box><size>{_v(box.size)}</size></box></geometry>"
         f"{_proximity(compliant)}\n"
         f"      </collision>"
     )
@@ -243,12 +236,11 @@ def plate_sdf(slots: int, pitch: float) -> str:
     mass = ALUMINIUM_DENSITY * length * PLATE_WIDTH * PLATE_THICKNESS
     link = _inertial(mass, size, PLATE_THICKNESS / 2) + "\n" + "\n".join(parts)
     frames = [
-        _frame(n, "base_plate", (x, 0, PLATE_THICKNESS + SEAT_GAP, 0, 0, 0))
-        for n, x in seats.items()
+        _frame(n, PLATE, (x, 0, PLATE_THICKNESS + SEAT_GAP, 0, 0, 0)) for n, x in seats.items()
     ]
     return _model(
-        "base_plate",
-        "base_plate",
+        PLATE,
+        PLATE,
         f"Body frame at the plate's underside centre; +x from slot 1 to slot {slots}.",
         link,
         frames,
@@ -288,7 +280,7 @@ def oval_sdf(model: str, body: str) -> str:
         cyl = f"<cylinder><radius>{_f(r)}</radius><length>{_f(thick)}</length></cylinder>"
         parts.append(
             f'      <collision name="{tag}">\n        <pose>{_v(pose)}</pose>\n'
-            f"        <geometry>{cyl}</geometry>\n{_proximity(True, hint=True)}\n      </collision>"
+            f"        <geometry>{cyl}</geometry>{_proximity(True)}\n      </collision>"
         )
         parts.append(_visual(tag + "_visual", pose, cyl, rgba))
         parts.append(
@@ -445,9 +437,7 @@ def tray_sdf(homes: list[TrayHome], size: tuple[float, float, float]) -> str:
                 Box(f"{tag}_rim_yn", (pa, TRAY_RIM, rim_h), (px, py - (pb + TRAY_RIM) / 2, rz)),
             ]
         frames.append(
-            _frame(
-                f"home_{home.instance}", "tray", (home.x, home.y, thick + BOSS[2], 0, 0, home.yaw)
-            )
+            _frame(f"home_{home.instance}", TRAY, (home.x, home.y, thick + BOSS[2], 0, 0, home.yaw))
         )
     parts = [_collision_box(bx, compliant=True) for bx in boxes]
     parts += [
@@ -456,8 +446,8 @@ def tray_sdf(homes: list[TrayHome], size: tuple[float, float, float]) -> str:
     ]
     link = _inertial(2.0, size, thick / 2) + "\n" + "\n".join(parts)
     return _model(
-        "tray",
-        "tray",
+        TRAY,
+        TRAY,
         "Body frame at the tray's underside centre; a part's boss rests on the tray top.",
         link,
         frames,
@@ -516,7 +506,7 @@ class CellDesign:
         instances, bodies = [], set()
         for part in spec.parts:
             body = _snake(part.name) or part.symbol.lower()
-            if body in bodies or body in ("table", "base_plate", "tray", "ur3", "rg2"):
+            if body in bodies or body in (TABLE, PLATE, TRAY, UR3, GRIPPER):
                 body = f"{body}_{part.symbol.lower()}"
             bodies.add(body)
             hosted = any(m.on == part.symbol for m in spec.mounts)
@@ -662,17 +652,17 @@ def add_cell_models(
     parser = make_parser(plant)
     instances: dict[str, ModelInstanceIndex] = {}
     if include_robot:
-        instances["ur3"], instances["rg2"] = add_robot(plant)
+        instances[UR3], instances[GRIPPER] = add_robot(plant)
     (table,) = parser.AddModels(url=package_uri("cell/table.sdf"))
     plant.WeldFrames(
         plant.world_frame(),
-        plant.GetBodyByName("table", table).body_frame(),
+        plant.GetBodyByName(TABLE, table).body_frame(),
         RigidTransform(np.asarray(TABLE_POSITION)),
     )
-    instances["table"] = table
+    instances[TABLE] = table
     for name, text, X_W in (
-        ("base_plate", design.plate_sdf(), design.X_W_plate()),
-        ("tray", design.tray_sdf(), design.X_W_tray()),
+        (PLATE, design.plate_sdf(), design.X_W_plate()),
+        (TRAY, design.tray_sdf(), design.X_W_tray()),
     ):
         (model,) = parser.AddModelsFromString(text, "sdf")
         plant.WeldFrames(plant.world_frame(), plant.GetBodyByName(name, model).body_frame(), X_W)
@@ -718,8 +708,8 @@ def check_cell_models(plant: MultibodyPlant, scene_graph, design: CellDesign) ->
             raise CellModelError(f"the cell has no model instance {name!r} ({what})")
         return plant.GetModelInstanceByName(name)
 
-    plate = instance("base_plate", "the base plate")
-    plate_body = plant.GetBodyByName("base_plate", plate)
+    plate = instance(PLATE, "the base plate")
+    plate_body = plant.GetBodyByName(PLATE, plate)
     names = set(_collision_names(plant, inspector, plate_body))
     seats = 0
     while plant.HasFrameNamed(f"slot_{seats + 1}", plate):
@@ -732,7 +722,7 @@ def check_cell_models(plant: MultibodyPlant, scene_graph, design: CellDesign) ->
     for k in range(1, seats + 1):
         if f"slot_{k}_seat" not in names:
             raise CellModelError(f"the plate's slot {k} has no floor geometry slot_{k}_seat")
-    tray = instance("tray", "the tray")
+    tray = instance(TRAY, "the tray")
     counts: dict[str, int] = {}
     for part in design.parts:
         model = instance(part.name, f"part {part.symbol} of the spec")

@@ -214,8 +214,9 @@ def table2_rows(space: StateSpace, policy: Policy) -> list[dict]:
             ours = [space.name(space.index(s)) for s in states]
         except InfeasibleTaskError as err:
             note = (
-                f"script n/a: its {err.task} at step {err.step} is not feasible in state "
-                f"{space.name(space.index(err.state))}, where this policy's route is then"
+                f"script n/a: the row's {err.task} at step {err.step} is not feasible in state "
+                f"{space.name(space.index(err.state))}, which this policy's route reaches at "
+                "that step"
             )
         except ScriptPastEndError as err:
             note = (
@@ -260,9 +261,24 @@ _MARKS = {
 }
 
 
+def check_table2_spec(space: StateSpace) -> None:
+    """UsageError unless `space` is the flange case's (the default spec): Table 2's scripts and
+    published sequences are the flange's tasks and states, meaningless on another spec."""
+    flange = load_spec()
+    if space.spec.spec_hash != flange.spec_hash:
+        source = space.spec.source
+        raise UsageError(
+            f"--assembly {source}: Table 2 belongs to the flange case (its rows script the "
+            f"flange's tasks and name its states) and says nothing about {space.spec.name!r}; "
+            f"drop --assembly, or script this spec with `hrc-drake react --assembly {source} "
+            "--operator 1:TASK`"
+        )
+
+
 def cmd_table2(args) -> int:
-    """Print Table 2: published, minimum-effort and this policy's sequences."""
+    """Print Table 2: published, minimum-effort and this policy's sequences (flange case only)."""
     space = _space(args)
+    check_table2_spec(space)
     policy = _policy(args, space)
     rows = table2_rows(space, policy)
     if args.json:
@@ -305,12 +321,28 @@ def cmd_costs(args) -> int:
 def cmd_simulate(args) -> int:
     """Run a scenario through the Drake cell (headless) and record it."""
     from hrc_drake.cell.command import simulate_command
+    from hrc_drake.cell.interface import StationLinkError
     from hrc_drake.cell_models import CellModelError
 
     try:
         return simulate_command(args)
     except CellModelError as err:
         print(f"hrc-drake simulate: error: {err}", file=sys.stderr)
+        return EXIT_USAGE
+    except StationLinkError as err:
+        print(f"hrc-drake simulate: error: {err}", file=sys.stderr)
+        return 1
+
+
+def cmd_station(args) -> int:
+    """Serve a scenario's simulated station over LCM (for `simulate --station-lcm`)."""
+    from hrc_drake.cell.remote import station_command
+    from hrc_drake.cell_models import CellModelError
+
+    try:
+        return station_command(args)
+    except CellModelError as err:
+        print(f"hrc-drake station: error: {err}", file=sys.stderr)
         return EXIT_USAGE
 
 
@@ -391,7 +423,40 @@ def build_parser() -> argparse.ArgumentParser:
         help="you are the operator: serve Meshcat (open the printed URL), run at the wall "
         "clock's pace and wait for your click at every task boundary",
     )
-    from hrc_drake.evaluate import add_evaluate_parser
+    p.add_argument(
+        "--port",
+        type=int,
+        default=None,
+        help="the port Meshcat serves with --live or --record (default: the first free from 7000)",
+    )
+    p.add_argument(
+        "--station-lcm",
+        metavar="URL",
+        default=None,
+        help="run the controller against the station `hrc-drake station` serves on this LCM URL "
+        "(e.g. udpm://239.241.129.92:20185?ttl=0), started with the same scenario options",
+    )
+    p = add("station", cmd_station, "serve a scenario's simulated station over LCM")
+    p.add_argument("--scenario", default=None, help="as for simulate")
+    p.add_argument("--scenario-text", default=None, help="as for simulate")
+    p.add_argument(
+        "--operator", default=None, help="the simulated operator's script, as for simulate"
+    )
+    p.add_argument("--lean", action="store_true", help="as for simulate")
+    p.add_argument(
+        "--lcm",
+        metavar="URL",
+        default=None,
+        help="LCM URL to serve on (default udpm://239.241.129.92:20185?ttl=0: this machine only)",
+    )
+    p.add_argument(
+        "--timeout",
+        type=float,
+        default=60.0,
+        help="seconds to wait for the controller to come, and for each of its later messages",
+    )
+    p.set_defaults(policy=None)
+    from hrc_drake.evaluate_command import add_evaluate_parser
 
     add_evaluate_parser(add)
     return parser

@@ -14,10 +14,13 @@ its likely answers); at task level a boundary whose task was among them costs no
 other the motion layer's median planning time (`PLANNING_SECONDS`).
 Time figures (mean, p95, worst) are over the completed runs.
 
-At cell level (``--cell``, `hrc_drake.cell.evaluate`) each run is a closed-loop simulation of the
-physical cell: times are the cell's simulated seconds, and the robot's idle time at a boundary is
-the wall time it waited for the planner after the operator's answer (``plan_ready_rate``: the
-share of boundaries whose plan was made ahead, while the operator bolted).
+At cell level (``--cell``) each run is a closed-loop simulation of the physical cell: times are
+the cell's simulated seconds, and the robot's idle time at a boundary is the wall time it waited
+for the planner after the operator's answer (``plan_ready_rate``: the share of boundaries whose
+plan was made ahead, while the operator bolted). This module does not know the cell: `Setup.cell`
+is an object that plays cell runs (`CellRuns`; `hrc_drake.cell.evaluate.CellOptions`), so the
+dependency goes one way, from the cell to here. The command line is
+`hrc_drake.evaluate_command`.
 
 Runs spread over local processes (``workers``) or, with ``ray``, over a Ray cluster (the optional
 extra ``hrc_drake[ray]``): each worker builds its own decider (and, at cell level, its own
@@ -27,18 +30,16 @@ way it runs (but for the ``wall_*`` figures and, at cell level, the measured idl
 
 from __future__ import annotations
 
-import json
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from hrc_drake.hri.populations import make_operator_model
-from hrc_drake.paths import UsageError, check_output_path
-from hrc_drake.tasks.costs import CostTable, load_cost_table, operator_seconds
+from hrc_drake.paths import UsageError
+from hrc_drake.tasks.costs import CostTable, operator_seconds
 from hrc_drake.tasks.deciders import DECIDERS, DEVIATION_SECONDS, make_decider
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.tokens import UNDO
@@ -138,6 +139,22 @@ def _task_result(done, seconds, tasks, undos, deviations, ready: list[bool]) -> 
     return RunResult(done, seconds, tasks, undos, deviations, idle, tuple(ready))
 
 
+class CellRuns(Protocol):
+    """What plays runs through the physical cell (picklable: it travels to every worker)."""
+
+    def prepare(self, space: StateSpace) -> Any:
+        """What every run of a worker shares (the scenario); errors here are the user's input."""
+
+    def check(self, operator, model_name: str) -> None:
+        """UsageError for an operator model the cell cannot play."""
+
+    def play(self, prepared: Any, space: StateSpace, decider, operator) -> RunResult:
+        """One run; the decider is not reset."""
+
+    def describe(self, space: StateSpace) -> dict[str, Any]:
+        """The report's keys naming what ran (the scenario, its overrides)."""
+
+
 @dataclass(frozen=True)
 class Setup:
     """What every worker needs to play runs (picklable)."""
@@ -149,8 +166,8 @@ class Setup:
     params: dict[str, Any]
     seed: int
     deviation_seconds: float = DEVIATION_SECONDS
-    cell: Any = None
-    """None: task level; an `hrc_drake.cell.evaluate.CellOptions`: runs through the cell."""
+    cell: CellRuns | None = None
+    """None: task level; else runs through the cell (`hrc_drake.cell.evaluate.CellOptions`)."""
 
 
 _WORKER: dict[str, Any] = {}
@@ -164,9 +181,7 @@ def _prepare(setup: Setup) -> None:
         setup.decider, setup.space, setup.costs, setup.seed, setup.deviation_seconds
     )
     if setup.cell is not None:
-        from hrc_drake.cell.evaluate import evaluation_scenario
-
-        _WORKER["scenario"] = evaluation_scenario(setup.cell, setup.space.spec)
+        _WORKER["cell"] = setup.cell.prepare(setup.space)
 
 
 def _play(run: int) -> RunResult:
@@ -176,14 +191,16 @@ def _play(run: int) -> RunResult:
         setup.operator_model, setup.space, seed=run_seed(setup.seed, run), **setup.params
     )
     if setup.cell is not None:
-        from hrc_drake.cell.evaluate import play_cell_run
-
-        return play_cell_run(_WORKER["scenario"], setup.space, decider, operator)
+        return setup.cell.play(_WORKER["cell"], setup.space, decider, operator)
     return simulate_run(setup.space, setup.costs, decider, operator, setup.deviation_seconds)
 
 
 def _play_many(runs: list[int]) -> list[RunResult]:
     return [_play(i) for i in runs]
+
+
+def _play_chunk(runs: list[int]) -> tuple[list[int], list[RunResult]]:
+    return runs, _play_many(runs)
 
 
 class _RayWorker:
@@ -197,7 +214,10 @@ class _RayWorker:
 
 
 def _chunks(runs: int, workers: int, per_worker: int = 4) -> list[list[int]]:
-    """Run indices in contiguous chunks, about `per_worker` per worker."""
+    """Run indices in contiguous chunks, about `per_worker` per worker (`per_worker` 0: one run
+    per chunk, for long runs such as the cell's, so that progress shows every run)."""
+    if per_worker == 0:
+        return [[i] for i in range(runs)]
     size = max(1, -(-runs // (per_worker * workers)))
     return [list(range(i, min(i + size, runs))) for i in range(0, runs, size)]
 
@@ -255,7 +275,7 @@ def _run_ray(setup: Setup, runs: int, workers: int | None, address: str | None, 
             workers = max(1, int(ray.cluster_resources().get("CPU", 1)))
         actor = ray.remote(num_cpus=1)(_RayWorker)
         actors = [actor.remote(setup) for _ in range(workers)]
-        chunks = _chunks(runs, workers)
+        chunks = _chunks(runs, workers, 0 if setup.cell is not None else 4)
         pending = {actors[k % workers].play.remote(chunk): chunk for k, chunk in enumerate(chunks)}
         results: list[RunResult | None] = [None] * runs
         done = 0
@@ -293,10 +313,8 @@ def evaluate(
     if setup.decider not in DECIDERS:
         make_decider(setup.decider, setup.space, setup.costs)
     if setup.cell is not None:
-        from hrc_drake.cell.evaluate import check_cell_operator, evaluation_scenario
-
-        check_cell_operator(operator, setup.operator_model)
-        evaluation_scenario(setup.cell, setup.space.spec)
+        setup.cell.check(operator, setup.operator_model)
+        setup.cell.prepare(setup.space)
     start = time.perf_counter()
     if ray:
         results, workers = _run_ray(setup, runs, workers, ray_address, progress)
@@ -314,13 +332,17 @@ def evaluate(
 
         backend = "processes"
         ctx = multiprocessing.get_context("spawn")
-        chunks = _chunks(runs, workers)
-        results = []
+        chunks = _chunks(runs, workers, 0 if setup.cell is not None else 4)
+        results = [None] * runs
+        done = 0
         with ctx.Pool(workers, initializer=_prepare, initargs=(setup,)) as pool:
-            for chunk in pool.imap(_play_many, chunks):
-                results.extend(chunk)
+            # Unordered: progress counts every finished chunk, not the longest prefix of them.
+            for indices, chunk in pool.imap_unordered(_play_chunk, chunks):
+                for i, result in zip(indices, chunk, strict=True):
+                    results[i] = result
+                done += len(chunk)
                 if progress is not None:
-                    progress(len(results), runs)
+                    progress(done, runs)
     wall = time.perf_counter() - start
     report = summarise(setup, results)
     report["wall_seconds"] = round(wall, 3)
@@ -369,22 +391,11 @@ def summarise(setup: Setup, results: list[RunResult]) -> dict[str, Any]:
                 # The cell's robot waits for the answer before it moves: no deviation time.
                 "deviation_seconds": 0.0,
                 "collisions": int(sum(r.collisions for r in results)),
-                "scenario": setup.cell.scenario,
+                **setup.cell.describe(setup.space),
                 "errors": errors[:5],
             }
         )
     return report
-
-
-def parse_params(items: list[str] | None) -> dict[str, str]:
-    """``["p=0.3", "order=S23"]`` -> ``{"p": "0.3", "order": "S23"}``; UsageError otherwise."""
-    params = {}
-    for item in items or []:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip():
-            raise UsageError(f"--param {item!r}: write KEY=VALUE, e.g. --param p=0.3")
-        params[key.strip()] = value.strip()
-    return params
 
 
 def plot_times(report: dict[str, Any], path: Path) -> None:
@@ -402,135 +413,54 @@ def plot_times(report: dict[str, Any], path: Path) -> None:
     save_figure(fig, path)
 
 
-def cmd_evaluate(args) -> int:
-    """`hrc-drake evaluate`: Monte Carlo runs of a decider against an operator model."""
-    from hrc_drake.tasks.graph import generate_states
-    from hrc_drake.tasks.spec import load_spec
+def plot_decider_means(
+    reports: dict[tuple[str, str], dict[str, Any]],
+    deciders: list[str],
+    models: list[str],
+    path: Path,
+    title: str,
+) -> None:
+    """Mean and p95 assembly time of each decider, one panel per operator model (columns) and
+    figure (rows: mean, p95), on linear axes fitted to each panel: the deciders differ by
+    fractions of a second within a population and by tens of seconds across populations, so a
+    shared axis (or a log one) would hide the differences that matter. Every value is printed
+    beside its dot. `reports[decider, model]` is a `summarise` report."""
+    from matplotlib.ticker import MaxNLocator
 
-    plot = None
-    if args.plot is not None:
-        from hrc_drake.tasks.plots import FORMATS
+    from hrc_drake.tasks.plots import plt, save_figure
 
-        plot = check_output_path(args.plot, "--plot", FORMATS)
-    if args.decider not in DECIDERS:
-        raise UsageError(f"unknown decider {args.decider!r}; known deciders: {', '.join(DECIDERS)}")
-    unused = ["--gamma"] if args.gamma is not None else []
-    if args.mistake_prob != 0.05:  # the common option's default
-        unused.append("--mistake-prob")
-    if unused:
-        raise UsageError(
-            f"{', '.join(unused)}: not used by evaluate (each decider has its own model); set "
-            "the operator population's parameters with --param, e.g. --param p=0.3"
-        )
-    cell_only = [f for f, v in (("--lean", args.lean), ("--scenario", args.scenario)) if v]
-    if args.scenario_text:
-        cell_only.append("--scenario-text")
-    if cell_only and not args.cell:
-        raise UsageError(f"{', '.join(cell_only)}: only for runs through the cell; add --cell")
-    space = generate_states(load_spec(args.assembly))
-    params = parse_params(args.param)
-    make_operator_model(args.operator_model, space, seed=0, **params)
-    cell = None
-    if args.cell:
-        from hrc_drake.cell.evaluate import DEFAULT_BASE_SCENARIO, CellOptions
-        from hrc_drake.cell.scenario import LEAN
-
-        overrides = [t for t in (LEAN if args.lean else None, *(args.scenario_text or [])) if t]
-        cell = CellOptions(args.scenario or DEFAULT_BASE_SCENARIO, tuple(overrides))
-    runs = args.runs if args.runs is not None else (DEFAULT_CELL_RUNS if cell else DEFAULT_RUNS)
-    if args.costs is not None:
-        costs = load_cost_table(args.costs, space)
-    else:
-        from hrc_drake.cell.costs import default_cost_table
-
-        costs = default_cost_table(space)
-    setup = Setup(space, costs, args.decider, args.operator_model, params, args.seed, cell=cell)
-    from hrc_drake.progress import ProgressLine
-
-    misfits: tuple[type[Exception], ...] = ()  # none at task level (which needs no Drake)
-    if cell is not None:
-        from hrc_drake.cell_models import CellModelError
-
-        misfits = (CellModelError,)
-
-    level = "cell" if cell else "evaluate"
-    with ProgressLine(f"{level} {args.decider} vs {args.operator_model}", unit="run") as line:
-        try:
-            report = evaluate(
-                setup,
-                runs,
-                args.workers,
-                progress=line.update,
-                ray=args.ray is not None,
-                ray_address=args.ray or None,
-            )
-        except misfits as err:
-            raise UsageError(str(err)) from None
-    if plot is not None:
-        plot_times(report, plot)
-    report.pop("times")
-    if args.json:
-        json.dump(report, sys.stdout, indent=1)
-        sys.stdout.write("\n")
-        return 0
-    for key, value in report.items():
-        print(f"{key:22} {value}")
-    return 0
-
-
-DEFAULT_RUNS = 1000
-DEFAULT_CELL_RUNS = 20
-
-
-def add_evaluate_parser(add) -> None:
-    """Register `evaluate` with `add(name, func, help)` of `hrc_drake.cli.build_parser`."""
-    p = add("evaluate", cmd_evaluate, "Monte Carlo: a decider against an operator population")
-    p.add_argument("--decider", required=True, help=f"one of {', '.join(DECIDERS)}")
-    p.add_argument(
-        "--operator-model",
-        required=True,
-        help="follows, random, habitual, mistake-prone, change-of-mind, slow",
+    rows = (("mean_time", "mean [s]"), ("p95_time", "p95 [s]"))
+    fig, axes = plt.subplots(
+        len(rows), len(models), figsize=(2.3 * len(models), 1.2 + 0.5 * len(deciders) * 2)
     )
-    p.add_argument(
-        "--runs",
-        type=int,
-        default=None,
-        help=f"runs (default {DEFAULT_RUNS}; with --cell {DEFAULT_CELL_RUNS})",
-    )
-    p.add_argument(
-        "--workers",
-        type=int,
-        default=None,
-        help="local processes (default 1); with --ray, Ray actors (default one per CPU)",
-    )
-    p.add_argument(
-        "--ray",
-        nargs="?",
-        const="",
-        default=None,
-        metavar="ADDRESS",
-        help="spread the runs on a Ray cluster at ADDRESS (no address: a local one); needs the "
-        "extra hrc_drake[ray]",
-    )
-    p.add_argument(
-        "--cell",
-        action="store_true",
-        help="run through the physical cell (closed-loop simulations; dozens, not thousands)",
-    )
-    p.add_argument(
-        "--scenario",
-        default=None,
-        help="with --cell: the base scenario (default row1-optimal; its operator is replaced)",
-    )
-    p.add_argument("--lean", action="store_true", help="with --cell: short holds (tests)")
-    p.add_argument(
-        "--scenario-text",
-        action="append",
-        default=None,
-        help="with --cell: YAML overrides of the base scenario",
-    )
-    p.add_argument("--plot", type=Path, default=None, help="histogram of assembly times")
-    p.add_argument("--costs", type=Path, default=None, help="cost table (default: the cell's)")
-    p.add_argument(
-        "--param", action="append", default=None, help="operator model parameter KEY=VALUE"
-    )
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    y = np.arange(len(deciders))[::-1]
+    for r, (key, label) in enumerate(rows):
+        for c, model in enumerate(models):
+            ax = axes[r][c]
+            values = [reports[d, model][key] for d in deciders]
+            ax.scatter(values, y, c=[colours[k % len(colours)] for k in range(len(deciders))])
+            low, high = min(values), max(values)
+            pad = max(0.15 * (high - low), 0.02 * high, 0.05)
+            ax.set_xlim(low - pad, high + 3 * pad)
+            for value, yy in zip(values, y, strict=True):
+                ax.annotate(
+                    f"{value:.2f}",
+                    (value, yy),
+                    xytext=(4, 0),
+                    textcoords="offset points",
+                    va="center",
+                    fontsize=7,
+                )
+            ax.set_ylim(-0.6, len(deciders) - 0.4)
+            ax.set_yticks(y, deciders if c == 0 else [""] * len(deciders))
+            ax.xaxis.set_major_locator(MaxNLocator(4))
+            ax.tick_params(axis="x", labelsize=7)
+            ax.grid(axis="x", alpha=0.3)
+            if r == 0:
+                ax.set_title(model, fontsize=9)
+            if c == 0:
+                ax.set_ylabel(label)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    save_figure(fig, path, dpi=110)

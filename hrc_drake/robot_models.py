@@ -14,6 +14,10 @@ from pydrake.multibody.tree import ModelInstanceIndex
 
 from hrc_drake.resources import models_dir, package_uri
 
+# Model instance names of the arm and the gripper (models/cell/robot.dmd.yaml).
+UR3 = "ur3"
+GRIPPER = "rg2"
+
 UR3_JOINTS: tuple[str, ...] = (
     "shoulder_pan_joint",
     "shoulder_lift_joint",
@@ -60,4 +64,4 @@ def add_robot(plant: MultibodyPlant) -> tuple[ModelInstanceIndex, ModelInstanceI
     directives_path = parser.package_map().ResolveUrl(package_uri(ROBOT_DIRECTIVES))
     directives = LoadModelDirectives(directives_path)
     ProcessModelDirectives(directives, plant, parser)
-    return plant.GetModelInstanceByName("ur3"), plant.GetModelInstanceByName("rg2")
+    return plant.GetModelInstanceByName(UR3), plant.GetModelInstanceByName(GRIPPER)

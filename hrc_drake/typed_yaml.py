@@ -12,6 +12,7 @@ Supported field types: `str`, `int`, `float` (an int is accepted), `bool`, `X | 
 from __future__ import annotations
 
 import dataclasses
+import re
 import types
 import typing
 from typing import Any
@@ -23,8 +24,32 @@ class TypedYamlError(ValueError):
     """YAML that does not fit its schema; the message names the key."""
 
 
+class YamlSyntaxError(TypedYamlError):
+    """Text that is not YAML; the message names the source, the line and the column."""
+
+
+# A number PyYAML (YAML 1.1) reads as a string because it has no dot, e.g. 5e-3; YAML 1.2 and
+# Drake's yaml_load_typed read it as a number, so it is one here too.
+_EXPONENT_NUMBER = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+$")
+
+
 def _type_name(tp: Any) -> str:
     return getattr(tp, "__name__", str(tp))
+
+
+def yaml_error_line(err: yaml.YAMLError, source: str) -> str:
+    """PyYAML's several-line message as one line naming `source`, the line and the column:
+    ``flange.yaml, line 3, column 6: bad YAML: expected ',' or '}', but got ':' (while parsing a
+    flow mapping from line 2, column 7)``."""
+    mark = getattr(err, "problem_mark", None)
+    problem = getattr(err, "problem", None) or str(err).splitlines()[0]
+    where = source if mark is None else f"{source}, line {mark.line + 1}, column {mark.column + 1}"
+    context = getattr(err, "context", None)
+    context_mark = getattr(err, "context_mark", None)
+    if context and context_mark is not None:
+        context = f"{context} from line {context_mark.line + 1}, column {context_mark.column + 1}"
+    extra = f" ({context})" if context else ""
+    return f"{where}: bad YAML: {problem}{extra}"
 
 
 def _convert(value: Any, tp: Any, key: str, default: Any = dataclasses.MISSING) -> Any:
@@ -47,6 +72,8 @@ def _convert(value: Any, tp: Any, key: str, default: Any = dataclasses.MISSING) 
             raise TypedYamlError(f"{key}: expected a mapping, got {value!r}")
         return {str(k): _convert(v, args[1], f"{key}.{k}") for k, v in value.items()}
     if tp is float:
+        if isinstance(value, str) and _EXPONENT_NUMBER.match(value.strip()):
+            return float(value)
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise TypedYamlError(f"{key}: expected a number, got {value!r}")
         return float(value)
@@ -86,16 +113,24 @@ def _merge(data: Any, schema: type, where: str, base: Any = None) -> Any:
     return obj
 
 
-def load_typed(schema: type, *, text: str | None = None, data: Any = None, defaults: Any = None):
+def load_typed(
+    schema: type,
+    *,
+    text: str | None = None,
+    data: Any = None,
+    defaults: Any = None,
+    source: str = "YAML",
+):
     """An instance of the dataclass `schema` from YAML `text` (or parsed `data`).
 
     Keys missing from the YAML keep the values of `defaults` (an instance of `schema`) or the
-    schema's own defaults; nested mappings merge key by key.
+    schema's own defaults; nested mappings merge key by key. A syntax error in `text` is a
+    TypedYamlError naming `source` (a file name), the line and the column.
     """
     if text is not None:
         try:
             data = yaml.safe_load(text)
         except yaml.YAMLError as err:
-            raise TypedYamlError(f"bad YAML: {err}") from err
+            raise YamlSyntaxError(yaml_error_line(err, source)) from None
     base = dataclasses.replace(defaults) if defaults is not None else None
     return _merge(data, schema, "", base)

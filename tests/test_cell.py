@@ -14,15 +14,17 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.solvers import Solve
 
 from hrc_drake.cell import (
-    CellScenario,
     PartStatus,
-    build_cell,
-    simulate_cell,
+    make_cell_station,
+    simulate_station,
+    station_scenario,
 )
-from hrc_drake.cell.builder import UR3_READY
-from hrc_drake.cell.scenario import load_cell_scenario, plant_config
+from hrc_drake.cell.controller import COMMANDED, MEASURED
+from hrc_drake.cell.scenario import load_cell_scenario, plant_config, scene_graph_config
+from hrc_drake.cell.welds import Weld
 from hrc_drake.cell_models import CellDesign, CellModelError, add_cell_models
-from hrc_drake.hri.scenario import ScenarioError
+from hrc_drake.hri.messages import Indication
+from hrc_drake.hri.scenario import Scenario, ScenarioError
 from hrc_drake.motion.poses import default_layout
 from hrc_drake.resources import models_dir
 from hrc_drake.robot_models import add_robot, make_parser
@@ -31,6 +33,14 @@ from hrc_drake.tasks.spec import load_spec
 
 PARTS = ("oval_flange_1", "oval_flange_2", "square_flange")
 SETTLE = 0.5
+# What only the simulator offers (docs/station.md); the controller never reads these.
+SIM_PORTS = (
+    "sim.welds",
+    "sim.plant_state",
+    "sim.contact_results",
+    "sim.body_poses",
+    "sim.query_object",
+)
 
 # Table 1 of the paper, one row per distinct configuration (flange-case.md; states 17-20 repeat
 # 11, 12, 9, 10 in another order).
@@ -57,14 +67,19 @@ TABLE_1_CONFIGURATIONS = [
 ]
 
 
+def _workpieces(**station) -> Scenario:
+    """The default scenario with a station of the workpieces only (and `station` fields)."""
+    return station_scenario(Scenario(), robot=False, **station)
+
+
 @pytest.fixture(scope="module")
 def workcell():
-    return build_cell(CellScenario(include_robot=False))
+    return make_cell_station(_workpieces())
 
 
 @pytest.fixture(scope="module")
 def cell():
-    return build_cell(CellScenario())
+    return make_cell_station(Scenario())
 
 
 def _perturbed(X: RigidTransform, rng: np.random.Generator, lift: float) -> RigidTransform:
@@ -107,30 +122,56 @@ def test_models_carry_the_convention_frames(workcell):
         assert plant.HasFrameNamed(f"home_{part}", workcell.instances["tray"])
 
 
-def test_whole_cell_builds_with_ports_and_constraints(cell):
+def _port_names(diagram, inputs: bool) -> set[str]:
+    if inputs:
+        return {diagram.get_input_port(i).get_name() for i in range(diagram.num_input_ports())}
+    return {diagram.get_output_port(i).get_name() for i in range(diagram.num_output_ports())}
+
+
+def test_whole_cell_builds_with_ports_and_constraints(cell, workcell):
     diagram = cell.diagram
-    for name in ("ur3.desired_state", "rg2.desired_opening"):
-        assert diagram.HasInputPort(name)
-    assert diagram.GetInputPort("ur3.desired_state").size() == 12
-    assert diagram.GetInputPort("rg2.desired_opening").size() == 1
-    for name in ("plant_state", "contact_results", "body_poses", "slot_configuration"):
-        assert diagram.HasOutputPort(name)
-    assert set(cell.grasp_constraints) == set(PARTS)
+    # The ports of docs/station.md: exactly what a controller commands and what a real cell
+    # measures, and beside them only the simulator's own (`sim.*`).
+    inputs, outputs = _port_names(diagram, inputs=True), _port_names(diagram, inputs=False)
+    assert {n for n in inputs if not n.startswith("sim.")} == set(COMMANDED)
+    assert {n for n in outputs if not n.startswith("sim.")} == set(MEASURED)
+    assert set(SIM_PORTS) <= outputs
+    for name, size in (("ur3.position", 6), ("ur3.velocity", 6), ("rg2.opening", 1)):
+        assert diagram.GetInputPort(name).size() == size, name
+    for name, size in (("ur3.state_estimated", 12), ("rg2.state_measured", 2)):
+        assert diagram.GetOutputPort(name).size() == size, name
+    assert diagram.GetOutputPort("rg2.grip_detected").size() == 1
+    assert set(cell.welds.grasps) == set(PARTS)
     rows = ("square_flange/row_1", "square_flange/row_2")
-    assert set(cell.bolt_constraints) == {
+    assert set(cell.welds.bolts) == {
         *((oval, key) for oval in PARTS[:2] for key in ("F1", "F2", "F3", *rows)),
         ("square_flange", "S12"),
         ("square_flange", "S23"),
     }
     context = cell.create_default_context()
     plant_context = cell.plant.GetMyContextFromRoot(context)
-    for cid in [*cell.grasp_constraints.values(), *cell.bolt_constraints.values()]:
+    for cid in [*cell.welds.grasps.values(), *cell.welds.bolts.values()]:
         assert not cell.plant.GetConstraintActiveStatus(plant_context, cid)
+    assert cell.wanted_welds(context) == frozenset()
+    # The default context: the arm at the scenario's ready posture, at rest, the fingers at
+    # the initial opening, on nothing; the operator has said nothing.
+    station = cell.scenario.station
+    measured = diagram.GetOutputPort("ur3.state_estimated").Eval(context)
+    np.testing.assert_allclose(measured, [*station.ur3.ready, *[0.0] * 6])
+    gripper = diagram.GetOutputPort("rg2.state_measured").Eval(context)
+    np.testing.assert_allclose(gripper, [station.rg2.initial_opening, 0.0], atol=1e-12)
+    assert diagram.GetOutputPort("rg2.grip_detected").Eval(context)[0] == 0.0
+    assert diagram.GetOutputPort("hri.indication").Eval(context) == Indication()
+    # The workpieces-only station has no robot ports.
+    robot_inputs = {"ur3.position", "ur3.velocity", "rg2.opening"}
+    assert not robot_inputs & _port_names(workcell.diagram, inputs=True)
+    assert "hri.prompt" in _port_names(workcell.diagram, inputs=True)
+    assert dict(workcell.welds.grasps) == {}
 
 
 def test_no_penetration_at_the_initial_state(cell):
     context = cell.create_default_context()
-    query = cell.diagram.GetOutputPort("query_object").Eval(context)
+    query = cell.diagram.GetOutputPort("sim.query_object").Eval(context)
     inspector = cell.scene_graph.model_inspector()
 
     def model(gid):
@@ -171,7 +212,7 @@ def test_settled_configuration_is_read_from_physics(workcell, configuration):
     }
     context = workcell.create_default_context()
     _set_parts(workcell, context, poses)
-    simulate_cell(workcell, context, SETTLE)
+    simulate_station(workcell, context, SETTLE)
     reading = workcell.configuration(context)
     assert reading.tokens() == configuration
     for part in PARTS:
@@ -194,7 +235,7 @@ def test_straddling_flange_is_misplaced(workcell):
     _set_parts(
         workcell, context, {"oval_flange_1": _perturbed(between, np.random.default_rng(7), 0.003)}
     )
-    simulate_cell(workcell, context, SETTLE)
+    simulate_station(workcell, context, SETTLE)
     reading = workcell.configuration(context)
     assert reading.status("oval_flange_1") is PartStatus.MISPLACED
     assert reading.tokens() == frozenset()
@@ -212,7 +253,9 @@ def _arm_posture_with_tcp_at(X_W_tcp: RigidTransform) -> np.ndarray:
     ik.AddOrientationConstraint(
         tcp, RotationMatrix(), plant.world_frame(), X_W_tcp.rotation(), 1e-4
     )
-    ik.get_mutable_prog().SetInitialGuess(ik.q(), np.concatenate([UR3_READY, [0.04, 0.04]]))
+    ik.get_mutable_prog().SetInitialGuess(
+        ik.q(), np.concatenate([Scenario().station.ur3.ready, [0.04, 0.04]])
+    )
     result = Solve(ik.prog())
     assert result.is_success()
     return result.GetSolution(ik.q())[:6]
@@ -236,9 +279,13 @@ def test_held_flange_above_the_plate_is_held_not_seated(cell):
     width = 0.045
     plant.SetPositions(plant_context, cell.instances["rg2"], [width / 2, width / 2])
     plant.SetFreeBodyPose(plant_context, cell.part_body(part), X_W_part)
-    plant.SetConstraintActiveStatus(plant_context, cell.grasp_constraints[part], True)
+    # The grasp weld stands in for the fingers' friction; the runner switches it on when the
+    # station wants it (below), here from the start.
+    cell.welds.apply(plant, plant_context, {Weld("grasp", part)})
     cell.hold_robot(context, opening=width - 0.002)
-    simulate_cell(cell, context, SETTLE)
+    simulate_station(cell, context, SETTLE)
+    # The station wants that weld too: the fingers are commanded closed on the part at the tcp.
+    assert cell.wanted_welds(context) == {Weld("grasp", part)}
 
     reading = cell.configuration(context)
     assert reading.status(part) is PartStatus.HELD
@@ -255,33 +302,40 @@ def test_scenario_yaml_is_typed_and_checked():
     assert plant_config(scenario).discrete_contact_approximation == "sap"
     with pytest.raises(ScenarioError, match="time_stp"):
         load_cell_scenario(None, "physics: {time_stp: 0.002}")
+    # The contact material is the scenario's, handed to SceneGraph as its defaults.
+    soft = load_cell_scenario(None, "physics: {contact: {hydroelastic_modulus: 1.0e6}}")
+    defaults = scene_graph_config(soft).default_proximity_properties
+    assert defaults.hydroelastic_modulus == 1.0e6 and defaults.compliance_type == "compliant"
+    with pytest.raises(ScenarioError, match="robt"):
+        load_cell_scenario(None, "station: {robt: false}")
     tamsi = load_cell_scenario(None, "physics: {discrete_contact_approximation: tamsi}")
     with pytest.raises(ValueError, match="SAP-family"):
-        build_cell(CellScenario(include_robot=False, plant_config=plant_config(tamsi)))
-    with pytest.raises(ValueError, match="not a part"):
-        build_cell(CellScenario(include_robot=False, initial_placements={"flange_9": "F1"}))
+        make_cell_station(station_scenario(tamsi, robot=False))
+    placed = load_cell_scenario(None, "station: {robot: false, initial_placements: {flange_9: F1}}")
+    with pytest.raises(ValueError, match=r"station\.initial_placements\.flange_9: not a part"):
+        make_cell_station(placed)
     with pytest.raises(ValueError, match="'F07' is not a placement"):
-        build_cell(CellScenario(include_robot=False, initial_placements={"oval_flange_1": "F07"}))
+        make_cell_station(_workpieces(initial_placements={"oval_flange_1": "F07"}))
     with pytest.raises(ValueError, match="places a S"):
-        build_cell(CellScenario(include_robot=False, initial_placements={"oval_flange_1": "S12"}))
+        make_cell_station(_workpieces(initial_placements={"oval_flange_1": "S12"}))
+    short = dataclasses.replace(Scenario().station.ur3, initial_positions=[0.0, 1.0])
+    with pytest.raises(ValueError, match=r"station\.ur3\.initial_positions: give 6"):
+        make_cell_station(station_scenario(Scenario(), ur3=short))
 
 
 def test_a_spec_that_does_not_fit_the_cell_is_refused(tmp_path):
     spec = load_spec()
     design = CellDesign.of(spec)
-    missing = CellDesign.of(
-        spec, dataclasses.replace(design.layout, part_models={"F": str(tmp_path / "no.sdf")})
-    )
+    missing = dataclasses.replace(design.layout, part_models={"F": str(tmp_path / "no.sdf")})
     with pytest.raises(CellModelError, match=r"part F: its model file .* does not exist"):
-        build_cell(CellScenario(design=missing, include_robot=False))
+        make_cell_station(dataclasses.replace(_workpieces(), cell=missing))
     with pytest.raises(CellModelError, match=r"cell\.part_models names 'Q'"):
         CellDesign.of(spec, dataclasses.replace(design.layout, part_models={"Q": "x.sdf"}))
 
 
 def test_initial_placements_seat_the_parts(workcell):
-    station = build_cell(
-        CellScenario(
-            include_robot=False,
+    station = make_cell_station(
+        _workpieces(
             initial_placements={
                 "square_flange": "S23",
                 "oval_flange_2": "F03",
@@ -290,7 +344,7 @@ def test_initial_placements_seat_the_parts(workcell):
         )
     )
     context = station.create_default_context()
-    simulate_cell(station, context, 0.1)
+    simulate_station(station, context, 0.1)
     assert station.configuration(context).tokens() == {"S23", "F03", "F1"}
     with pytest.raises(ValueError, match="F01 needs one S over base slot 1"):
         workcell.placement_poses({"oval_flange_1": "F01"})

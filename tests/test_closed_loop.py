@@ -85,12 +85,13 @@ def test_recording_is_a_self_contained_html(tmp_path):
 
 def test_the_next_plan_is_ready_when_the_operator_answers():
     """While the operator bolts, the robot plans the task it will propose next."""
-    # Options no other test uses: a planner of its own, with an empty plan cache.
+    # Options no other test uses: a planning worker of its own (one per cell and options), with
+    # an empty plan cache.
     fresh = load_cell_scenario("row4-forces-4", [LEAN, "{motion: {hold_time: 0.55}}"])
     ahead = run_scenario(fresh)
     # Step 1 the operator overrides F1 with F3: that plan was not foreseen; later ones were.
     assert ahead.done and list(ahead.plan_ready) == [False, True, True]
-    # Another fresh planner, without planning ahead: no plan is ready at any boundary.
+    # Another fresh worker, without planning ahead: no plan is ready at any boundary.
     cold = load_cell_scenario(
         "row4-forces-4", [LEAN, "{run: {plan_ahead: false}, motion: {hold_time: 0.6}}"]
     )

@@ -1,23 +1,118 @@
-"""A person as the operator in the browser, driven with no browser: button messages are injected
-into Meshcat the way Drake's own tests press buttons (the same code path as a click)."""
+"""The live panel with no browser: its labels over the catalogue, its markers, and a live run
+driven by button messages injected into Meshcat the way Drake's own tests press buttons (the
+same code path as a click). The browser tests (`tests/test_browser.py`) click in Chromium."""
 
 import base64
 import re
 
 import pytest
+from pydrake.geometry import Meshcat
+from pydrake.math import RigidTransform
 
-from hrc_drake.cell.run import run_scenario
-from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+from hrc_drake.hri.controls import control_name, is_safe_control_name
+from hrc_drake.hri.live import LiveOperator, describe_task, panel_buttons
+from hrc_drake.resources import models_dir
+from hrc_drake.tasks.graph import StateKind, generate_states
+from hrc_drake.tasks.spec import load_spec
+from hrc_drake.tasks.tokens import UNDO
 
 umsgpack = pytest.importorskip("umsgpack")
 
-pytestmark = pytest.mark.slow
+CATALOGUE = sorted((models_dir() / "assemblies").glob("*.yaml"))
 
 
+@pytest.mark.parametrize(
+    ("text", "name"),
+    [
+        ("F1: the robot's proposal", "F1: the robots proposal"),
+        ('say "F2"', "say F2"),
+        ("a\\b", "a/b"),
+        ("two\nlines", "two lines"),
+        ("<b>bold</b> & co", "b bold /b co"),
+        ("F1 - robot proposal", "F1 - robot proposal"),
+        ("mistake: F03 lands in F02", "mistake: F03 lands in F02"),
+    ],
+)
+def test_control_names_carry_no_quote_backslash_or_markup(text, name):
+    assert control_name(text) == name
+    assert is_safe_control_name(name)
+
+
+def test_a_name_with_nothing_safe_in_it_is_refused():
+    with pytest.raises(ValueError, match="nothing left"):
+        control_name("'\"`")
+    assert not is_safe_control_name("F1: the robot's proposal")
+
+
+@pytest.mark.parametrize("path", CATALOGUE, ids=lambda p: p.stem)
+def test_every_label_the_panel_makes_is_safe_for_every_catalogue_assembly(path):
+    """Every state, with every feasible task as the proposal (whatever the policy): each label
+    is safe, the proposal's button comes first and says so, and every feasible task has a
+    button."""
+    space = generate_states(load_spec(path))
+    boundaries = 0
+    for index in range(len(space.kind)):
+        if space.kind[index] == StateKind.TERMINAL:
+            continue
+        state = space.sequence(index)
+        feasible = [t for t, _ in space.tasks(index)]
+        for proposal in feasible:
+            buttons = panel_buttons(space, state, proposal)
+            labels = list(buttons)
+            assert all(is_safe_control_name(label) for label in labels), labels
+            assert not any(c in label for label in labels for c in "'\"`\\"), labels
+            assert labels[0] == f"{proposal} - robot proposal" and buttons[labels[0]] == proposal
+            assert set(buttons.values()) == set(feasible), (state, proposal, buttons)
+            assert describe_task(space, proposal, state).startswith(proposal)
+            boundaries += 1
+    assert boundaries > 0
+
+
+def test_an_undo_proposal_shows_its_own_marker_and_the_buttons_go_after_the_click(flange_space):
+    """At a dead end (F2 first: no correct assembly is left) the robot proposes undo: the red
+    undo marker shows over the part, not the ghost of a placement; the panel offers undo as the
+    robot's proposal, once; the click returns undo and takes the buttons down."""
+    meshcat = Meshcat()
+    seen = {}
+
+    def visible(path: str) -> bool:
+        return umsgpack.unpackb(meshcat._GetPackedProperty(path, "visible"))["value"]
+
+    def click(prompt):
+        seen["buttons"] = meshcat.GetButtonNames()
+        seen["undo"], seen["proposal"] = (
+            visible("/operator_choices/undo"),
+            visible("/operator_choices/proposal"),
+        )
+        meshcat._InjectWebsocketMessage(
+            umsgpack.packb({"type": "button", "name": prompt.button_for(UNDO)})
+        )
+
+    said = []
+    operator = LiveOperator(
+        meshcat,
+        flange_space,
+        place=lambda task, state: RigidTransform([0.3, 0.08 * len(state), 0.0]),
+        clock=lambda: 0.0,
+        on_prompt=click,
+        say=said.append,
+    )
+    assert operator(2, ("F2",), UNDO) == UNDO
+    assert seen["buttons"] == ["undo - robot proposal"]
+    assert seen["undo"] is True and seen["proposal"] is False
+    assert meshcat.GetButtonNames() == [] and visible("/operator_choices/undo") is False
+    assert meshcat.HasPath("/operator_choices/step_2")
+    assert "undo: take F2 off" in said[0] and '"Open Controls", top right' in said[0]
+
+
+@pytest.mark.slow
 def test_a_live_run_follows_the_clicks_to_a_terminal_state(tmp_path):
     """Row 4 clicked by hand: F3 instead of the proposed F1 at step 1, then the robot's
     proposals; the run ends on the minimum-effort column, and the recording shows the
     choices."""
+    from hrc_drake.cell.run import run_scenario
+    from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+
     row = load_cell_scenario("row4-forces-4", LEAN)
     clicks = {1: "F3"}
     prompts = []
@@ -29,18 +124,18 @@ def test_a_live_run_follows_the_clicks_to_a_terminal_state(tmp_path):
         prompt.meshcat._InjectWebsocketMessage(message)
 
     result = run_scenario(row, live=True, on_prompt=click, record=tmp_path / "live.html")
-    assert result.error is None and result.done
+    assert result.error is None and result.done and not result.interrupted
     assert result.names == list(row.minimum_effort)
     assert [t.indicated for t in result.tasks] == ["F3", "S12", "F01"]
     assert [t.observed for t in result.tasks] == ["F3", "S12", "F01"]
-    # The panel offered the proposal, the other feasible tasks, and the spec's mistake.
+    # The panel offered the proposal first, the other feasible tasks, and the spec's mistake.
     first = prompts[0]
-    assert first.proposal == "F1" and first.buttons[first.button_for("F1")] == "F1"
+    assert first.proposal == "F1" and next(iter(first.buttons)) == "F1 - robot proposal"
     assert {"F1", "F2", "F3", "S12", "S23"} <= set(first.buttons.values())
-    assert any(name.startswith("mistake") for name in prompts[2].buttons)
+    assert prompts[2].mistake_button == "mistake: F01 lands in F02"
     # Choices are drawn into the recording (the panel is not part of it).
     commands = _recorded_commands((tmp_path / "live.html").read_text())
-    for path in (b"operator_choices/step_1", b"operator_choices/ghost", b"safety/stopped"):
+    for path in (b"operator_choices/step_1", b"operator_choices/proposal", b"safety/stopped"):
         assert path in commands, path
 
 
@@ -48,3 +143,30 @@ def _recorded_commands(html: str) -> bytes:
     """The Meshcat commands a static page replays (base64 msgpack blobs), concatenated."""
     blobs = re.findall(r"data:application/octet-binary;base64,([A-Za-z0-9+/=]+)", html)
     return b"".join(base64.b64decode(blob) for blob in blobs)
+
+
+def test_the_catalogue_is_there():
+    """The label test above runs over the catalogue: it must not be empty."""
+    assert {"flange", "four-slot", "five-slot", "three-oval"} <= {p.stem for p in CATALOGUE}
+
+
+@pytest.mark.parametrize("port", ["80", "70000", "taken"])
+def test_a_port_meshcat_cannot_serve_is_a_one_line_error(capsys, port):
+    """`--port` is checked before the run: Drake's Meshcat takes 0 or 1024-65535, and a port
+    another program holds cannot be served."""
+    import socket
+
+    from hrc_drake.cli import main
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as holder:
+        holder.bind(("", 0))
+        holder.listen()
+        if port == "taken":
+            port = str(holder.getsockname()[1])
+        code = main(["simulate", "--live", "--lean", "--port", port])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert (
+        code == 2
+        and len(err) == 1
+        and err[0].startswith(f"hrc-drake simulate: error: --port {port}:")
+    )

@@ -88,9 +88,12 @@ def test_gripper_opens_before_grasp_closes_on_the_part_and_opens_at_release(plan
     grasp = plan.segment(Stage.GRASP)
     assert width == pytest.approx(0.090, abs=1e-6)
     assert plan.gripper_opening(grasp.start) > width
-    assert plan.gripper_opening(grasp.end) == pytest.approx(width)
-    assert plan.gripper_opening(plan.t_in_place) == pytest.approx(width)
-    assert plan.gripper_opening(plan.t_release) == pytest.approx(width)
+    # Closed past the part's width, so that the fingers stall on it (a grip is detected).
+    assert plan.grip_width == pytest.approx(width)
+    assert plan.gripper_opening(grasp.end) == pytest.approx(width - planner.options.grip_squeeze)
+    closed = width - planner.options.grip_squeeze
+    assert plan.gripper_opening(plan.t_in_place) == pytest.approx(closed)
+    assert plan.gripper_opening(plan.t_release) == pytest.approx(closed)
     assert plan.gripper_opening(plan.segment(Stage.RELEASE).end) > width
     assert all(0.0 <= plan.gripper_opening(t) <= 0.110 for t in np.linspace(0, plan.duration, 50))
 

@@ -10,6 +10,8 @@ from pydrake.geometry import Cylinder, Role
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
 
+from hrc_drake.cell.scenario import load_cell_scenario
+from hrc_drake.cell.station import make_cell_station
 from hrc_drake.resources import package_uri
 from hrc_drake.robot_models import (
     RG2_FINGER_JOINTS,
@@ -234,13 +236,41 @@ def test_finger_insides_open_by_the_sum_of_the_joints(scene: RobotScene) -> None
         assert inside_y[0] - inside_y[1] == pytest.approx(q_left + q_right, abs=1e-12)
 
 
-def test_every_collision_geometry_has_friction(scene: RobotScene) -> None:
-    inspector = scene.inspector
+# Contact values no other scenario uses, so that they can only come from this one.
+CONTACT = (
+    "{physics: {contact: {static_friction: 0.7, dynamic_friction: 0.4, "
+    "hydroelastic_modulus: 3.0e7}}}"
+)
+
+
+def test_every_collision_geometry_has_the_scenarios_friction_but_the_fingers() -> None:
+    """The models state only what differs from the scenario's contact material: the RG2's
+    fingers and rubber pads (1.0). The station gives every other geometry the scenario's
+    friction, and SceneGraph its other contact values as defaults (seen in a context)."""
+    scenario = load_cell_scenario(None, CONTACT)
+    station = make_cell_station(scenario)
+    context = station.diagram.CreateDefaultContext()
+    scene_graph = station.scene_graph
+    query = scene_graph.get_query_output_port().Eval(scene_graph.GetMyContextFromRoot(context))
+    inspector = query.inspector()
     ids = inspector.GetAllGeometryIds(Role.kProximity)
     assert len(ids) >= 14
+    contact = scenario.physics.contact
+    fingers, others = [], []
     for geometry in ids:
         props = inspector.GetProximityProperties(geometry)
-        assert props.HasProperty("material", "coulomb_friction"), inspector.GetName(geometry)
+        name = inspector.GetName(geometry)
+        friction = props.GetProperty("material", "coulomb_friction")
+        mu = (friction.static_friction(), friction.dynamic_friction())
+        on_finger = name in ("rg2::finger", "rg2::pad")
+        (fingers if on_finger else others).append((name, mu))
+        if props.HasProperty("hydroelastic", "hydroelastic_modulus"):
+            modulus = props.GetProperty("hydroelastic", "hydroelastic_modulus")
+            assert modulus == contact.hydroelastic_modulus, name
+    assert len(fingers) == 4 and {mu for _, mu in fingers} == {(1.0, 1.0)}
+    scenario_friction = (contact.static_friction, contact.dynamic_friction)
+    wrong = sorted({(name, mu) for name, mu in others if mu != scenario_friction})
+    assert wrong == [], f"not the scenario's friction {scenario_friction}: {wrong}"
 
 
 def test_base_collision_clears_the_table(scene: RobotScene) -> None:

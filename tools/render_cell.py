@@ -10,15 +10,18 @@ while recording to Meshcat, and writes the self-contained `Meshcat.StaticHtml()`
 """
 
 import argparse
+import dataclasses
 import io
 import sys
 from pathlib import Path
 
 import numpy as np
+from pydrake.geometry import Meshcat
 from pydrake.math import RigidTransform
 
 from hrc_drake.atomic import atomic_write_bytes
-from hrc_drake.cell import CellScenario, build_cell, simulate_cell
+from hrc_drake.cell import make_cell_station, simulate_station, station_scenario
+from hrc_drake.hri.scenario import Scenario
 
 STATE_11 = {"oval_flange_1": "F3", "square_flange": "S12", "oval_flange_2": "F01"}
 
@@ -27,9 +30,15 @@ def render_png(out: Path) -> Path:
     """Render the cell with the parts of state 11 seated and save it as a PNG at `out`."""
     import matplotlib.image
 
-    station = build_cell(CellScenario(camera=True, initial_placements=STATE_11))
+    scenario = Scenario()
+    # The cell alone, as in the README: the operator's body would stand in front of the camera.
+    scenario = dataclasses.replace(scenario, body=dataclasses.replace(scenario.body, enabled=False))
+    camera = dataclasses.replace(scenario.station.camera, enabled=True)
+    station = make_cell_station(
+        station_scenario(scenario, camera=camera, initial_placements=STATE_11)
+    )
     context = station.create_default_context()
-    image = station.diagram.GetOutputPort("camera.rgb_image").Eval(context)
+    image = station.diagram.GetOutputPort("sim.camera.rgb_image").Eval(context)
     rgb = np.array(image.data, copy=True)[:, :, :3]
     buffer = io.BytesIO()
     matplotlib.image.imsave(buffer, rgb, format="png")
@@ -38,7 +47,7 @@ def render_png(out: Path) -> Path:
 
 def record_settling(out: Path, duration: float) -> Path:
     """Record the parts of state 11 settling into their seats; save the Meshcat page at `out`."""
-    station = build_cell(CellScenario(meshcat=True, recording_path=str(out)))
+    station = make_cell_station(Scenario(), Meshcat())
     context = station.create_default_context()
     plant_context = station.plant.GetMyContextFromRoot(context)
     for part, X in station.placement_poses(STATE_11).items():
@@ -46,7 +55,7 @@ def record_settling(out: Path, duration: float) -> Path:
         station.plant.SetFreeBodyPose(
             plant_context, station.part_body(part), X @ RigidTransform([0.0005, -0.0005, lift])
         )
-    simulate_cell(station, context, duration)
+    simulate_station(station, context, duration, recording=out)
     print(f"configuration after {duration} s: {sorted(station.configuration(context).tokens())}")
     return out
 

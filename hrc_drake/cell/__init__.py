@@ -1,12 +1,5 @@
-"""The Drake cell: the diagram built from a scenario, the SlotMonitor, the Supervisor, runs."""
+"""The Drake cell: the station built from a scenario, its controller, and closed-loop runs."""
 
-from hrc_drake.cell.builder import (
-    CellScenario,
-    CellStation,
-    build_cell,
-    save_meshcat_html,
-    simulate_cell,
-)
 from hrc_drake.cell.slot_monitor import (
     CellConfiguration,
     PartPlacement,
@@ -14,16 +7,21 @@ from hrc_drake.cell.slot_monitor import (
     SlotMonitor,
     SlotTolerances,
 )
+from hrc_drake.cell.station import (
+    CellStation,
+    make_cell_station,
+    simulate_station,
+    station_scenario,
+)
 
 __all__ = [
     "CellConfiguration",
-    "CellScenario",
     "CellStation",
     "PartPlacement",
     "PartStatus",
     "SlotMonitor",
     "SlotTolerances",
-    "build_cell",
-    "save_meshcat_html",
-    "simulate_cell",
+    "make_cell_station",
+    "simulate_station",
+    "station_scenario",
 ]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import socket
 import sys
 from pathlib import Path
 
@@ -18,6 +19,7 @@ from hrc_drake.tasks.spec import load_spec
 from hrc_drake.tasks.tokens import UNDO
 
 DEFAULT_SCENARIO = "row1-optimal"
+EXIT_INTERRUPTED = 130  # the shell's status for a command ended by SIGINT (128 + 2)
 
 
 def _scenario(args) -> Scenario:
@@ -34,36 +36,123 @@ def _scenario(args) -> Scenario:
             scenario.description = f"assembly {args.assembly}, operator follows the robot"
     if args.operator is not None:
         scenario = with_operator_script(scenario, args.operator)
+        # The file's description told of its own operator; say what will run instead.
+        steps = ", ".join(f"{d.task} at step {d.step}" for d in scenario.operator.deviations)
+        scenario.description = (
+            f"the operator performs {steps} instead of the robot's proposal, and otherwise "
+            "follows the robot (--operator)"
+        )
     if args.policy is not None:
         scenario = dataclasses.replace(scenario, policy=str(args.policy))
     return scenario
 
 
+def _check_still_time(still_time: float, scenario: Scenario, space, policy, live: bool) -> None:
+    """Before the run: refuse a `--still-time` past the longest run (`run.max_sim_time`); when
+    the tasks are known in advance (a scripted or following operator, not live), a time within
+    their bolting holds is surely within the run; otherwise say at once that the run's length is
+    known only at its end (the still is then not written)."""
+    limit = scenario.run.max_sim_time
+    if still_time > limit:
+        raise UsageError(
+            f"--still-time {still_time} s is past the end of the run: a run lasts at most "
+            f"run.max_sim_time, {limit} s; choose a time within it"
+        )
+    if not (live or scenario.stochastic or scenario.operator.model):
+        _, decisions = run_decisions(space, policy, ScriptedOperator(scenario.script))
+        if still_time <= len(decisions) * scenario.motion.hold_time:
+            return  # the holds alone last longer: the run is surely still going then
+    print(
+        f"note: --still-time {still_time} s: this run's length is known only when it ends; if it "
+        "ends earlier, that is reported then and no still is written",
+        file=sys.stderr,
+    )
+
+
+def _check_port(port: int) -> None:
+    """UsageError unless Meshcat can serve `port`: 0 (any free port) or 1024-65535 (Drake's
+    Meshcat refuses the privileged ones), and free now."""
+    if port != 0 and not 1024 <= port <= 65535:
+        raise UsageError(f"--port {port}: give 0 (any free port) or a port from 1024 to 65535")
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        try:
+            probe.bind(("", port))
+        except OSError as err:
+            raise UsageError(
+                f"--port {port}: cannot serve it ({err.strerror}); choose another port, or "
+                "leave --port out for the first free one from 7000"
+            ) from None
+
+
 def simulate_command(args) -> int:
-    """Run a scenario headless, print the decision steps and states, write the recording."""
+    """Run a scenario headless, print the decision steps and states, write the recording.
+
+    Ctrl-C ends it with one line: during the simulation, once the recording and the summary
+    (or `--json`) of what ran are written, marked interrupted; before it, with nothing
+    written."""
+    try:
+        return _simulate(args)
+    except KeyboardInterrupt:
+        print("hrc-drake simulate: interrupted before the simulation began", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+def _run(args, scenario, policy, record, still, live: bool, port):
+    """The run: in this process, or (`--station-lcm URL`) the controller here against the
+    station another process serves (`hrc-drake station`)."""
+    url = getattr(args, "station_lcm", None)
+    if url is None:
+        return run_scenario(
+            scenario, policy, record=record, progress=not live, still=still, live=live, port=port
+        )
+    if record is not None or still is not None or live:
+        raise UsageError(
+            "--station-lcm runs only the controller here; --record, --still and --live need "
+            "the station in this process: drop them"
+        )
+    from hrc_drake.cell.remote import check_lcm_url, run_over_lcm
+
+    return run_over_lcm(scenario, check_lcm_url(url, "--station-lcm"), policy, progress=True)
+
+
+def _outputs(args):
+    """The checked `--record` path and `(time, path)` of `--still` (None when not asked)."""
     record = check_output_path(args.record, "--record", (".html",)) if args.record else None
     still = None
     if args.still is not None:
         if args.still_time < 0:
             raise UsageError(f"--still-time {args.still_time}: give a time >= 0 s")
         still = (args.still_time, check_output_path(args.still, "--still", (".png",)))
-    if getattr(args, "live", False) and args.operator is not None:
-        raise UsageError("--live with --operator: in a live run you are the operator; drop one")
+    return record, still
+
+
+def _checked_run(args, live: bool, still):
+    """The scenario and its policy, with the operator's script checked against the decision
+    loop before anything is simulated (an infeasible task, or steps past the end of the run)."""
     scenario = _scenario(args)
     space = generate_states(load_spec(scenario.assembly_path))
     for d in scenario.operator.deviations:
         if d.task != UNDO:
             space.spec.placement(d.task)
     policy = scenario_policy(scenario, space)
-    live = getattr(args, "live", False)
     if scenario.script and not live:
-        # The decision loop predicts a scripted run; refuse a script that cannot apply before
-        # simulating it (an infeasible task, or steps past the end of the run).
         _, decisions = run_decisions(space, policy, ScriptedOperator(scenario.script))
         check_script_within_run(scenario.script, decisions)
-    result = run_scenario(
-        scenario, policy, record=record, progress=not live, still=still, live=live
-    )
+    if still is not None:
+        _check_still_time(args.still_time, scenario, space, policy, live)
+    return scenario, policy
+
+
+def _simulate(args) -> int:
+    record, still = _outputs(args)
+    live = getattr(args, "live", False)
+    if live and args.operator is not None:
+        raise UsageError("--live with --operator: in a live run you are the operator; drop one")
+    scenario, policy = _checked_run(args, live, still)
+    port = getattr(args, "port", None)
+    if port is not None:
+        _check_port(port)
+    result = _run(args, scenario, policy, record, still, live, port)
     problems = []
     if still is not None and result.sim_time < args.still_time:
         problems.append(
@@ -74,29 +163,10 @@ def simulate_command(args) -> int:
         json.dump(result.to_json(), sys.stdout, indent=1)
         sys.stdout.write("\n")
     else:
-        print(f"scenario {result.scenario}: {scenario.description}")
-        for t in result.tasks:
-            who = "" if t.indicated == t.proposed else f" (operator: {t.indicated})"
-            print(
-                f"  step {t.step}: robot proposes {t.proposed}{who}; cell shows {t.observed}; "
-                f"{t.end_time - t.start_time:.1f} s simulated"
-            )
-        print("  states:", " ".join(result.names), f"({result.final_kind})")
-        print(
-            f"  {result.sim_time:.1f} s simulated in {result.wall_time:.1f} s "
-            f"(real-time factor {result.real_time_factor or 0:.2f})"
-        )
-        if result.safety is not None:
-            figures = result.safety.to_json()
-            print(
-                f"  safety: least separation {figures['min_separation']} m, "
-                f"{figures['violations']} violation(s), slowed {figures['slowed_time']} s, "
-                f"stopped {figures['stopped_time']} s"
-            )
-        if result.collisions:
-            print("  unexpected contacts:", *result.collisions[:5], sep="\n    ")
-        if result.recording:
-            print(f"  recording: {result.recording} (open it in a web browser)")
+        _print_summary(result, scenario)
+    if result.interrupted:
+        print(f"hrc-drake simulate: {result.error}", file=sys.stderr)
+        return EXIT_INTERRUPTED
     for problem in problems:
         print(f"hrc-drake simulate: error: {problem}", file=sys.stderr)
     if result.error:
@@ -105,3 +175,29 @@ def simulate_command(args) -> int:
     if problems:
         return 2
     return 0 if result.done else 1
+
+
+def _print_summary(result, scenario) -> None:
+    print(f"scenario {result.scenario}: {scenario.description}")
+    for t in result.tasks:
+        who = "" if t.indicated == t.proposed else f" (operator: {t.indicated})"
+        print(
+            f"  step {t.step}: robot proposes {t.proposed}{who}; cell shows {t.observed}; "
+            f"{t.end_time - t.start_time:.1f} s simulated"
+        )
+    print("  states:", " ".join(result.names), f"({result.final_kind})")
+    print(
+        f"  {result.sim_time:.1f} s simulated in {result.wall_time:.1f} s "
+        f"(real-time factor {result.real_time_factor or 0:.2f})"
+    )
+    if result.safety is not None:
+        figures = result.safety.to_json()
+        print(
+            f"  safety: least separation {figures['min_separation']} m, "
+            f"{figures['violations']} violation(s), slowed {figures['slowed_time']} s, "
+            f"stopped {figures['stopped_time']} s"
+        )
+    if result.collisions:
+        print("  unexpected contacts:", *result.collisions[:5], sep="\n    ")
+    if result.recording:
+        print(f"  recording: {result.recording} (open it in a web browser)")

@@ -22,6 +22,7 @@ from pathlib import Path
 
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.motion import MotionOptions, MotionPlanner, Plan, PlanningError, UnreachableError
+from hrc_drake.motion.planner import check_reach
 from hrc_drake.resources import models_dir
 from hrc_drake.tasks.costs import (
     CostTable,
@@ -113,9 +114,12 @@ def compute_cost_table(
     """Plan every task edge of `space` (or only `edges`) and return the cost table.
 
     Seconds = robot time (the plan's duration without bolting holds) + the operator's
-    (un)bolting time from the spec. CostPlanningError naming the edge if one cannot be planned.
+    (un)bolting time from the spec. First the reach check (`check_reach`): CellModelError naming
+    the part or slot the UR3 cannot reach and a layout that it can, the same error `simulate`
+    gives. CostPlanningError naming the edge if one cannot be planned.
     """
     planner = planner or timing_planner(space)
+    check_reach(planner)
     todo = list(task_edges(space) if edges is None else edges)
     entries: dict[Edge, EdgeCost] = {}
     for i, (state, task) in enumerate(todo):
@@ -164,8 +168,10 @@ def default_cost_table(
 
 
 def costs_command(args) -> int:
-    """`hrc-drake costs --out FILE [--json]`: plan every edge, save the table, rank sequences."""
-    from hrc_drake.paths import check_output_path
+    """`hrc-drake costs --out FILE [--json]`: plan every edge, save the table, rank sequences.
+    A layout the UR3 cannot reach, or an edge that cannot be planned, is a one-line UsageError."""
+    from hrc_drake.cell_models import CellModelError
+    from hrc_drake.paths import UsageError, check_output_path
     from hrc_drake.progress import ProgressLine
     from hrc_drake.tasks.graph import generate_states
     from hrc_drake.tasks.spec import load_spec
@@ -173,9 +179,12 @@ def costs_command(args) -> int:
     check_output_path(args.out, "--out")
     space = generate_states(load_spec(args.assembly))
     start = time.perf_counter()
-    planner = timing_planner(space)
-    with ProgressLine("planning task edges", "edge") as bar:
-        table = compute_cost_table(space, planner, progress=bar.update)
+    try:
+        planner = timing_planner(space)
+        with ProgressLine("planning task edges", "edge") as bar:
+            table = compute_cost_table(space, planner, progress=bar.update)
+    except (CellModelError, CostPlanningError) as err:
+        raise UsageError(str(err)) from None
     wall = time.perf_counter() - start
     save_cost_table(table, args.out)
     config = MdpConfig(

@@ -13,6 +13,9 @@ What a cell run reports, beside the task-level figures: its time is the cell's s
 waits for the operator's answer before it moves); the robot's idle time at each boundary is the
 wall time it waited for the planner after the answer (0 when the task was planned ahead while the
 operator bolted), and whether that plan was ready is recorded per boundary.
+
+`CellOptions` is what `hrc_drake.evaluate.Setup.cell` holds: the task-level evaluation calls its
+methods and never imports this module; this module imports it (one way).
 """
 
 from __future__ import annotations
@@ -20,7 +23,9 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
+from hrc_drake.evaluate import RunResult, predicted_tasks
 from hrc_drake.paths import UsageError
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.policy import PolicyFileError
@@ -47,8 +52,6 @@ class DeciderPolicy:
     def predicted_tasks(self, state: tuple[str, ...]) -> list[str]:
         """The tasks to plan ahead for `state`, most likely first
         (`hrc_drake.evaluate.predicted_tasks`)."""
-        from hrc_drake.evaluate import predicted_tasks
-
         proposal = self.next_task(state)
         return [] if proposal is None else predicted_tasks(self.decider, state, proposal)
 
@@ -66,10 +69,38 @@ class DeciderPolicy:
 
 @dataclass(frozen=True)
 class CellOptions:
-    """Which cell runs an evaluation: a base scenario and YAML overrides (picklable)."""
+    """Which cell runs an evaluation: a base scenario and YAML overrides (picklable); the
+    `hrc_drake.evaluate.CellRuns` of `Setup.cell`."""
 
     scenario: str = DEFAULT_BASE_SCENARIO
     overrides: tuple[str, ...] = ()
+
+    def prepare(self, space: StateSpace):
+        """The scenario every run plays (`evaluation_scenario`)."""
+        return evaluation_scenario(self, space.spec)
+
+    def check(self, operator, model_name: str) -> None:
+        """UsageError for an operator model the cell cannot play (`check_cell_operator`)."""
+        check_cell_operator(operator, model_name)
+
+    def play(self, scenario, space: StateSpace, decider, operator) -> RunResult:
+        """One run through the cell (`play_cell_run`)."""
+        return play_cell_run(scenario, space, decider, operator)
+
+    def describe(self, space: StateSpace) -> dict[str, Any]:
+        """What ran: the base scenario's settings with the evaluated assembly (when it is not
+        the base's own) and the population's operator, and the overrides applied on top."""
+        from hrc_drake.hri.scenario import load_scenario
+
+        spec = space.spec
+        base = load_scenario(self.scenario)
+        same = bool(spec.source) and Path(spec.source).resolve() == base.assembly_path.resolve()
+        what = "its operator" if same else f"assembly {spec.name} ({spec.source}) and an operator"
+        return {
+            "scenario": f"{self.scenario} with {what} from the population model",
+            "base_scenario": self.scenario,
+            "scenario_overrides": list(self.overrides),
+        }
 
 
 def evaluation_scenario(options: CellOptions, spec: AssemblySpec):
@@ -99,7 +130,6 @@ def play_cell_run(scenario, space: StateSpace, decider, operator):
     Returns an `hrc_drake.evaluate.RunResult` with the cell's idle times."""
     from hrc_drake.cell.run import run_scenario
     from hrc_drake.cell.scenario import cell_design, motion_options
-    from hrc_drake.evaluate import RunResult
     from hrc_drake.motion.planner import MotionPlanner
 
     policy = DeciderPolicy(decider, space)

@@ -2,10 +2,12 @@
 
 The body is geometry in the SceneGraph (illustration and perception roles, so Meshcat and the
 camera show it) with no proximity role and no place in the MultibodyPlant: it never pushes a part
-and the plant never sees it. `OperatorBody` poses it from a `BodyScript` — by default the
-operator of this cell, who waits with the hand at the table edge, reaches to the part while the
-robot holds it, bolts and withdraws before the release — and publishes the body as world-frame
-spheres (each capsule as a chain of spheres) for the separation monitor (`hrc_drake.cell.safety`).
+and the plant never sees it. It is part of the simulated station: `OperatorBody` poses it from a
+`BodyScript` of the simulated operator's activity (`hrc_drake.cell.sim_operator`) — by default
+the operator of this cell, who waits with the hand at the table edge, reaches to the part while
+bolting it and withdraws before the bolts are done — and publishes the body as world-frame
+spheres (each capsule as a chain of spheres): what a body tracker reports, at the separation
+monitor's rate.
 
 The arm is two capsules (upper arm, forearm) and a hand sphere; the elbow comes from the shoulder
 and the hand by two-link inverse kinematics, and the torso leans in when the hand reaches further
@@ -33,9 +35,8 @@ from pydrake.geometry import (
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.framework import LeafSystem
 
-from hrc_drake.cell.supervisor import Mode, SupervisorStatus
+from hrc_drake.cell.sim_operator import ActivityKind, OperatorActivity
 from hrc_drake.hri.scenario import BodyConfig
-from hrc_drake.motion.plan import Stage
 
 UPPER_ARM, FOREARM = 0.30, 0.32  # shoulder-elbow, elbow-hand centre [m] (adult, ~50th pct)
 ARM_RADII = (0.045, 0.04)
@@ -49,9 +50,9 @@ CHAIN_GAP = 1 - np.sqrt(3) / 2  # of a chain sphere's radius (see `_chain`)
 SKIN = Rgba(0.93, 0.75, 0.62, 1.0)
 SHIRT = Rgba(0.25, 0.40, 0.65, 1.0)
 
-# (simulated time, Supervisor status, position of the part the robot handles or None)
+# (simulated time, the simulated operator's activity, position of the part it works on or None)
 #   -> the hand centre in world [m]
-BodyScript = Callable[[float, SupervisorStatus, np.ndarray | None], np.ndarray]
+BodyScript = Callable[[float, OperatorActivity, np.ndarray | None], np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -83,28 +84,24 @@ def min_jerk(x: float) -> float:
 
 
 class BoltingScript:
-    """The cell's operator: waits at the table edge; during the plan's hold reaches to the held
-    part (`reach_offset` from it), bolts, and is back at rest before the release.
+    """The cell's operator: waits at the table edge; while bolting reaches to the part
+    (`reach_offset` from it), bolts, and is back at rest before the bolts are done.
 
-    Reach and withdrawal take `reach_time` each, shortened to fit three of them in the hold; a
-    reach the hand cannot make within `hand_speed` in that time (a minimum-jerk motion peaks at
-    1.875 × distance / time) stops short along the way (lean runs' 0.5 s holds)."""
+    Reach and withdrawal take `reach_time` each, shortened to fit three of them in the bolting
+    time; a reach the hand cannot make within `hand_speed` in that time (a minimum-jerk motion
+    peaks at 1.875 × distance / time) stops short along the way (lean runs' 0.5 s holds)."""
 
     def __init__(self, config: BodyConfig):
         self.rest = np.asarray(config.rest_hand, dtype=float)
         self.offset = np.asarray(config.reach_offset, dtype=float)
         self.speed, self.reach_time = config.hand_speed, config.reach_time
 
-    def __call__(self, now: float, status: SupervisorStatus, part: np.ndarray | None):
+    def __call__(self, now: float, activity: OperatorActivity, part: np.ndarray | None):
         """The hand centre at `now`."""
-        plan = status.plan
-        if status.mode != Mode.EXECUTE or plan is None or part is None:
+        if activity.kind != ActivityKind.BOLT or part is None:
             return self.rest
-        hold = next((g for g in plan.segments if g.stage == Stage.HOLD), None)
-        if hold is None:
-            return self.rest
-        length = hold.end - hold.start
-        phase = status.plan_time(now) - hold.start
+        length = activity.duration
+        phase = now - activity.start
         if length <= 0 or not 0.0 <= phase <= length:
             return self.rest
         move = min(self.reach_time, length / 3)
@@ -115,34 +112,29 @@ class BoltingScript:
 
 
 class ReachInto:
-    """A scripted intrusion: at decision step `step`, once the plan's time passes the start of
-    `stage` plus `delay`, the hand moves from `rest` to `target` in `move` seconds (minimum
-    jerk), stays `dwell` seconds and goes back; otherwise it rests. Times after the trigger are
-    simulated time, so the hand keeps its own pace whatever the robot does."""
+    """A scripted intrusion: `delay` seconds after the operator indicated the task of decision
+    step `step`, the hand moves from `rest` to `target` in `move` seconds (minimum jerk), stays
+    `dwell` seconds and goes back; otherwise it rests. Times are simulated time, so the hand keeps
+    its own pace whatever the robot does."""
 
     def __init__(
         self,
         rest,
         target,
         step: int = 1,
-        stage: Stage = Stage.CARRY,
-        delay: float = 0.2,
+        delay: float = 3.0,
         move: float = 0.5,
         dwell: float = 2.0,
     ):
         self.rest, self.target = np.asarray(rest, float), np.asarray(target, float)
-        self.step, self.stage, self.delay = step, stage, delay
+        self.step, self.delay = step, delay
         self.move, self.dwell = move, dwell
         self.start: float | None = None
 
-    def __call__(self, now: float, status: SupervisorStatus, part: np.ndarray | None):
+    def __call__(self, now: float, activity: OperatorActivity, part: np.ndarray | None):
         """The hand centre at `now`."""
         if self.start is None:
-            plan = status.plan
-            if status.mode != Mode.EXECUTE or plan is None or status.step != self.step:
-                return self.rest
-            trigger = plan.segment(self.stage).start + self.delay
-            if status.plan_time(now) < trigger:
+            if activity.answered_step != self.step or now < activity.answered_at + self.delay:
                 return self.rest
             self.start = now
         t = now - self.start
@@ -169,17 +161,37 @@ def _along(a: np.ndarray, b: np.ndarray) -> RigidTransform:
     return RigidTransform(RotationMatrix.MakeFromOneVector(z / np.linalg.norm(z), 2), (a + b) / 2)
 
 
-def _chain(a: np.ndarray, b: np.ndarray, radius: float, length: float) -> np.ndarray:
-    """Centres of spheres along the capsule a–b of nominal `length`, spaced ≤ the radius (a
-    fixed count per capsule): their union misses the capsule's surface by at most
+def _chain_steps(radius: float, length: float) -> np.ndarray:
+    """Where the spheres of a capsule of nominal `length` sit along it (0 to 1), spaced ≤ the
+    radius (a fixed count per capsule): their union misses the capsule's surface by at most
     (1 − √3/2) × radius between two spheres (`CHAIN_GAP`), which the monitor subtracts."""
-    n = int(np.ceil(1.1 * length / radius)) + 1
-    return np.linspace(a, b, n)
+    return np.linspace(0.0, 1.0, int(np.ceil(1.1 * length / radius)) + 1)[:, None]
+
+
+# The body's parts as sphere chains: (steps along the part, radius); computed once.
+_FOREARM_STEPS = _chain_steps(ARM_RADII[1], FOREARM)
+_UPPER_ARM_STEPS = _chain_steps(ARM_RADII[0], UPPER_ARM)
+_TORSO_STEPS = _chain_steps(TORSO_RADIUS, TORSO_LENGTH)
+_COUNTS = (1, len(_FOREARM_STEPS), len(_UPPER_ARM_STEPS), len(_TORSO_STEPS), 1)
+_RADII = np.concatenate(
+    [
+        np.full(n, r)
+        for n, r in zip(
+            _COUNTS, (HAND_RADIUS, *ARM_RADII[::-1], TORSO_RADIUS, HEAD_RADIUS), strict=True
+        )
+    ]
+)
+_ENDS = np.cumsum(_COUNTS)
+_GROUPS = tuple((int(e - n), int(e)) for e, n in zip(_ENDS, _COUNTS, strict=True))
+_HALF_TORSO = np.array([0.0, 0.0, TORSO_LENGTH / 2])
 
 
 @dataclass(frozen=True)
 class BodyPose:
     """Key points of the body in world [m]."""
+
+    def __deepcopy__(self, memo) -> BodyPose:
+        return self  # immutable once made
 
     shoulder: np.ndarray
     elbow: np.ndarray
@@ -188,23 +200,19 @@ class BodyPose:
     head: np.ndarray
 
     def spheres(self) -> tuple[np.ndarray, np.ndarray, tuple[tuple[int, int], ...]]:
-        """(centres n×3, radii n, index ranges of the parts) of the body as spheres."""
-        half = np.array([0, 0, TORSO_LENGTH / 2])
-        parts = [
-            (self.hand[None, :], HAND_RADIUS),
-            (_chain(self.elbow, self.hand, ARM_RADII[1], FOREARM), ARM_RADII[1]),
-            (_chain(self.shoulder, self.elbow, ARM_RADII[0], UPPER_ARM), ARM_RADII[0]),
-            (
-                _chain(self.torso - half, self.torso + half, TORSO_RADIUS, TORSO_LENGTH),
-                TORSO_RADIUS,
-            ),
-            (self.head[None, :], HEAD_RADIUS),
-        ]
-        centres = np.vstack([c for c, _ in parts])
-        radii = np.concatenate([np.full(len(c), r) for c, r in parts])
-        ends = np.cumsum([len(c) for c, _ in parts])
-        groups = tuple((int(e - len(c)), int(e)) for e, (c, _) in zip(ends, parts, strict=True))
-        return centres, radii, groups
+        """(centres n×3, radii n, index ranges of the parts) of the body as spheres: the hand,
+        the forearm, the upper arm, the torso, the head."""
+        bottom = self.torso - _HALF_TORSO
+        centres = np.vstack(
+            [
+                self.hand,
+                self.elbow + _FOREARM_STEPS * (self.hand - self.elbow),
+                self.shoulder + _UPPER_ARM_STEPS * (self.elbow - self.shoulder),
+                bottom + _TORSO_STEPS * (2 * _HALF_TORSO),
+                self.head,
+            ]
+        )
+        return centres, _RADII, _GROUPS
 
 
 def body_pose(stance: np.ndarray, hand: np.ndarray) -> BodyPose:
@@ -231,10 +239,14 @@ def body_pose(stance: np.ndarray, hand: np.ndarray) -> BodyPose:
     )
 
 
-class OperatorBody(LeafSystem):
-    """Poses the operator's body geometry and publishes it as spheres.
+_EMPTY = BodySpheres(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
 
-    Input ports: `status` (SupervisorStatus), `body_poses` (the plant's). Output ports:
+
+class OperatorBody(LeafSystem):
+    """Poses the operator's body geometry and publishes it as spheres, every `period` seconds
+    (the tracker's rate: between updates the body stands where it was last seen).
+
+    Input ports: `activity` (OperatorActivity), `body_poses` (the plant's). Output ports:
     `geometry_pose` (FramePoseVector, to the SceneGraph source `operator`), `spheres`
     (BodySpheres)."""
 
@@ -244,6 +256,7 @@ class OperatorBody(LeafSystem):
         plant,
         part_instances: dict[str, object],
         config: BodyConfig,
+        period: float,
         script: BodyScript | None = None,
     ):
         super().__init__()
@@ -252,53 +265,73 @@ class OperatorBody(LeafSystem):
         self._part_body = {
             name: int(plant.GetBodyIndices(model)[0]) for name, model in part_instances.items()
         }
+        self._period = period
         self.source_id = scene_graph.RegisterSource("operator")
-        self._frames = {}
-        for name, shape, color in (
-            ("upper_arm", Capsule(ARM_RADII[0], UPPER_ARM), SHIRT),
-            ("forearm", Capsule(ARM_RADII[1], FOREARM), SKIN),
-            ("hand", Sphere(HAND_RADIUS), SKIN),
-            ("torso", Capsule(TORSO_RADIUS, TORSO_LENGTH), SHIRT),
-            ("head", Sphere(HEAD_RADIUS), SKIN),
-        ):
-            frame = scene_graph.RegisterFrame(self.source_id, GeometryFrame(f"operator_{name}"))
-            gid = scene_graph.RegisterGeometry(
-                self.source_id, frame, GeometryInstance(RigidTransform(), shape, name)
+        self._frames = {
+            name: self._register(scene_graph, name, shape, color)
+            for name, shape, color in (
+                ("upper_arm", Capsule(ARM_RADII[0], UPPER_ARM), SHIRT),
+                ("forearm", Capsule(ARM_RADII[1], FOREARM), SKIN),
+                ("hand", Sphere(HAND_RADIUS), SKIN),
+                ("torso", Capsule(TORSO_RADIUS, TORSO_LENGTH), SHIRT),
+                ("head", Sphere(HEAD_RADIUS), SKIN),
             )
-            illustration = IllustrationProperties()
-            illustration.AddProperty("phong", "diffuse", color)
-            scene_graph.AssignRole(self.source_id, gid, illustration)
-            perception = PerceptionProperties()
-            perception.AddProperty("phong", "diffuse", color)
-            perception.AddProperty("label", "id", RenderLabel.kDontCare)
-            scene_graph.AssignRole(self.source_id, gid, perception)
-            self._frames[name] = frame
-        self._status_port = self.DeclareAbstractInputPort(
-            "status", AbstractValue.Make(SupervisorStatus())
+        }
+        self._activity = self.DeclareAbstractInputPort(
+            "activity", AbstractValue.Make(OperatorActivity())
         )
-        self._poses_port = self.DeclareAbstractInputPort(
+        self._poses = self.DeclareAbstractInputPort(
             "body_poses", AbstractValue.Make([RigidTransform()])
         )
+        rest = body_pose(self._stance, self._script(0.0, OperatorActivity(), None))
+        self._pose = self.DeclareAbstractState(AbstractValue.Make(rest))
+        self._spheres = self.DeclareAbstractState(AbstractValue.Make(_EMPTY))
         self.DeclareAbstractOutputPort(
-            "geometry_pose", lambda: AbstractValue.Make(FramePoseVector()), self._calc_geometry
+            "geometry_pose",
+            lambda: AbstractValue.Make(FramePoseVector()),
+            self._calc_geometry,
+            prerequisites_of_calc={self.abstract_state_ticket(self._pose)},
         )
-        empty = BodySpheres(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
-        self.DeclareAbstractOutputPort(
-            "spheres", lambda: AbstractValue.Make(empty), self._calc_spheres
-        )
+        self.DeclareStateOutputPort("spheres", self._spheres)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
 
-    def pose(self, context, dt: float = 0.0) -> BodyPose:
-        """The body's pose at the context's time minus `dt`."""
-        status: SupervisorStatus = self._status_port.Eval(context)
+    def _register(self, scene_graph, name: str, shape, color: Rgba):
+        frame = scene_graph.RegisterFrame(self.source_id, GeometryFrame(f"operator_{name}"))
+        gid = scene_graph.RegisterGeometry(
+            self.source_id, frame, GeometryInstance(RigidTransform(), shape, name)
+        )
+        illustration = IllustrationProperties()
+        illustration.AddProperty("phong", "diffuse", color)
+        scene_graph.AssignRole(self.source_id, gid, illustration)
+        perception = PerceptionProperties()
+        perception.AddProperty("phong", "diffuse", color)
+        perception.AddProperty("label", "id", RenderLabel.kDontCare)
+        scene_graph.AssignRole(self.source_id, gid, perception)
+        return frame
+
+    def pose(self, context) -> BodyPose:
+        """The body's pose by its script at the context's time."""
+        activity: OperatorActivity = self._activity.Eval(context)
         part = None
-        if status.pending is not None and status.pending[2] in self._part_body:
-            poses = self._poses_port.Eval(context)
-            part = poses[self._part_body[status.pending[2]]].translation()
-        hand = np.asarray(self._script(context.get_time() - dt, status, part), dtype=float)
+        if activity.part in self._part_body:
+            part = self._poses.Eval(context)[self._part_body[activity.part]].translation()
+        hand = np.asarray(self._script(context.get_time(), activity, part), dtype=float)
         return body_pose(self._stance, hand)
 
+    def _update(self, context, state) -> None:
+        # A tracker's velocities: the change since its last sample.
+        now = self.pose(context)
+        centres, radii, groups = now.spheres()
+        before = context.get_abstract_state(self._spheres).get_value()
+        velocities = np.zeros_like(centres)
+        if len(before.centres) == len(centres):
+            velocities = (centres - before.centres) / self._period
+        spheres = BodySpheres(centres, radii, velocities, groups)
+        state.get_mutable_abstract_state(self._pose).set_value(now)
+        state.get_mutable_abstract_state(self._spheres).set_value(spheres)
+
     def _calc_geometry(self, context, output) -> None:
-        p = self.pose(context)
+        p: BodyPose = context.get_abstract_state(self._pose).get_value()
         poses = output.get_mutable_value()
         poses.clear()
         poses.set_value(self._frames["upper_arm"], _along(p.shoulder, p.elbow))
@@ -306,12 +339,6 @@ class OperatorBody(LeafSystem):
         poses.set_value(self._frames["hand"], RigidTransform(p.hand))
         poses.set_value(self._frames["torso"], RigidTransform(p.torso))
         poses.set_value(self._frames["head"], RigidTransform(p.head))
-
-    def _calc_spheres(self, context, output) -> None:
-        dt = 2e-3
-        centres, radii, groups = self.pose(context).spheres()
-        before, _, _ = self.pose(context, dt).spheres()
-        output.set_value(BodySpheres(centres, radii, (centres - before) / dt, groups))
 
 
 __all__ = [

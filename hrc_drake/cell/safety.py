@@ -21,11 +21,14 @@ every sphere is at least S_p(s) + `slow_band` away, with the plan's own velociti
 (`SafetyLog`): least separation, least margin (separation − S_p with the measured velocities) while
 the robot moves, violations (steps where the robot moved with separation < S_p), body contacts,
 and the time spent slowed and stopped.
+
+The reading, the log and `allowed_scale` are those of the controller's monitor
+(`hrc_drake.cell.separation`), which reads only what a real cell measures.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -34,73 +37,13 @@ from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from hrc_drake.cell.operator_body import CHAIN_GAP, BodySpheres
+from hrc_drake.cell.separation import SafetyLog, SeparationReading, allowed_scale
 from hrc_drake.cell.supervisor import Mode, SupervisorStatus
 from hrc_drake.hri.scenario import SafetyConfig
 from hrc_drake.motion.plan import Stage
 
 REACH = 0.8  # m; farther than S_p can be here (v_h ≤ 2 m/s, T_s ≤ 0.2 s at 0.25 m/s TCP)
 EXACT = 0.25  # m; the least separation is exact below this, a lower bound above
-
-
-@dataclass(frozen=True)
-class SeparationReading:
-    """One step's assessment.
-
-    Attributes:
-        separation: least distance robot–body [m] (inf: nothing within REACH).
-        margin: least separation − S_p with the measured velocities [m].
-        limit: the speed scale allowed (see the module docstring).
-        moving: a robot joint moves faster than `SafetyConfig.moving_speed`.
-    """
-
-    separation: float = float("inf")
-    margin: float = float("inf")
-    limit: float = 1.0
-    moving: bool = False
-
-
-@dataclass(frozen=True)
-class SafetyLog:
-    """The run's safety figures, accumulated step by step (`simulate --json` `safety`)."""
-
-    steps: int = 0
-    min_separation: float = float("inf")
-    min_margin: float = float("inf")
-    violations: int = 0
-    body_contacts: int = 0
-    slowed_time: float = 0.0
-    stopped_time: float = 0.0
-
-    def to_json(self) -> dict:
-        """The JSON-able figures (distances in m, rounded to 0.1 mm; None: never measured)."""
-
-        def finite(x: float) -> float | None:
-            return round(float(x), 4) if np.isfinite(x) else None
-
-        return {
-            "min_separation": finite(self.min_separation),
-            "min_margin": finite(self.min_margin),
-            "violations": self.violations,
-            "body_contacts": self.body_contacts,
-            "slowed_time": round(self.slowed_time, 3),
-            "stopped_time": round(self.stopped_time, 3),
-        }
-
-
-def allowed_scale(gap: np.ndarray, a0: np.ndarray, a1: np.ndarray, a2: np.ndarray) -> float:
-    """The largest s ∈ [0, 1] with a0 + a1 s + a2 s² ≤ gap for every entry (0 if none)."""
-    scale = 1.0
-    for g, c0, c1, c2 in zip(gap, a0, a1, a2, strict=True):
-        if c0 + c1 + c2 <= g:
-            continue
-        if c0 > g:
-            return 0.0
-        if c2 > 1e-12:
-            s = (-c1 + np.sqrt(c1 * c1 + 4 * c2 * (g - c0))) / (2 * c2)
-        else:
-            s = (g - c0) / c1 if c1 > 1e-12 else 1.0
-        scale = min(scale, float(s))
-    return float(np.clip(scale, 0.0, 1.0))
 
 
 class SeparationMonitor(LeafSystem):

@@ -13,10 +13,17 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from pydrake.common.yaml import yaml_load_typed
+from pydrake.geometry import DefaultProximityProperties, SceneGraphConfig
 from pydrake.multibody.plant import MultibodyPlantConfig
 
 from hrc_drake.cell_models import CellDesign
-from hrc_drake.hri.scenario import Scenario, ScenarioError, check_scenario, scenario_file
+from hrc_drake.hri.scenario import (
+    Scenario,
+    ScenarioError,
+    check_scenario,
+    load_scenario,
+    scenario_file,
+)
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.tasks.spec import AssemblySpec
 
@@ -30,27 +37,33 @@ def load_cell_scenario(
     """A scenario file (a path, or a name under scenarios/) with YAML overrides on top (one text,
     or several applied in turn).
 
-    With no file, the overrides apply to the defaults. ScenarioError names the file (or
-    `--scenario-text`) and the key for an unknown key or a value of the wrong type."""
+    With no file, the overrides apply to the defaults. The text is checked first by the strict
+    loader of the task layer (`hrc_drake.hri.scenario.load_scenario`), whose ScenarioError names
+    the file (or `--scenario-text`), the key and the type it expects, or the line and column of a
+    YAML syntax error; Drake's own errors are several lines of traceback about its conversion.
+    Then Drake's `yaml_load_typed` loads it, as `hardware_sim` does."""
+    checked = load_scenario(name_or_path, scenario_text)
     scenario, source = Scenario(), "<defaults>"
     if name_or_path is not None:
         path = scenario_file(name_or_path)
         source = str(path)
-        try:
-            scenario = yaml_load_typed(schema=Scenario, filename=str(path), defaults=Scenario())
-        except RuntimeError as err:
-            raise ScenarioError(f"scenario {path}: {err}") from err
-        if not scenario.name:
-            scenario.name = path.stem
+        scenario = _drake_load(f"scenario {path}", filename=str(path), defaults=Scenario())
+        scenario.name = checked.name
     texts = [scenario_text] if isinstance(scenario_text, str) else list(scenario_text or ())
     if texts:
         source = f"{source} with --scenario-text"
     for text in texts:
-        try:
-            scenario = yaml_load_typed(schema=Scenario, data=text, defaults=scenario)
-        except RuntimeError as err:
-            raise ScenarioError(f"--scenario-text: {err}") from err
+        scenario = _drake_load("--scenario-text", data=text, defaults=scenario)
     return check_scenario(scenario, source)
+
+
+def _drake_load(source: str, **kwargs) -> Scenario:
+    try:
+        return yaml_load_typed(schema=Scenario, **kwargs)
+    except (RuntimeError, ValueError, TypeError) as err:
+        # Not expected after the strict check; still one line, not the converter's traceback.
+        last = str(err).strip().splitlines()[-1] if str(err).strip() else type(err).__name__
+        raise ScenarioError(f"{source}: {last}") from None
 
 
 def plant_config(scenario: Scenario) -> MultibodyPlantConfig:
@@ -61,6 +74,23 @@ def plant_config(scenario: Scenario) -> MultibodyPlantConfig:
         contact_model=physics.contact_model,
         discrete_contact_approximation=physics.discrete_contact_approximation,
         contact_surface_representation=physics.contact_surface_representation,
+    )
+
+
+def scene_graph_config(scenario: Scenario) -> SceneGraphConfig:
+    """The SceneGraphConfig of the scenario's `physics.contact`: the contact material of every
+    geometry whose model does not set its own, compliant unless the model says rigid."""
+    contact = scenario.physics.contact
+    return SceneGraphConfig(
+        default_proximity_properties=DefaultProximityProperties(
+            compliance_type="compliant",
+            hydroelastic_modulus=contact.hydroelastic_modulus,
+            resolution_hint=contact.resolution_hint,
+            hunt_crossley_dissipation=contact.hunt_crossley_dissipation,
+            relaxation_time=contact.relaxation_time,
+            static_friction=contact.static_friction,
+            dynamic_friction=contact.dynamic_friction,
+        )
     )
 
 

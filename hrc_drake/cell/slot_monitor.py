@@ -19,12 +19,11 @@ from pydrake.multibody.plant import ContactResults, MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex
 from pydrake.systems.framework import LeafSystem
 
+from hrc_drake.cell.contacts import contact_pairs, geometry_owners
+from hrc_drake.cell_models import PLATE
 from hrc_drake.motion.poses import CellFrames, seat_pose
+from hrc_drake.robot_models import GRIPPER
 from hrc_drake.tasks.spec import SpecError
-
-PLATE = "base_plate"
-TRAY = "tray"
-GRIPPER = "rg2"
 
 
 class PartStatus(enum.Enum):
@@ -118,6 +117,37 @@ def _rotation_angle(X_ref: RigidTransform, X: RigidTransform) -> tuple[float, fl
     return float(np.linalg.norm(X_rel.translation())), float(angle)
 
 
+def _instance(plant: MultibodyPlant, name: str, role: str):
+    if not plant.HasModelInstanceNamed(name):
+        known = ", ".join(
+            plant.GetModelInstanceName(ModelInstanceIndex(i))
+            for i in range(plant.num_model_instances())
+        )
+        raise ValueError(
+            f"SlotMonitor: {role} {name!r} is not a model instance of the plant (instances: "
+            f"{known}); build the plant from the same CellDesign as the frames"
+        )
+    return plant.GetModelInstanceByName(name)
+
+
+def _named_geometries(plant: MultibodyPlant, inspector, body) -> dict[str, GeometryId]:
+    return {
+        inspector.GetName(g).split("::")[-1]: g for g in plant.GetCollisionGeometriesForBody(body)
+    }
+
+
+def _seats_of(plant: MultibodyPlant, inspector, model, body) -> list[_Seat]:
+    """The seats of a body: each collision geometry `<frame>_seat` is the floor of frame
+    `<frame>`."""
+    seats = []
+    for geometry_name, gid in sorted(_named_geometries(plant, inspector, body).items()):
+        if geometry_name.endswith("_seat"):
+            frame_name = geometry_name.removesuffix("_seat")
+            frame = plant.GetFrameByName(frame_name, model)
+            seats.append(_Seat(frame_name, body.index(), frame.GetFixedPoseInBodyFrame(), gid))
+    return seats
+
+
 class SlotMonitor(LeafSystem):
     """Reports the placement of every part from contact results and body poses.
 
@@ -129,7 +159,8 @@ class SlotMonitor(LeafSystem):
         plant: the finalized cell plant.
         scene_graph: its SceneGraph (for geometry names).
         frames: the cell's frames and design: which instances are parts of which spec symbol,
-            which are hosts; tokens are the spec's (`AssemblySpec.placement_of`).
+            which are hosts, where the tray homes are; tokens are the spec's
+            (`AssemblySpec.placement_of`).
         tolerances: pose tolerances.
     """
 
@@ -146,89 +177,11 @@ class SlotMonitor(LeafSystem):
         self._spec = design.spec
         self._symbols = {p.name: p.symbol for p in design.parts}
         inspector = scene_graph.model_inspector()
-
-        def instance(name: str, role: str):
-            if not plant.HasModelInstanceNamed(name):
-                known = ", ".join(
-                    plant.GetModelInstanceName(ModelInstanceIndex(i))
-                    for i in range(plant.num_model_instances())
-                )
-                raise ValueError(
-                    f"SlotMonitor: {role} {name!r} is not a model instance of the plant "
-                    f"(instances: {known}); pass part_symbols/host_tags naming existing instances"
-                )
-            return plant.GetModelInstanceByName(name)
-
-        def geometries(body) -> dict[str, GeometryId]:
-            return {
-                inspector.GetName(g).split("::")[-1]: g
-                for g in plant.GetCollisionGeometriesForBody(body)
-            }
-
-        def seats_of(model, body) -> list[_Seat]:
-            names = geometries(body)
-            seats = []
-            for geometry_name, gid in sorted(names.items()):
-                if not geometry_name.endswith("_seat"):
-                    continue
-                frame_name = geometry_name.removesuffix("_seat")
-                frame = plant.GetFrameByName(frame_name, model)
-                seats.append(_Seat(frame_name, body.index(), frame.GetFixedPoseInBodyFrame(), gid))
-            return seats
-
-        plate = instance(PLATE, "the base plate")
-        plate_body = plant.GetBodyByName(PLATE, plate)
-        self._slots = {int(s.name.removeprefix("slot_")): s for s in seats_of(plate, plate_body)}
-        if not self._slots:
-            raise ValueError("SlotMonitor: the base plate has no slot_k_seat collision geometry")
-        self._plate_geometries = set(plant.GetCollisionGeometriesForBody(plate_body))
-
-        self._parts: dict[str, object] = {}  # instance -> body
-        self._part_geometries: dict[str, set[GeometryId]] = {}
-        self._span: dict[str, int] = {}
-        self._X_BG: dict[str, RigidTransform] = {}  # grasp frame in the part body
-        self._owner: dict[GeometryId, str] = {}
-        for name in sorted(self._symbols):
-            model = instance(name, "part")
-            bodies = plant.GetBodyIndices(model)
-            body = plant.get_body(bodies[0])
-            self._parts[name] = body
-            geoms = geometries(body)
-            self._part_geometries[name] = set(geoms.values())
-            self._span[name] = self._spec.part(self._symbols[name]).footprint
-            if plant.HasFrameNamed("grasp", model):
-                self._X_BG[name] = plant.GetFrameByName("grasp", model).GetFixedPoseInBodyFrame()
-            for gid in geoms.values():
-                self._owner[gid] = name
-        self._host_tags = design.host_tags
-        self._host_seats: dict[str, list[_Seat]] = {}
-        for name in self._host_tags:
-            instance(name, "host part")
-            if name not in self._parts:
-                raise ValueError(f"SlotMonitor: host {name!r} is not in part_symbols")
-            self._host_seats[name] = seats_of(plant.GetModelInstanceByName(name), self._parts[name])
-
-        self._homes: list[tuple[str, RigidTransform]] = []  # (symbol, X_W_home) — tray is welded
-        plant_context = plant.CreateDefaultContext()
-        if plant.HasModelInstanceNamed(TRAY):
-            tray = plant.GetModelInstanceByName(TRAY)
-            for part in self._parts:
-                frame_name = f"home_{part}"
-                if plant.HasFrameNamed(frame_name, tray):
-                    X_WH = plant.GetFrameByName(frame_name, tray).CalcPoseInWorld(plant_context)
-                    self._homes.append((self._symbols[part], X_WH))
-
-        self._tcp = None
-        self._finger_geometries: list[set[GeometryId]] = []
-        if plant.HasModelInstanceNamed(GRIPPER):
-            rg2 = plant.GetModelInstanceByName(GRIPPER)
-            tcp = plant.GetFrameByName("tcp", rg2)
-            self._tcp = (tcp.body().index(), tcp.GetFixedPoseInBodyFrame())
-            for body_index in plant.GetBodyIndices(rg2):
-                body = plant.get_body(body_index)
-                if "finger" in body.name():
-                    self._finger_geometries.append(set(plant.GetCollisionGeometriesForBody(body)))
-
+        self._read_plate(plant, inspector)
+        self._read_parts(plant, inspector, design.host_tags)
+        # The tray is welded: its homes are fixed world poses.
+        self._homes = [(self._symbols[part], X_WH) for part, X_WH in frames.homes.items()]
+        self._read_gripper(plant)
         self.DeclareAbstractInputPort("contact_results", AbstractValue.Make(ContactResults()))
         self.DeclareAbstractInputPort("body_poses", AbstractValue.Make([RigidTransform()]))
         self.DeclareAbstractOutputPort(
@@ -237,6 +190,53 @@ class SlotMonitor(LeafSystem):
             self._calc_configuration,
         )
 
+    def _read_plate(self, plant: MultibodyPlant, inspector) -> None:
+        plate = _instance(plant, PLATE, "the base plate")
+        body = plant.GetBodyByName(PLATE, plate)
+        self._slots = {
+            int(s.name.removeprefix("slot_")): s for s in _seats_of(plant, inspector, plate, body)
+        }
+        if not self._slots:
+            raise ValueError("SlotMonitor: the base plate has no slot_k_seat collision geometry")
+        self._plate_geometries = set(plant.GetCollisionGeometriesForBody(body))
+
+    def _read_parts(self, plant: MultibodyPlant, inspector, host_tags) -> None:
+        self._parts: dict[str, object] = {}  # instance -> body
+        self._part_geometries: dict[str, set[GeometryId]] = {}
+        self._span: dict[str, int] = {}
+        self._X_BG: dict[str, RigidTransform] = {}  # grasp frame in the part body
+        # Geometry -> the part instance it belongs to (parts are one body each).
+        self._owner = {
+            gid: owner.model
+            for gid, owner in geometry_owners(plant).items()
+            if owner.model in self._symbols
+        }
+        for name in sorted(self._symbols):
+            model = _instance(plant, name, "part")
+            body = plant.get_body(plant.GetBodyIndices(model)[0])
+            self._parts[name] = body
+            self._part_geometries[name] = set(plant.GetCollisionGeometriesForBody(body))
+            self._span[name] = self._spec.part(self._symbols[name]).footprint
+            if plant.HasFrameNamed("grasp", model):
+                self._X_BG[name] = plant.GetFrameByName("grasp", model).GetFixedPoseInBodyFrame()
+        self._host_seats = {
+            name: _seats_of(plant, inspector, plant.GetModelInstanceByName(name), self._parts[name])
+            for name in host_tags
+        }
+
+    def _read_gripper(self, plant: MultibodyPlant) -> None:
+        self._tcp = None
+        self._finger_geometries: list[set[GeometryId]] = []
+        if not plant.HasModelInstanceNamed(GRIPPER):
+            return
+        rg2 = plant.GetModelInstanceByName(GRIPPER)
+        tcp = plant.GetFrameByName("tcp", rg2)
+        self._tcp = (tcp.body().index(), tcp.GetFixedPoseInBodyFrame())
+        for body_index in plant.GetBodyIndices(rg2):
+            body = plant.get_body(body_index)
+            if "finger" in body.name():
+                self._finger_geometries.append(set(plant.GetCollisionGeometriesForBody(body)))
+
     @property
     def part_symbols(self) -> dict[str, str]:
         """Model instance -> spec part symbol."""
@@ -244,20 +244,12 @@ class SlotMonitor(LeafSystem):
 
     def _touches(self, contacts: ContactResults) -> dict[str, set[GeometryId]]:
         touching: dict[str, set[GeometryId]] = {p: set() for p in self._parts}
-
-        def note(a: GeometryId, b: GeometryId) -> None:
+        for a, b in contact_pairs(contacts):
             # Either geometry may be the part's (and both, for two parts touching).
             if a in self._owner:
                 touching[self._owner[a]].add(b)
             if b in self._owner:
                 touching[self._owner[b]].add(a)
-
-        for i in range(contacts.num_hydroelastic_contacts()):
-            surface = contacts.hydroelastic_contact_info(i).contact_surface()
-            note(surface.id_M(), surface.id_N())
-        for i in range(contacts.num_point_pair_contacts()):
-            pair = contacts.point_pair_contact_info(i).point_pair()
-            note(pair.id_A, pair.id_B)
         return touching
 
     def _within_seat(self, X_W_seat: RigidTransform, X_W_part: RigidTransform) -> bool:

@@ -1,32 +1,34 @@
 """The Supervisor: at every task boundary it reads the cell, asks the policy, and drives the robot.
 
-At a task boundary the Supervisor
-1. reads the SlotMonitor's configuration and, with the history it has seen, the MDP state;
-2. asks the Policy for the next task and proposes it on the HRI;
-3. takes the operator's answer (confirm, or another task: the slot the operator indicates);
-4. asks the motion layer for the plan and drives the UR3 and the gripper through it: pick,
-   carry, place, hold while the operator bolts, release, retreat (or, for `undo`, take the part
-   placed last back to the tray);
-5. after the task, learns what really happened from the SlotMonitor — the part may sit in
-   another seat than planned — and only then moves the MDP state on.
+It is the controller's task level and sees the cell only through what a real cell measures
+(`docs/station.md`). At a task boundary the Supervisor
+1. reads the configuration sensor and, with the history it has seen, the MDP state;
+2. asks the policy for the next task and shows it on the operator's interface (a `CHOOSE`
+   prompt);
+3. takes the operator's indication (the proposal confirmed, or another task);
+4. asks the planner for the plan — the planner runs beside it (`hrc_drake.motion.service`): the
+   update only asks and polls, holding the arm still meanwhile — and drives the UR3 and the
+   gripper through it: pick, carry, place; holds the part still and prompts `BOLT`; once the
+   operator says it is bolted, releases and retreats (or, for `undo`, takes the part placed
+   last back to the tray);
+5. after the task, learns what really happened from the configuration sensor — the part may
+   sit in another seat than planned — and only then moves the MDP state on.
+
+It checks what it commands against what it measures: a joint farther from its command than
+`station.ur3.tracking_tolerance`, or fingers that do not stand at the width of the part they
+should hold (and have not stalled on it), stop the task with the reason.
 
 The robot follows its plan in plan time `tau`, which advances at the speed scale s ∈ [0, 1] that
-the separation monitor (`hrc_drake.cell.safety`) allows on the optional `speed_limit` input: the
-robot slows down by scaling its trajectory's time, stops with s = 0 and resumes as s ramps back,
-never faster than the arm's joint acceleration limit allows. While the plan holds the part still
-for bolting, `tau` runs with simulated time whatever s is (a monitored stop); at the end of
-the hold the robot moves on only when s > 0. All stage logic (grasp and bolt welds, release)
-reads `tau`.
-
-Grasping and bolting are weld constraints of the plant. A Drake system cannot write another
-system's parameters from its events, so the Supervisor publishes the welds it wants on its
-`welds` port; the simulator's monitor (`hrc_drake.cell.run`) stops the simulation at the step
-where they change, applies them, and goes on.
+the separation monitor allows on the optional `speed_limit` input: the robot slows down by
+scaling its trajectory's time, stops with s = 0 and resumes as s ramps back, never faster than
+the arm's joint acceleration limit allows. While it holds a part for bolting, `tau` stands at
+the start of the plan's hold; the operator's `bolted` moves it to the release.
 """
 
 from __future__ import annotations
 
 import enum
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
@@ -34,22 +36,29 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
+from hrc_drake.cell.intent import MotionIntent
 from hrc_drake.cell.slot_monitor import CellConfiguration, PartStatus
+from hrc_drake.hri.messages import Indication, Prompt, PromptKind
 from hrc_drake.motion.plan import Plan, Stage
-from hrc_drake.tasks.decide import Operator
+from hrc_drake.motion.service import PlanFailure, PlanRequest, PlanService
+from hrc_drake.robot_models import UR3_JOINTS
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.policy import Policy
 from hrc_drake.tasks.tokens import UNDO
 
-# (configuration, task, last token, measured layout: instance -> token) -> Plan
-Planner = Callable[[frozenset[str], str, str | None, dict[str, str]], Plan]
+N_JOINTS = len(UR3_JOINTS)
+# After the fingers close, this long for them to stall on the part before the grasp is checked;
+# and a grasp that looks lost must stay so this long (a jolt of the carry is not a loss).
+GRIP_SETTLE = 0.1  # s
 
 
 class Mode(enum.Enum):
     """What the Supervisor is doing."""
 
     DECIDE = "decide"  # at a task boundary
-    EXECUTE = "execute"  # following a plan
+    ASK = "ask"  # the proposal is shown; waiting for the operator's indication
+    PLAN = "plan"  # waiting for the planner (the arm holds still)
+    EXECUTE = "execute"  # following a plan (holding the part while the operator bolts it)
     SETTLE = "settle"  # plan done; let the parts come to rest before reading the cell
     DONE = "done"  # a terminal state is reached
     FAILED = "failed"  # cannot go on (the reason is in `error`)
@@ -68,15 +77,8 @@ class TaskRecord:
     part: str
     start_time: float
     end_time: float
-
-
-@dataclass(frozen=True)
-class Weld:
-    """A weld constraint the Supervisor wants active: a grasp, or a bolt at a seat."""
-
-    kind: str  # "grasp" | "bolt"
-    part: str
-    seat: str = ""  # bolt: the seat key (token on the plate, "<host>/row_<j>" on a host part)
+    idle: float = 0.0  # wall seconds the robot waited for the planner after the indication
+    plan_ready: bool = False  # the plan was made ahead of the indication
 
 
 @dataclass(frozen=True)
@@ -86,22 +88,28 @@ class SupervisorStatus:
     mode: Mode = Mode.DECIDE
     state: tuple[str, ...] = ()
     step: int = 0
+    prompt: Prompt = field(default_factory=Prompt)
+    request: PlanRequest | None = None
+    requested_wall: float = 0.0  # perf_counter() when the plan was asked for
+    plan_ready: bool = False
     plan: Plan | None = None
     plan_start: float = 0.0
     pending: tuple[str, str, str] | None = None  # (proposed, indicated, part) of the task
     tokens_before: frozenset[str] = frozenset()
     settle_until: float = 0.0
-    welds: frozenset[Weld] = frozenset()
-    bolt_seat: str | None = None
+    bolted: bool = False
+    planned_ahead: bool = False
     q_hold: tuple[float, ...] = ()
     opening_hold: float = 0.0
     history: tuple[TaskRecord, ...] = ()
     error: str | None = None
-    events: tuple[str, ...] = field(default_factory=tuple)
+    events: tuple[str, ...] = ()
     tau: float = 0.0  # plan time at `tau_time` (simulated time)
     tau_time: float = 0.0
     rate: float = 1.0  # d tau / dt from `tau_time` on
     speed: float = 1.0  # the speed scale s the robot runs at (1: the plan's own speed)
+    idle: float = 0.0  # wall seconds waited on the planner for the current task
+    grip_lost_at: float | None = None  # when the grasp last started to look lost
 
     def __deepcopy__(self, memo) -> SupervisorStatus:
         # Drake copies abstract values at every update and output evaluation; this value is
@@ -113,137 +121,228 @@ class SupervisorStatus:
         tau = self.tau + self.rate * (now - self.tau_time)
         return float(np.clip(tau, 0.0, self.plan.duration)) if self.plan is not None else tau
 
+    def holding_for_bolts(self, tau: float) -> bool:
+        """Whether the robot holds the placed part still, waiting for the operator's bolts."""
+        plan = self.plan
+        return (
+            plan is not None
+            and plan.task != UNDO
+            and not self.bolted
+            and plan.t_in_place <= tau < plan.t_release
+        )
+
+    def command(self, now: float) -> tuple[np.ndarray, np.ndarray, float]:
+        """(joint positions, joint velocities, gripper opening) commanded at `now`."""
+        if self.mode != Mode.EXECUTE or self.plan is None:
+            q = np.asarray(self.q_hold, dtype=float)
+            return q, np.zeros(len(q)), self.opening_hold
+        tau = self.plan_time(now)
+        q = self.plan.trajectory.value(tau).ravel()
+        v = self.plan.trajectory.EvalDerivative(tau, 1).ravel() * self.rate
+        if tau >= self.plan.duration:
+            v = np.zeros_like(v)
+        return q, v, self.plan.gripper_opening(tau)
+
     @property
     def visited(self) -> list[tuple[str, ...]]:
         """The MDP states visited, from the start."""
         return [(), *(r.next_state for r in self.history)]
 
 
+class SupervisorError(RuntimeError):
+    """The supervisor cannot go on."""
+
+
+@dataclass(frozen=True)
+class SupervisorLimits:
+    """Timing and checks of the Supervisor (from the scenario's `run:` and `station:`)."""
+
+    period: float = 0.02
+    settle_time: float = 0.3
+    max_steps: int = 30
+    joint_acceleration: float = 5.0
+    tracking_tolerance: float = 0.05
+    grip_tolerance: float = 0.004
+    plan_ahead: bool = True
+
+
 class Supervisor(LeafSystem):
     """Task-level state machine of the cell (see the module docstring).
 
-    Input ports: `slot_configuration` (CellConfiguration), `speed_limit` (1: the speed scale the
-    separation monitor allows; unconnected, 1). Output ports: `ur3.desired_state`
-    (12), `rg2.desired_opening` (1), `welds` (frozenset[Weld]), `status` (SupervisorStatus).
+    Input ports: `configuration` (CellConfiguration), `hri.indication` (Indication),
+    `ur3.state_estimated` (12), `rg2.state_measured` (2: opening, rate), `rg2.grip_detected`
+    (1), `speed_limit` (1: the speed scale the separation monitor allows; unconnected, 1).
+    Output ports: `command` (13: the arm's joint positions and velocities, then the gripper's
+    opening; the controller splits it into `ur3.position`, `ur3.velocity`, `rg2.opening`),
+    `hri.prompt` (Prompt), `intent` (MotionIntent), `status` (SupervisorStatus).
     `policy` needs `next_task(state)` and `matches(spec)` (a `Policy`, or a decider wrapped by
-    `hrc_drake.cell.evaluate.DeciderPolicy`); `on_task(record)`, if given, hears every task as
-    the cell observed it (a learning decider updates its operator model from it).
+    `hrc_drake.cell.evaluate.DeciderPolicy`), and may offer `predicted_tasks(state)` (most likely
+    first) for planning ahead; `on_task(record)`, if given, hears every task as the cell observed
+    it (a learning decider updates its operator model from it).
     """
 
     def __init__(
         self,
         space: StateSpace,
         policy: Policy,
-        operator: Operator,
-        planner: Planner,
+        plans: PlanService,
         home: np.ndarray,
         home_opening: float,
-        period: float = 0.02,
-        settle_time: float = 0.3,
-        max_steps: int = 30,
-        joint_acceleration: float = 5.0,
+        limits: SupervisorLimits | None = None,
         on_task: Callable[[TaskRecord], None] | None = None,
     ):
         super().__init__()
         policy.matches(space.spec)
-        self._space, self._policy, self._operator, self._planner = space, policy, operator, planner
+        self._space, self._policy, self._plans = space, policy, plans
+        self._limits = limits if limits is not None else SupervisorLimits()
         self._on_task = on_task
-        self._settle_time, self._max_steps = settle_time, max_steps
-        self._period, self._joint_acceleration = period, joint_acceleration
-        self._config_port = self.DeclareAbstractInputPort(
-            "slot_configuration", AbstractValue.Make(CellConfiguration())
-        )
+        self._declare_inputs()
         initial = SupervisorStatus(
             q_hold=tuple(float(x) for x in home), opening_hold=float(home_opening)
         )
-        self._speed_port = self.DeclareVectorInputPort("speed_limit", BasicVector(1))
         self._status_index = self.DeclareAbstractState(AbstractValue.Make(initial))
+        self._declare_outputs()
+        self.DeclarePeriodicUnrestrictedUpdateEvent(self._limits.period, 0.0, self._update)
+
+    def _declare_inputs(self) -> None:
+        self._config_port = self.DeclareAbstractInputPort(
+            "configuration", AbstractValue.Make(CellConfiguration())
+        )
+        self._indication_port = self.DeclareAbstractInputPort(
+            "hri.indication", AbstractValue.Make(Indication())
+        )
+        self._arm_port = self.DeclareVectorInputPort("ur3.state_estimated", 2 * N_JOINTS)
+        self._gripper_port = self.DeclareVectorInputPort("rg2.state_measured", 2)
+        self._grip_port = self.DeclareVectorInputPort("rg2.grip_detected", 1)
+        self._speed_port = self.DeclareVectorInputPort("speed_limit", BasicVector(1))
+
+    def _declare_outputs(self) -> None:
         # Outputs depend on the state and time only (no feedthrough): the separation monitor
-        # reads `status` and feeds `speed_limit` back without an algebraic loop.
+        # reads `intent` and feeds `speed_limit` back without an algebraic loop.
         deps = {self.time_ticket(), self.abstract_state_ticket(self._status_index)}
+        # One command, evaluated once per plant step, split into the arm's and the gripper's.
         self.DeclareVectorOutputPort(
-            "ur3.desired_state", BasicVector(12), self._calc_arm, prerequisites_of_calc=deps
+            "command", 2 * N_JOINTS + 1, self._calc_command, prerequisites_of_calc=deps
         )
-        self.DeclareVectorOutputPort(
-            "rg2.desired_opening", BasicVector(1), self._calc_gripper, prerequisites_of_calc=deps
-        )
-        self.DeclareAbstractOutputPort(
-            "welds",
-            lambda: AbstractValue.Make(frozenset()),
-            self._calc_welds,
-            prerequisites_of_calc=deps,
-        )
-        self.DeclareAbstractOutputPort(
-            "status",
-            lambda: AbstractValue.Make(SupervisorStatus()),
-            self._calc_status,
-            prerequisites_of_calc=deps,
-        )
-        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
+        for name, empty, calc in (
+            ("hri.prompt", Prompt(), self._calc_prompt),
+            ("intent", MotionIntent(), self._calc_intent),
+            ("status", SupervisorStatus(), self._calc_status),
+        ):
+            self.DeclareAbstractOutputPort(
+                name,
+                lambda empty=empty: AbstractValue.Make(empty),
+                calc,
+                prerequisites_of_calc=deps,
+            )
 
     # --- outputs -------------------------------------------------------------------------
     def _status(self, context) -> SupervisorStatus:
         return context.get_abstract_state(self._status_index).get_value()
 
-    def _calc_arm(self, context, output) -> None:
-        s = self._status(context)
-        if s.mode == Mode.EXECUTE and s.plan is not None:
-            tau = s.plan_time(context.get_time())
-            q = s.plan.trajectory.value(tau).ravel()
-            v = s.plan.trajectory.EvalDerivative(tau, 1).ravel() * s.rate
-            if tau >= s.plan.duration:
-                v = np.zeros_like(v)
-            output.SetFromVector(np.concatenate([q, v]))
-        else:
-            output.SetFromVector(np.concatenate([s.q_hold, np.zeros(len(s.q_hold))]))
+    def _calc_command(self, context, output) -> None:
+        q, v, opening = self._status(context).command(context.get_time())
+        output.SetFromVector(np.concatenate([q, v, [opening]]))
 
-    def _calc_gripper(self, context, output) -> None:
-        s = self._status(context)
-        if s.mode == Mode.EXECUTE and s.plan is not None:
-            output.SetFromVector([s.plan.gripper_opening(s.plan_time(context.get_time()))])
-        else:
-            output.SetFromVector([s.opening_hold])
-
-    def _calc_welds(self, context, output) -> None:
-        output.set_value(self._status(context).welds)
+    def _calc_prompt(self, context, output) -> None:
+        output.set_value(self._status(context).prompt)
 
     def _calc_status(self, context, output) -> None:
         output.set_value(self._status(context))
 
+    def _calc_intent(self, context, output) -> None:
+        s = self._status(context)
+        if s.mode != Mode.EXECUTE or s.plan is None:
+            output.set_value(MotionIntent(rate=s.rate))
+            return
+        plan, tau = s.plan, s.plan_time(context.get_time())
+        grasped = plan.segment(Stage.GRASP).end <= tau < plan.t_release
+        moving = tau < plan.duration and not s.holding_for_bolts(tau) and s.rate > 0
+        qdot = plan.trajectory.EvalDerivative(min(tau, plan.duration), 1).ravel()
+        output.set_value(
+            MotionIntent(
+                qdot=qdot if tau < plan.duration else np.zeros_like(qdot),
+                carrying=plan.instance if grasped else None,
+                moving=moving,
+                rate=s.rate,
+            )
+        )
+
     # --- the state machine ---------------------------------------------------------------
     def _update(self, context, state) -> None:
         status = self._status(context)
-        config = self._config_port.Eval(context)
         now = context.get_time()
         limit = self._speed_port.Eval(context)[0] if self._speed_port.HasValue(context) else 1.0
         try:
+            self._check_tracking(status, context, now)
             status = self._advance(status, float(np.clip(limit, 0.0, 1.0)), now)
-            if status.mode == Mode.DECIDE:
-                status = self._decide(status, config, now)
-            elif status.mode == Mode.EXECUTE:
-                status = self._execute(status, config, now)
-            elif status.mode == Mode.SETTLE and now >= status.settle_until:
-                status = self._observe(status, config, now)
+            status = self._step(status, context, now)
         except SupervisorError as err:
-            status = replace(status, mode=Mode.FAILED, error=str(err), plan=None)
+            status = self._stop(status, context, now, err)
         state.get_mutable_abstract_state(self._status_index).set_value(status)
+
+    def _stop(self, s: SupervisorStatus, context, now: float, err: SupervisorError):
+        """Stop the task: the arm holds where it is measured, the gripper keeps its command
+        (a part in it stays held)."""
+        q = self._arm_port.Eval(context)[:N_JOINTS]
+        opening = s.command(now)[2]
+        return replace(
+            s,
+            mode=Mode.FAILED,
+            error=str(err),
+            plan=None,
+            q_hold=tuple(float(x) for x in q),
+            opening_hold=float(opening),
+            events=(*s.events, f"{now:.2f}: stopped: {err}"),
+        )
+
+    def _step(self, status: SupervisorStatus, context, now: float) -> SupervisorStatus:
+        mode = status.mode
+        if mode == Mode.DECIDE:
+            return self._decide(status, self._config_port.Eval(context), now)
+        if mode == Mode.ASK:
+            return self._take_indication(status, context, now)
+        if mode == Mode.PLAN:
+            return self._take_plan(status, self._config_port.Eval(context), now)
+        if mode == Mode.EXECUTE:
+            return self._execute(status, context, now)
+        if mode == Mode.SETTLE and now >= status.settle_until:
+            return self._observe(status, self._config_port.Eval(context), now)
+        return status
+
+    def _check_tracking(self, s: SupervisorStatus, context, now: float) -> None:
+        """Stop when a joint is farther from its command than the tolerance (the command of
+        the previous update, which the servo has had a period to follow)."""
+        if s.mode in (Mode.DONE, Mode.FAILED):
+            return
+        q = self._arm_port.Eval(context)[:N_JOINTS]
+        error = np.abs(q - s.command(now)[0])
+        worst = int(np.argmax(error))
+        if error[worst] > self._limits.tracking_tolerance:
+            raise SupervisorError(
+                f"step {s.step}: {UR3_JOINTS[worst]} is {error[worst]:.3f} rad from its command "
+                f"(tolerance {self._limits.tracking_tolerance} rad): the arm is pushed or "
+                "blocked; the task is stopped and the arm holds where it is"
+            )
 
     def _advance(self, s: SupervisorStatus, limit: float, now: float) -> SupervisorStatus:
         """Move the plan time to `now`, then ramp the speed scale toward `limit` (no faster
-        than the joint acceleration limit allows at the plan's speed) and set the rate on."""
+        than the joint acceleration limit allows at the plan's speed) and set the rate on.
+        While the robot holds a part for bolting the plan time stands still."""
         if s.mode != Mode.EXECUTE or s.plan is None:
             return replace(s, speed=limit)
         plan = s.plan
         tau = s.plan_time(now)
+        if s.holding_for_bolts(tau):
+            return replace(s, tau=plan.t_in_place, tau_time=now, speed=limit, rate=0.0)
         qdot = np.abs(plan.trajectory.EvalDerivative(min(tau, plan.duration), 1)).max()
-        step = self._joint_acceleration * self._period / max(qdot, 1e-9)
+        step = self._limits.joint_acceleration * self._limits.period / max(qdot, 1e-9)
         speed = float(np.clip(limit, s.speed - step, s.speed + step))
-        hold = next((g for g in plan.segments if g.stage == Stage.HOLD), None)
-        # The hold is a monitored stop: the arm stands still, its time runs on.
-        holding = hold is not None and hold.start <= tau and tau + self._period <= hold.end
-        return replace(s, tau=tau, tau_time=now, speed=speed, rate=1.0 if holding else speed)
+        return replace(s, tau=tau, tau_time=now, speed=speed, rate=speed)
 
     def _decide(self, s: SupervisorStatus, config: CellConfiguration, now: float):
+        """At a task boundary: the MDP state from the cell, then the policy's proposal on the
+        operator's interface."""
         space = self._space
         tokens = config.tokens()
         index = space.index(s.state)
@@ -254,24 +353,53 @@ class Supervisor(LeafSystem):
             )
         if space.kind[index] == StateKind.TERMINAL:
             return replace(s, mode=Mode.DONE, events=(*s.events, f"{now:.2f}: done"))
-        if s.step >= self._max_steps:
+        if s.step >= self._limits.max_steps:
             raise SupervisorError(f"no terminal state after {s.step} tasks")
-        step = s.step + 1
-        proposed = self._policy.next_task(s.state)
-        indicated = self._operator(step, s.state, proposed)
-        feasible = {t for t, _ in space.tasks(index)}
+        if s.step == 0:
+            self._plan_ahead(s.state, config.layout())
+        proposal = self._policy.next_task(s.state)
+        prompt = Prompt(s.step + 1, PromptKind.CHOOSE, s.state, proposal)
+        return replace(s, mode=Mode.ASK, step=s.step + 1, prompt=prompt, tokens_before=tokens)
+
+    def _take_indication(self, s: SupervisorStatus, context, now: float):
+        """Once the operator indicates a task: check it, then ask the planner for it."""
+        indication: Indication = self._indication_port.Eval(context)
+        if not indication.answers(s.prompt):
+            return s
+        space, step, indicated = self._space, s.step, indication.task
+        feasible = {t for t, _ in space.tasks(space.index(s.state))}
         if indicated not in feasible:
             raise SupervisorError(
                 f"step {step}: the operator indicated {indicated!r}, not feasible in "
                 f"{list(s.state)} (feasible: {sorted(feasible)})"
             )
+        config: CellConfiguration = self._config_port.Eval(context)
         last = s.state[-1] if s.state else None
-        try:
-            plan = self._planner(tokens, indicated, last, config.layout())
-        except (RuntimeError, ValueError) as err:  # UnreachableError, PlanningError, bad input
-            raise SupervisorError(
-                f"step {step}: no plan for {indicated} from {sorted(tokens)}: {err}"
-            ) from err
+        request = PlanRequest.of(s.tokens_before, indicated, last, config.layout())
+        ready = self._plans.is_cached(request)
+        self._plans.request(request)
+        event = (
+            f"{now:.2f}: step {step} proposes {s.prompt.proposal}, operator indicates {indicated}"
+        )
+        return replace(
+            s,
+            mode=Mode.PLAN,
+            request=request,
+            requested_wall=time.perf_counter(),
+            plan_ready=ready,
+            pending=(s.prompt.proposal, indicated, ""),
+            events=(*s.events, event),
+        )
+
+    def _take_plan(self, s: SupervisorStatus, config: CellConfiguration, now: float):
+        """Once the planner answers: start the plan (the arm held still until then)."""
+        result = self._plans.poll(s.request)
+        if result is None:
+            return s
+        step, (proposed, indicated, _) = s.step, s.pending
+        if isinstance(result, PlanFailure):
+            raise SupervisorError(f"step {step}: {result}")
+        plan: Plan = result
         placement = config.placement(plan.instance)
         expected = PartStatus.SEATED if indicated == UNDO else PartStatus.TRAY
         if placement.status != expected:
@@ -279,84 +407,113 @@ class Supervisor(LeafSystem):
                 f"step {step}: {plan.instance} should be {expected.value} for {indicated}, the "
                 f"cell shows it {placement.status.value}"
             )
-        event = f"{now:.2f}: step {step} proposes {proposed}, operator indicates {indicated}"
         return replace(
             s,
             mode=Mode.EXECUTE,
-            step=step,
             plan=plan,
             plan_start=now,
             tau=0.0,
             tau_time=now,
             rate=s.speed,
             pending=(proposed, indicated, plan.instance),
-            tokens_before=tokens,
-            bolt_seat=None,
-            events=(*s.events, event),
+            bolted=False,
+            planned_ahead=False,
+            idle=time.perf_counter() - s.requested_wall,
         )
 
-    def _execute(self, s: SupervisorStatus, config: CellConfiguration, now: float):
+    def _execute(self, s: SupervisorStatus, context, now: float):
+        """Follow the plan: check the grasp, prompt for the bolts and wait for them, plan the
+        next task ahead, and settle at the end."""
         plan = s.plan
         tau = s.plan_time(now)
-        part = plan.instance
-        grasp, welds = Weld("grasp", part), set(s.welds)
-        grasped_at = plan.segment(Stage.GRASP).end
-        bolt_seat = s.bolt_seat
-        if grasped_at <= tau < plan.t_release:
-            welds.add(grasp)
-            # Taking a part back: unbolt it once it is held.
-            welds -= {w for w in welds if w.kind == "bolt" and w.part == part}
-        if tau >= plan.t_release:
-            welds.discard(grasp)
-            if plan.task != UNDO and bolt_seat is None:
-                # The operator has bolted the part where it really sits (read from contact).
-                placement = config.placement(part)
-                if placement.status == PartStatus.SEATED and placement.seats:
-                    bolt_seat = (
-                        placement.token
-                        if placement.host is None
-                        else f"{placement.host}/{placement.seats[0]}"
-                    )
-                    welds.add(Weld("bolt", part, bolt_seat))
-                else:
-                    bolt_seat = ""
-        s = replace(s, welds=frozenset(welds), bolt_seat=bolt_seat)
+        s = self._check_grip(s, context, now)
+        if tau >= plan.t_in_place and not s.planned_ahead:
+            s = replace(s, planned_ahead=True)
+            self._plan_ahead_after(s, self._config_port.Eval(context))
+        if s.holding_for_bolts(tau):
+            return self._hold_for_bolts(s, context, now)
         if tau >= plan.duration:
             q_end = tuple(float(x) for x in plan.trajectory.value(plan.duration).ravel())
             return replace(
                 s,
                 mode=Mode.SETTLE,
-                settle_until=now + self._settle_time,
+                settle_until=now + self._limits.settle_time,
                 q_hold=q_end,
                 opening_hold=plan.gripper_opening(plan.duration),
                 plan=None,
+                prompt=replace(s.prompt, kind=PromptKind.NONE),
             )
         return s
 
-    def _observe(self, s: SupervisorStatus, config: CellConfiguration, now: float):
-        space = self._space
-        proposed, indicated, part = s.pending
-        tokens = config.tokens()
-        added, removed = tokens - s.tokens_before, s.tokens_before - tokens
+    def _hold_for_bolts(self, s: SupervisorStatus, context, now: float):
+        """Hold the part in place: prompt BOLT once; on `bolted`, go on to the release."""
+        _proposed, indicated, part = s.pending
+        if s.prompt.kind != PromptKind.BOLT:
+            prompt = Prompt(s.step, PromptKind.BOLT, s.state, indicated, part)
+            return replace(s, prompt=prompt, events=(*s.events, f"{now:.2f}: holds {part}"))
+        indication: Indication = self._indication_port.Eval(context)
+        if not indication.answers(s.prompt):
+            return s
+        event = f"{now:.2f}: operator has bolted {part}"
+        return replace(
+            s, bolted=True, tau=s.plan.t_release, tau_time=now, events=(*s.events, event)
+        )
+
+    def _check_grip(self, s: SupervisorStatus, context, now: float) -> SupervisorStatus:
+        """Between the grasp and the release the fingers must stand at the part's width,
+        stalled on it: closed past it, the gripper holds nothing."""
+        plan, tau = s.plan, s.plan_time(now)
+        if not plan.segment(Stage.GRASP).end + GRIP_SETTLE <= tau < plan.t_release:
+            return replace(s, grip_lost_at=None)
+        opening = float(self._gripper_port.Eval(context)[0])
+        gripped = self._grip_port.Eval(context)[0] > 0.5
+        width = plan.grip_width
+        if gripped and abs(opening - width) <= self._limits.grip_tolerance:
+            return replace(s, grip_lost_at=None)
+        if s.grip_lost_at is None or now - s.grip_lost_at < GRIP_SETTLE:
+            return replace(s, grip_lost_at=now if s.grip_lost_at is None else s.grip_lost_at)
+        raise SupervisorError(
+            f"step {s.step}: the gripper stands at {opening * 1000:.1f} mm "
+            f"({'stalled' if gripped else 'no grip detected'}) where {plan.instance} is "
+            f"{width * 1000:.1f} mm wide: it does not hold the part; the task is stopped"
+        )
+
+    def _plan_ahead_after(self, s: SupervisorStatus, config: CellConfiguration) -> None:
+        """While the operator bolts: plan what the policy will propose once this task is done
+        (the layout as it will be if the part stays where it is placed)."""
+        _proposed, indicated, part = s.pending
+        layout = config.layout()
         if indicated == UNDO:
-            if added or removed != {s.state[-1]}:
-                raise SupervisorError(
-                    f"after undo of {s.state[-1]} the cell shows {sorted(tokens)} (removed "
-                    f"{sorted(removed)}, added {sorted(added)})"
-                )
-            observed, next_state = UNDO, s.state[:-1]
+            layout.pop(part, None)
+            state = s.state[:-1]
         else:
-            if removed or len(added) != 1:
-                raise SupervisorError(
-                    f"after {indicated} the cell shows {sorted(tokens)}: {part} is "
-                    f"{config.placement(part).status.value}, not in a seat"
-                )
-            (observed,) = added
-            next_state = (*s.state, observed)
-            if observed not in {t for t, _ in space.tasks(space.index(s.state))}:
-                raise SupervisorError(
-                    f"the cell shows {observed} placed, not a feasible task from {list(s.state)}"
-                )
+            layout[part] = indicated
+            state = (*s.state, indicated)
+        self._plan_ahead(state, layout)
+
+    def _plan_ahead(self, state: tuple[str, ...], layout: dict[str, str]) -> None:
+        if not self._limits.plan_ahead:
+            return
+        space = self._space
+        try:
+            index = space.index(state)
+        except KeyError:
+            return
+        if space.kind[index] == StateKind.TERMINAL:
+            return
+        predict = getattr(self._policy, "predicted_tasks", None)
+        tasks = predict(state) if predict is not None else [self._policy.next_task(state)]
+        last = state[-1] if state else None
+        for task in (t for t in tasks if t is not None):
+            try:
+                self._plans.request(PlanRequest.of(layout.values(), task, last, layout))
+            except ValueError:
+                continue  # a prediction the layout cannot serve: the boundary will tell
+
+    def _observe(self, s: SupervisorStatus, config: CellConfiguration, now: float):
+        """After the task: what the cell shows was done moves the MDP state on."""
+        proposed, indicated, part = s.pending
+        observed, next_state = self._observed(s, config)
         record = TaskRecord(
             step=s.step,
             state=s.state,
@@ -367,6 +524,8 @@ class Supervisor(LeafSystem):
             part=part,
             start_time=s.plan_start,
             end_time=now,
+            idle=s.idle,
+            plan_ready=s.plan_ready,
         )
         if self._on_task is not None:
             self._on_task(record)
@@ -376,10 +535,42 @@ class Supervisor(LeafSystem):
             mode=Mode.DECIDE,
             state=next_state,
             pending=None,
+            request=None,
             history=(*s.history, record),
             events=(*s.events, event),
         )
 
+    def _observed(self, s: SupervisorStatus, config: CellConfiguration):
+        """(the task the cell shows done, the next MDP state); SupervisorError if the cell
+        shows something no task explains."""
+        _proposed, indicated, part = s.pending
+        tokens = config.tokens()
+        added, removed = tokens - s.tokens_before, s.tokens_before - tokens
+        if indicated == UNDO:
+            if added or removed != {s.state[-1]}:
+                raise SupervisorError(
+                    f"after undo of {s.state[-1]} the cell shows {sorted(tokens)} (removed "
+                    f"{sorted(removed)}, added {sorted(added)})"
+                )
+            return UNDO, s.state[:-1]
+        if removed or len(added) != 1:
+            raise SupervisorError(
+                f"after {indicated} the cell shows {sorted(tokens)}: {part} is "
+                f"{config.placement(part).status.value}, not in a seat"
+            )
+        (observed,) = added
+        if observed not in {t for t, _ in self._space.tasks(self._space.index(s.state))}:
+            raise SupervisorError(
+                f"the cell shows {observed} placed, not a feasible task from {list(s.state)}"
+            )
+        return observed, (*s.state, observed)
 
-class SupervisorError(RuntimeError):
-    """The supervisor cannot go on."""
+
+__all__ = [
+    "Mode",
+    "Supervisor",
+    "SupervisorError",
+    "SupervisorLimits",
+    "SupervisorStatus",
+    "TaskRecord",
+]

@@ -1,44 +1,63 @@
 """A person as the operator, in the browser: Meshcat buttons at every task boundary.
 
 `LiveOperator` is an operator callable (`hrc_drake.tasks.decide.Operator`) for the cell's
-Supervisor. At a task boundary it shows the robot's proposal in the scene — a translucent ghost
-of the part at the proposed place — and puts one button per feasible task in Meshcat's control
-panel (the paper's touch menu: the proposal first, named as such), plus "mistake" (the part goes
-to the spec's mistaken alternative, the other row) and "undo" when they apply. It blocks the
-Supervisor's decision until a button is clicked, then draws the choice into the scene at the
-current simulated time (`time_in_recording`), so that a recording of the live run shows it: the
-control panel is not part of a recording.
+Supervisor. At a task boundary it shows the robot's proposal in the scene and puts one button per
+choice in Meshcat's control panel (the paper's touch menu), and blocks the Supervisor's decision
+until one is clicked:
+- the proposal's button first, "F1 - robot proposal" (names are made safe for Meshcat's
+  JavaScript by `hrc_drake.hri.controls`, which drops the apostrophe of "robot's");
+- "F2 instead" for every other feasible task;
+- "mistake: F03 lands in F02" when the spec lists a mistake for the proposal (the part goes to
+  the mistaken alternative, the other row);
+- "undo the last part" when undo is feasible and not the proposal.
+In the scene, a proposed placement shows as a translucent blue ghost of the part at its place
+with a blue cone pointing down at it; a proposed undo as a red ghost over the last part placed
+with a red cone pointing up (the part comes off). Once a button is clicked the marker goes and a
+sphere above the chosen place stays (green: the proposal confirmed, orange: another task), all
+drawn at the simulated time (`time_in_recording`), so that a recording of the live run shows
+them: the control panel is not part of a recording.
 
-Tests press buttons with no browser, as Drake's own tests do (the same code path as a click):
+The browser tests click these buttons in Chromium (`tests/test_browser.py`); the fast unit test
+presses them with no browser, as Drake's own tests do (the same code path as a click):
 `meshcat._InjectWebsocketMessage(umsgpack.packb({"type": "button", "name": NAME}))`, from the
 `on_prompt` hook that the operator calls once the buttons are up.
 """
 
 from __future__ import annotations
 
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.geometry import Box, Meshcat, Rgba, Sphere
-from pydrake.math import RigidTransform
+from pydrake.geometry import Box, Meshcat, MeshcatCone, Rgba, Sphere
+from pydrake.math import RigidTransform, RotationMatrix
 
+from hrc_drake.hri.controls import add_button, control_name
 from hrc_drake.hri.operator import StochasticOperator
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.tokens import UNDO
 
 ROOT = "/operator_choices"
-GHOST = Rgba(0.2, 0.6, 1.0, 0.35)
+PROPOSAL_MARK = f"{ROOT}/proposal"  # the ghost of a proposed placement and its cone
+UNDO_MARK = f"{ROOT}/undo"  # the ghost of the part a proposed undo takes off and its cone
+GHOST = Rgba(0.2, 0.6, 1.0, 0.5)
+POINTER = Rgba(0.2, 0.6, 1.0, 0.9)
+UNDO_GHOST = Rgba(0.9, 0.15, 0.1, 0.5)
+UNDO_POINTER = Rgba(0.9, 0.15, 0.1, 0.9)
 CONFIRMED = Rgba(0.1, 0.8, 0.2, 0.9)
 OVERRIDDEN = Rgba(1.0, 0.55, 0.0, 0.9)
 PART_BOX = (0.09, 0.06, 0.02)  # m; the ghost's size (the flanges' envelope)
+CONE = (0.06, 0.022)  # m; the pointer cone's height and radius
+CONE_GAP = 0.03  # m; from the part's frame to the cone's tip (proposal) or base (undo)
+WHERE_THE_BUTTONS_ARE = '"Open Controls", top right of the Meshcat page'
 
 
 @dataclass(frozen=True)
-class Prompt:
+class PanelPrompt:
     """What the person is asked at a task boundary: `buttons` maps each button's name (its
-    label in the panel) to the task it performs; `meshcat` shows them."""
+    label in the panel, in the panel's order) to the task it performs; `meshcat` shows them."""
 
     step: int
     state: tuple[str, ...]
@@ -48,13 +67,68 @@ class Prompt:
     meshcat: Meshcat
 
     def button_for(self, task: str) -> str:
-        """The name of the button that performs `task` (KeyError naming the offered tasks)."""
+        """The name of the first button that performs `task` (KeyError naming the offered
+        tasks)."""
         for name, t in self.buttons.items():
             if t == task:
                 return name
         raise KeyError(
             f"no button performs {task!r}; offered: {sorted(set(self.buttons.values()))}"
         )
+
+    @property
+    def mistake_button(self) -> str | None:
+        """The name of the "mistake" button, if the panel offers one."""
+        return next((name for name in self.buttons if name.startswith("mistake")), None)
+
+
+def panel_buttons(space: StateSpace, state: tuple[str, ...], proposal: str) -> dict[str, str]:
+    """Button name -> task for a task boundary, in the panel's order: the proposal first, the
+    other feasible tasks, the proposal's mistaken alternative (the spec's `mistakes`), undo.
+    Every name is made safe for Meshcat (`control_name`); ValueError if two choices would get
+    the same name."""
+    feasible = [t for t, _ in space.tasks(space.index(state))]
+    labelled: list[tuple[str, str]] = []
+    if proposal in feasible:
+        labelled.append((f"{proposal} - robot proposal", proposal))
+    labelled += [(f"{t} instead", t) for t in feasible if t not in (proposal, UNDO)]
+    alternatives = StochasticOperator(space, 0.0, 0.0).alternatives(state, proposal)
+    if alternatives:
+        labelled.append((f"mistake: {proposal} lands in {alternatives[0]}", alternatives[0]))
+    if UNDO in feasible and proposal != UNDO:
+        labelled.append(("undo the last part", UNDO))
+    buttons: dict[str, str] = {}
+    for label, task in labelled:
+        name = control_name(label)
+        if name in buttons:
+            raise ValueError(
+                f"two buttons would both read {name!r} ({buttons[name]} and {task}); give the "
+                "assembly's parts symbols that differ in letters or digits"
+            )
+        buttons[name] = task
+    return buttons
+
+
+def describe_task(space: StateSpace, task: str, state: tuple[str, ...]) -> str:
+    """The task in words, e.g. "F1: oval flange on slot 1", "undo: take F2 off"."""
+    spec = space.spec
+    if task == UNDO:
+        return f"undo: take {state[-1]} off" if state else "undo"
+    placement = spec.placement(task)
+    name = spec.part(placement.part).name
+    slots = ", ".join(str(s) for s in placement.slots)
+    where = f"slot{'s' if len(placement.slots) > 1 else ''} {slots}"
+    if placement.host is not None:
+        where = f"the {spec.part(placement.host).name} over {where}"
+    return f"{task}: {name} on {where}"
+
+
+def live_banner(url: str) -> str:
+    """What the terminal says when a live run starts: where the page and its buttons are."""
+    return (
+        f"live: open {url} in a web browser; at every task boundary the robot shows its "
+        f"proposal in the scene and waits for your click under {WHERE_THE_BUTTONS_ARE}"
+    )
 
 
 class LiveOperator:
@@ -65,9 +139,12 @@ class LiveOperator:
         space: the assembly's state space (feasible tasks, the spec's mistakes).
         place: `(task, state) -> RigidTransform | None`, where the part of `task` would sit.
         clock: the simulated time now (for `time_in_recording`).
-        on_prompt: called with the `Prompt` once the buttons are shown (tests inject clicks).
+        on_prompt: called with the `PanelPrompt` once the buttons are shown (tests inject
+            clicks).
         after_answer: called after each answer (the runner resets the real-time pacing).
         poll: seconds between looks at the button counts.
+        say: where the prompt for the person in the terminal goes (default: stderr, so that
+            `simulate --json` keeps stdout for its JSON).
     """
 
     def __init__(
@@ -76,69 +153,85 @@ class LiveOperator:
         space: StateSpace,
         place: Callable[[str, tuple[str, ...]], RigidTransform | None],
         clock: Callable[[], float],
-        on_prompt: Callable[[Prompt], None] | None = None,
+        on_prompt: Callable[[PanelPrompt], None] | None = None,
         after_answer: Callable[[], None] | None = None,
         poll: float = 0.05,
+        say: Callable[[str], None] | None = None,
     ):
         self.meshcat, self.space, self.place, self.clock = meshcat, space, place, clock
         self.on_prompt, self.after_answer, self.poll = on_prompt, after_answer, poll
-        self._mistakes = StochasticOperator(space, 0.0, 0.0)
+        self.say = say or (lambda text: print(text, file=sys.stderr, flush=True))
         self.answers: list[tuple[int, str, str]] = []  # (step, proposal, task chosen)
-        meshcat.SetObject(f"{ROOT}/ghost", Box(*PART_BOX), GHOST)
-        meshcat.SetProperty(f"{ROOT}/ghost", "visible", False, 0.0)
+        _add_marker(meshcat, PROPOSAL_MARK, GHOST, POINTER)
+        _add_marker(meshcat, UNDO_MARK, UNDO_GHOST, UNDO_POINTER)
 
     def buttons(self, state: tuple[str, ...], proposal: str) -> dict[str, str]:
-        """Button name -> task for a boundary: the proposal first, the other feasible tasks,
-        the mistaken alternative of the proposal, undo."""
-        feasible = [t for t, _ in self.space.tasks(self.space.index(state))]
-        buttons = {}
-        if proposal in feasible:
-            buttons[f"{proposal}: the robot's proposal"] = proposal
-        for task in feasible:
-            if task not in (proposal, UNDO):
-                buttons[f"{task} instead"] = task
-        alternatives = self._mistakes.alternatives(state, proposal)
-        if alternatives:
-            buttons[f"mistake: {proposal} lands in {alternatives[0]}"] = alternatives[0]
-        if UNDO in feasible:
-            buttons["undo the last part"] = UNDO
-        return buttons
+        """Button name -> task for a boundary (`panel_buttons`)."""
+        return panel_buttons(self.space, state, proposal)
 
     def __call__(self, step: int, state: tuple[str, ...], proposal: str) -> str:
         """Show the proposal and the buttons; block until a click; return the task chosen."""
         now = self.clock()
         buttons = self.buttons(state, proposal)
-        ghost = self.place(proposal, state) if proposal != UNDO else None
-        if ghost is not None:
-            self.meshcat.SetTransform(f"{ROOT}/ghost", ghost, now)
-            self.meshcat.SetProperty(f"{ROOT}/ghost", "visible", True, now)
+        shown = self._show_proposal(state, proposal, now)
         base = {}
-        for name in buttons:
-            self.meshcat.AddButton(name)
-            base[name] = self.meshcat.GetButtonClicks(name)
-        print(f"step {step}: the robot proposes {proposal}; click a button in Meshcat", flush=True)
-        if self.on_prompt is not None:
-            self.on_prompt(Prompt(step, state, proposal, dict(buttons), now, self.meshcat))
-        chosen = None
-        while chosen is None:
-            for name in buttons:
-                if self.meshcat.GetButtonClicks(name) > base[name]:
-                    chosen = buttons[name]
-                    break
-            else:
-                time.sleep(self.poll)
-        for name in buttons:
-            self.meshcat.DeleteButton(name)
+        try:
+            for text in buttons:
+                name = add_button(self.meshcat, text)
+                base[name] = self.meshcat.GetButtonClicks(name)
+            self.say(self.prompt_text(step, state, proposal, buttons))
+            if self.on_prompt is not None:
+                self.on_prompt(PanelPrompt(step, state, proposal, dict(buttons), now, self.meshcat))
+            chosen = self._wait_for_click(buttons, base)
+        finally:
+            # Also when the run is interrupted: no button of a finished run stays in the panel.
+            for name in base:
+                self.meshcat.DeleteButton(name)
+        if shown is not None:
+            self.meshcat.SetProperty(shown, "visible", False, now)
         self._draw_choice(step, state, proposal, chosen, now)
         self.answers.append((step, proposal, chosen))
         if self.after_answer is not None:
             self.after_answer()
         return chosen
 
+    def prompt_text(
+        self, step: int, state: tuple[str, ...], proposal: str, buttons: dict[str, str]
+    ) -> str:
+        """What the terminal says at a boundary: the proposal in words and where to answer."""
+        marker = "red" if proposal == UNDO else "blue"
+        first = next(iter(buttons), None)
+        agree = f'click "{first}" to agree, or another button' if first else "click a button"
+        return (
+            f"step {step}: the robot proposes {describe_task(self.space, proposal, state)} "
+            f"({marker} marker in the scene); {agree} under {WHERE_THE_BUTTONS_ARE}"
+        )
+
+    def _wait_for_click(self, buttons: dict[str, str], base: dict[str, int]) -> str:
+        while True:
+            for name in buttons:
+                if self.meshcat.GetButtonClicks(name) > base[name]:
+                    return buttons[name]
+            time.sleep(self.poll)
+
+    def _show_proposal(self, state, proposal, now) -> str | None:
+        """Put the proposal's marker in the scene from `now` on; returns its path (None: no
+        place to show)."""
+        if proposal == UNDO:
+            path = UNDO_MARK
+            where = self.place(state[-1], state[:-1]) if state else None
+        else:
+            path = PROPOSAL_MARK
+            where = self.place(proposal, state)
+        if where is None:
+            return None
+        _place_marker(self.meshcat, path, where, now, pointing_down=proposal != UNDO)
+        self.meshcat.SetProperty(path, "visible", True, now)
+        return path
+
     def _draw_choice(self, step, state, proposal, chosen, now) -> None:
-        """The ghost goes; a marker at the chosen place stays (green: the proposal confirmed,
-        orange: another task), from `now` on in the recording."""
-        self.meshcat.SetProperty(f"{ROOT}/ghost", "visible", False, now)
+        """A marker at the chosen place stays (green: the proposal confirmed, orange: another
+        task), from `now` on in the recording."""
         where = self.place(chosen, state) if chosen != UNDO else None
         path = f"{ROOT}/step_{step}"
         colour = CONFIRMED if chosen == proposal else OVERRIDDEN
@@ -153,4 +246,28 @@ class LiveOperator:
         self.meshcat.SetProperty(path, "visible", True, now)
 
 
-__all__ = ["LiveOperator", "Prompt"]
+def _add_marker(meshcat: Meshcat, path: str, ghost: Rgba, pointer: Rgba) -> None:
+    """A hidden marker: a ghost of a part and a cone above it."""
+    meshcat.SetObject(f"{path}/ghost", Box(*PART_BOX), ghost)
+    meshcat.SetObject(f"{path}/cone", MeshcatCone(CONE[0], CONE[1], CONE[1]), pointer)
+    meshcat.SetProperty(path, "visible", False, 0.0)
+
+
+def _place_marker(
+    meshcat: Meshcat, path: str, X_W_part: RigidTransform, now: float, pointing_down: bool
+) -> None:
+    """The ghost at the part's pose; the cone above it, its tip down at the part (a proposed
+    placement) or up, away from it (a proposed undo)."""
+    meshcat.SetTransform(f"{path}/ghost", X_W_part, now)
+    # The cone's tip is its frame's origin and it opens along +z; turned over, it points up.
+    up = np.array([0.0, 0.0, 1.0])
+    p = X_W_part.translation()
+    if pointing_down:
+        X_W_cone = RigidTransform(p + CONE_GAP * up)
+    else:
+        flipped = RotationMatrix.MakeXRotation(np.pi)
+        X_W_cone = RigidTransform(flipped, p + (CONE_GAP + CONE[0]) * up)
+    meshcat.SetTransform(f"{path}/cone", X_W_cone, now)
+
+
+__all__ = ["LiveOperator", "PanelPrompt", "describe_task", "live_banner", "panel_buttons"]

@@ -20,6 +20,7 @@ more YAML merged on top (`--scenario-text "{motion: {hold_time: 0.5}}"`).
 """
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -28,7 +29,7 @@ from hrc_drake.layout import CellLayout
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.resources import models_dir, scenarios_dir
 from hrc_drake.tasks.graph import StateSpace
-from hrc_drake.typed_yaml import TypedYamlError, load_typed
+from hrc_drake.typed_yaml import TypedYamlError, YamlSyntaxError, load_typed
 
 
 class ScenarioError(ValueError):
@@ -93,6 +94,29 @@ class MotionConfig:
 
 
 @dataclass
+class ContactConfig:
+    """The contact material of every collision geometry whose model does not set its own: the
+    one place these figures are stated (the station hands them to Drake as SceneGraphConfig's
+    `default_proximity_properties`). A model states only what differs: whether a geometry is
+    rigid or compliant, and the gripper pads' rubber.
+
+    Attributes:
+        hydroelastic_modulus: Pa, of compliant geometry (plate, parts, tray, table).
+        resolution_hint: m, the mesh size of compliant geometry that needs one.
+        hunt_crossley_dissipation: s/m; used by the TAMSI, Similar and Lagged approximations.
+        relaxation_time: s; SAP's dissipation (SAP ignores Hunt & Crossley's).
+        static_friction, dynamic_friction: Coulomb friction coefficients.
+    """
+
+    hydroelastic_modulus: float = 2.0e7
+    resolution_hint: float = 0.01
+    hunt_crossley_dissipation: float = 10.0
+    relaxation_time: float = 0.1
+    static_friction: float = 0.6
+    dynamic_friction: float = 0.5
+
+
+@dataclass
 class PhysicsConfig:
     """The MultibodyPlant's settings (the names of Drake's `MultibodyPlantConfig`).
 
@@ -107,8 +131,7 @@ class PhysicsConfig:
     contact_model: str = "hydroelastic_with_fallback"
     discrete_contact_approximation: str = "sap"
     contact_surface_representation: str = "polygon"
-    hydroelastic_modulus: float | None = None
-    mesh_resolution_hint: float | None = None
+    contact: ContactConfig = field(default_factory=ContactConfig)
 
 
 @dataclass
@@ -122,6 +145,9 @@ class RunConfig:
         max_steps: decision steps before a run is a failure.
         plan_ahead: while the operator bolts, plan the task the policy will propose next, so
             that the plan is ready at the task boundary (no robot idle time on the planner).
+        wait_for_planner: simulated time stands still while the planner works, so that a run
+            does not depend on the machine's speed (same seed, same result); False: time runs
+            on and the robot holds still meanwhile, as on a real cell (live runs always).
     """
 
     period: float = 0.02
@@ -129,6 +155,7 @@ class RunConfig:
     max_sim_time: float = 900.0
     max_steps: int = 30
     plan_ahead: bool = True
+    wait_for_planner: bool = True
 
 
 @dataclass
@@ -184,6 +211,83 @@ class BodyConfig:
 
 
 @dataclass
+class ArmConfig:
+    """The UR3 in the station: where it starts, its simulated joint servo, and the tracking check
+    of the controller.
+
+    Attributes:
+        initial_positions: joint positions at the start [rad] (UR3_JOINTS order); empty: the
+            motion layer's home posture, where every plan starts and ends.
+        ready: a posture above the work used when no motion layer is asked (stills, cell tests).
+        kp, kd: the simulated servo's PD gains per joint [N·m/rad, N·m·s/rad]; stiff, because SAP
+            integrates them implicitly; the arm's own gravity is compensated (as a UR's controller
+            does), so they only reject a held part's weight and contact forces.
+        tracking_tolerance: rad; a measured joint farther than this from its command stops the
+            task (the arm was pushed, or it is blocked).
+    """
+
+    initial_positions: list[float] = field(default_factory=list)
+    ready: list[float] = field(default_factory=lambda: [0.0, -1.7, 1.9, -1.77, -1.5708, 0.0])
+    kp: list[float] = field(default_factory=lambda: [4000.0, 4000.0, 2000.0, 500.0, 500.0, 500.0])
+    kd: list[float] = field(default_factory=lambda: [200.0, 200.0, 100.0, 20.0, 20.0, 20.0])
+    tracking_tolerance: float = 0.05
+
+
+@dataclass
+class GripperConfig:
+    """The RG2-like gripper in the station and the controller's grasp check.
+
+    Attributes:
+        initial_opening: opening between the finger insides at the start and between tasks [m]
+            (0.8 of the 0.110 m stroke).
+        kp, kd: the simulated finger servo's PD gains [N/m, N·s/m].
+        grip_tolerance: m; a measured opening farther than this from the width of the part the
+            gripper should hold means it holds nothing (or something else).
+    """
+
+    initial_opening: float = 0.088
+    kp: float = 2000.0
+    kd: float = 40.0
+    grip_tolerance: float = 0.004
+
+
+@dataclass
+class CameraSettings:
+    """An RGB camera looking at the cell from the operator's side (stills).
+
+    Attributes:
+        enabled: add the camera (`--still` turns it on).
+        position, target: where it stands and what it looks at, in world [m].
+        width, height: image size [px]; fov_y: vertical field of view [deg].
+    """
+
+    enabled: bool = False
+    position: list[float] = field(default_factory=lambda: [0.95, -0.75, 0.80])
+    target: list[float] = field(default_factory=lambda: [0.17, -0.06, 0.14])
+    width: int = 1024
+    height: int = 640
+    fov_y: float = 40.0
+
+
+@dataclass
+class StationConfig:
+    """What the simulated station holds beyond the assembly's models.
+
+    Attributes:
+        robot: add the UR3 and the gripper (False: the workpieces only, for fast cell tests).
+        initial_placements: part instance -> a task token (`F1`, `S23`, `F02`) or `tray`; parts
+            not named start in the tray.
+        ur3, rg2, camera: see their types.
+    """
+
+    robot: bool = True
+    initial_placements: dict[str, str] = field(default_factory=dict)
+    ur3: ArmConfig = field(default_factory=ArmConfig)
+    rg2: GripperConfig = field(default_factory=GripperConfig)
+    camera: CameraSettings = field(default_factory=CameraSettings)
+
+
+@dataclass
 class Scenario:
     """One run of the cell (or of the decision loop): see the module docstring.
 
@@ -204,6 +308,7 @@ class Scenario:
     run: RunConfig = field(default_factory=RunConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     body: BodyConfig = field(default_factory=BodyConfig)
+    station: StationConfig = field(default_factory=StationConfig)
 
     @property
     def assembly_path(self) -> Path:
@@ -304,27 +409,32 @@ def scenario_file(name_or_path: str | Path) -> Path:
 
 
 def load_scenario(
-    name_or_path: str | Path | None = None, scenario_text: str | None = None
+    name_or_path: str | Path | None = None, scenario_text: str | Sequence[str] | None = None
 ) -> Scenario:
     """Load a scenario file (a path, or a name under scenarios/), then the YAML overrides in
-    `scenario_text`; with no file, `scenario_text` on top of the defaults. Strict: ScenarioError
-    naming the key for an unknown key or a value of the wrong type."""
+    `scenario_text` (one text, or several applied in turn); with no file, the overrides on top
+    of the defaults. Strict: ScenarioError naming the key and the expected type for an unknown
+    key or a value of the wrong type, and the line and column of a YAML syntax error."""
     scenario, source = Scenario(), "<defaults>"
     if name_or_path is not None:
         path = scenario_file(name_or_path)
         source = str(path)
-        try:
-            scenario = load_typed(Scenario, text=path.read_text())
-        except TypedYamlError as err:
-            raise ScenarioError(f"scenario {path}: {err}") from err
+        scenario = _load_typed(path.read_text(), f"scenario {path}", None)
         if not scenario.name:
             scenario.name = path.stem
-    if scenario_text:
-        try:
-            scenario = load_typed(Scenario, text=scenario_text, defaults=scenario)
-        except TypedYamlError as err:
-            raise ScenarioError(f"--scenario-text: {err}") from err
+    texts = [scenario_text] if isinstance(scenario_text, str) else list(scenario_text or ())
+    for text in texts:
+        scenario = _load_typed(text, "--scenario-text", scenario)
     return check_scenario(scenario, source)
+
+
+def _load_typed(text: str, source: str, defaults: Scenario | None) -> Scenario:
+    try:
+        return load_typed(Scenario, text=text, defaults=defaults, source=source)
+    except YamlSyntaxError as err:
+        raise ScenarioError(str(err)) from None
+    except TypedYamlError as err:
+        raise ScenarioError(f"{source}: {err}") from None
 
 
 def with_operator_script(scenario: Scenario, script: str) -> Scenario:

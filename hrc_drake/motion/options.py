@@ -28,6 +28,9 @@ class MotionOptions:
     """m; pre-grasp / pre-place / retreat offset along the tool's approach axis."""
     finger_gap: float = 0.008
     """m; each finger's gap to the part when open around it (the RG2 opens to any width)."""
+    grip_squeeze: float = 0.006
+    """m the gripper is commanded past a part's width: its fingers stall on the part (a real RG2
+    then reports a grip), and close past the width when there is none."""
     straight_steps: int = 6
     """IK waypoints along a straight approach or retreat."""
     kto_control_points: int = 10

@@ -81,6 +81,9 @@ class Plan:
         segments: labelled intervals covering [0, duration].
         phases: scene layout and allowed contacts over time (for validation).
         motions: timing of each arm motion.
+        grip_width: the part's width between the fingers when held [m]; the gripper is
+            commanded `MotionOptions.grip_squeeze` narrower, so that its fingers stall on the
+            part (grip detected) and close past the width when it holds nothing.
     """
 
     task: str
@@ -94,6 +97,7 @@ class Plan:
     segments: tuple[Segment, ...]
     phases: tuple[CheckPhase, ...]
     motions: tuple[MotionTiming, ...]
+    grip_width: float = 0.0
 
     def positions(self, t: float) -> np.ndarray:
         """Joint positions at time t (clamped to [0, duration])."""

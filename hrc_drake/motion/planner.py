@@ -366,7 +366,7 @@ class MotionPlanner:
         line.stage(Stage.APPROACH, t0)
 
         t0 = line.t
-        line.gripper(width, opts.gripper_time)
+        line.gripper(width - opts.grip_squeeze, opts.gripper_time)
         line.phase(t0, pick.layout, hand)
         line.stage(Stage.GRASP, t0)
 
@@ -410,13 +410,15 @@ class MotionPlanner:
             segments=tuple(line.segments),
             phases=tuple(line.phases),
             motions=tuple(line.motions),
+            grip_width=width,
         )
 
 
-def check_reach(planner: MotionPlanner) -> None:
+def check_reach(planner: MotionPlanner, suggest: bool = True) -> None:
     """Check, before any simulation, that the UR3 reaches every grasp: each part in its tray home
     and at every placement the spec allows (pre-grasp and grasp, with the robot's limits and
-    clearance). CellModelError naming the slot or part and the layout value to change."""
+    clearance). CellModelError naming the slot or part and the layout value to change, and with
+    `suggest` a nearby layout that passed this check (`hrc_drake.motion.reach_search`)."""
     frames, spec = planner.frames, planner.frames.spec
     opts = planner.options
     layout = frames.design.layout
@@ -473,8 +475,25 @@ def check_reach(planner: MotionPlanner) -> None:
                         f"the UR3 cannot reach {what}: {err.constraint} at the {waypoint} (tcp at "
                         f"[{p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}] m, "
                         f"{float(np.hypot(p[0], p[1])):.3f} m from its base axis; it reaches "
-                        f"about 0.5 m). Move it closer: change {knob} (now "
-                        f"{now[knob]}) or cell.slot_pitch ({layout.slot_pitch})"
+                        f"about 0.5 m). Move it closer: change {knob} (now {now[knob]})"
+                        f"{_layout_hint(planner) if suggest else ''}"
                     ) from err
     finally:
         empty.set_allowed_contacts(())
+
+
+def _layout_hint(planner: MotionPlanner) -> str:
+    """A layout near the planner's that passed `check_reach`, as a hint; or say none did."""
+    from hrc_drake.motion.reach_search import suggest_layout
+
+    def reaches(design: CellDesign) -> bool:
+        try:
+            check_reach(MotionPlanner(planner.options, design=design), suggest=False)
+        except CellModelError:
+            return False
+        return True
+
+    found = suggest_layout(planner.frames.design, reaches)
+    if found is None:
+        return "; no layout near this one passed the reach check: move the plate or tray closer"
+    return f"; the reach check passes with {found.as_yaml()} (the spec's cell: section)"

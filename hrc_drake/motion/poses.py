@@ -7,7 +7,7 @@ places (`AssemblySpec.placement`), and
 - a part on a host over base slot k sits on the host's row over k: `X_W_host · X_host_row_j`,
   j = the position of k among the slots the host covers (`row_1` over the lowest);
 - the gripper's `tcp` takes the part's `grasp` frame.
-The cell builder (initial poses, bolt welds), the motion layer and the SlotMonitor's nominal
+The cell station (initial poses, bolt welds), the motion layer and the SlotMonitor's nominal
 seats all use these functions.
 """
 
@@ -109,16 +109,20 @@ def part_pose(frames: CellFrames, token: str, configuration: Iterable[str]) -> R
     return X_W_host @ frames.rows[host.part][host_row(host, slot)]
 
 
+# The placement of a part at its home in the tray (in layouts and scenario placements).
+IN_TRAY = "tray"
+
+
 def layout_poses(frames: CellFrames, layout: Mapping[str, str]) -> dict[str, RigidTransform]:
-    """World poses of part instances placed as `layout` says (instance -> token or ``tray``)."""
-    configuration = [t for t in layout.values() if t != "tray"]
+    """World poses of part instances placed as `layout` says (instance -> token or `IN_TRAY`)."""
+    configuration = [t for t in layout.values() if t != IN_TRAY]
     poses = {}
     for instance, token in layout.items():
         if instance not in frames.homes:
             raise ValueError(
                 f"{instance!r} is not a part of the cell; parts are {', '.join(frames.homes)}"
             )
-        if token == "tray":
+        if token == IN_TRAY:
             poses[instance] = frames.homes[instance]
             continue
         symbol = frames.design.symbol_of(instance)

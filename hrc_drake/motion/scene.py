@@ -27,17 +27,14 @@ from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
 from pydrake.multibody.tree import FixedOffsetFrame
 from pydrake.systems.framework import DiagramBuilder
 
-from hrc_drake.cell_models import CellDesign, add_cell_models, check_cell_models
+from hrc_drake.cell_models import PLATE, TRAY, CellDesign, add_cell_models, check_cell_models
 from hrc_drake.motion.poses import CellFrames, part_pose
-from hrc_drake.robot_models import RG2_FINGER_JOINTS, RG2_MAX_OPENING, UR3_JOINTS
+from hrc_drake.robot_models import GRIPPER, RG2_FINGER_JOINTS, RG2_MAX_OPENING, UR3, UR3_JOINTS
 
-ROBOT = "ur3"
-GRIPPER = "rg2"
+ROBOT = UR3
 TCP = "tcp"
 FINGER_JOINTS = RG2_FINGER_JOINTS
 MAX_OPENING = RG2_MAX_OPENING
-PLATE = "base_plate"
-TRAY = "tray"
 # Wrist links sit right against the gripper mount; their capsules may touch it (calibration).
 _WRIST_LINKS = ("wrist_1_link", "wrist_2_link", "wrist_3_link")
 

@@ -43,6 +43,7 @@ import yaml
 
 from hrc_drake.resources import default_assembly
 from hrc_drake.tasks.tokens import UNDO, Placement, placement_token
+from hrc_drake.typed_yaml import yaml_error_line
 
 BASE = "base"
 # Seconds the operator takes to bolt a part when its spec gives no `bolt_time`: the robot's
@@ -578,5 +579,5 @@ def load_spec(path: str | Path | None = None) -> AssemblySpec:
     try:
         data = yaml.safe_load(path.read_text())
     except yaml.YAMLError as err:
-        raise SpecError(f"assembly spec {path}: bad YAML: {err}") from err
+        raise SpecError(f"assembly spec {yaml_error_line(err, str(path))}") from None
     return parse_spec(data, source=str(path))

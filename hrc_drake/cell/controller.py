@@ -1,0 +1,131 @@
+"""The cell's controller: the Supervisor and its separation monitor, as one diagram whose ports
+are exactly what a real cell offers (`docs/station.md`).
+
+Inputs (measured): `ur3.state_estimated`, `rg2.state_measured`, `rg2.grip_detected`,
+`configuration`, `operator.body`, `hri.indication`. Outputs (commanded): `ur3.position`,
+`ur3.velocity`, `rg2.opening`, `hri.prompt`; and `status` (the Supervisor's, for whoever runs
+the controller: progress lines, the stack light, reports). The planner runs beside it, behind a
+`PlanService` (`hrc_drake.motion.service`). Built the same whether the station is the simulated
+one in this process (`make_cell_station`) or one served over LCM.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.systems.framework import Diagram, DiagramBuilder
+from pydrake.systems.primitives import Demultiplexer
+
+from hrc_drake.cell.separation import ControllerSeparationMonitor, SafetyLog
+from hrc_drake.cell.supervisor import Supervisor, SupervisorLimits, TaskRecord
+from hrc_drake.cell_models import CellDesign
+from hrc_drake.hri.scenario import Scenario
+from hrc_drake.motion.options import MotionOptions
+from hrc_drake.motion.service import PlanService
+from hrc_drake.tasks.graph import StateSpace
+from hrc_drake.tasks.policy import Policy
+
+MEASURED = (
+    "ur3.state_estimated",
+    "rg2.state_measured",
+    "rg2.grip_detected",
+    "configuration",
+    "operator.body",
+    "hri.indication",
+)
+COMMANDED = ("ur3.position", "ur3.velocity", "rg2.opening", "hri.prompt")
+
+
+@dataclass(frozen=True)
+class Controller:
+    """The built controller: its diagram, its Supervisor, and its separation monitor (None when
+    the scenario has no operator body to keep clear of)."""
+
+    diagram: Diagram
+    supervisor: Supervisor
+    monitor: ControllerSeparationMonitor | None
+
+    def safety_log(self, root_context) -> SafetyLog | None:
+        """The separation monitor's log in a root context (None without a monitor)."""
+        if self.monitor is None:
+            return None
+        return self.monitor.log(self.monitor.GetMyContextFromRoot(root_context))
+
+
+def supervisor_limits(scenario: Scenario, options: MotionOptions) -> SupervisorLimits:
+    """The Supervisor's timing and checks from the scenario's `run:` and `station:`."""
+    run, station = scenario.run, scenario.station
+    return SupervisorLimits(
+        period=run.period,
+        settle_time=run.settle_time,
+        max_steps=run.max_steps,
+        joint_acceleration=options.joint_acceleration_limit,
+        tracking_tolerance=station.ur3.tracking_tolerance,
+        grip_tolerance=station.rg2.grip_tolerance,
+        plan_ahead=run.plan_ahead,
+    )
+
+
+def make_controller(
+    scenario: Scenario,
+    design: CellDesign,
+    space: StateSpace,
+    policy: Policy,
+    plans: PlanService,
+    home: np.ndarray,
+    options: MotionOptions,
+    on_task: Callable[[TaskRecord], None] | None = None,
+) -> Controller:
+    """The controller of `scenario`'s cell: the Supervisor (proposals from `policy`, plans from
+    `plans`, starting and ending at `home`) and, with an operator body, the separation monitor.
+    `on_task(record)` hears every task as the cell observed it."""
+    builder = DiagramBuilder()
+    limits = supervisor_limits(scenario, options)
+    opening = scenario.station.rg2.initial_opening
+    supervisor = builder.AddNamedSystem(
+        "supervisor", Supervisor(space, policy, plans, home, opening, limits, on_task)
+    )
+    for name in MEASURED:
+        if name != "operator.body":
+            builder.ExportInput(supervisor.GetInputPort(name), name)
+    n = len(home)
+    split = builder.AddNamedSystem("command_split", Demultiplexer([n, n, 1]))
+    builder.Connect(supervisor.GetOutputPort("command"), split.get_input_port())
+    for k, name in enumerate(("ur3.position", "ur3.velocity", "rg2.opening")):
+        builder.ExportOutput(split.get_output_port(k), name)
+    for name in ("hri.prompt", "status"):
+        builder.ExportOutput(supervisor.GetOutputPort(name), name)
+    monitor = None
+    if scenario.body.enabled:
+        monitor = builder.AddNamedSystem(
+            "separation_monitor",
+            ControllerSeparationMonitor(
+                design, scenario.safety, options.joint_acceleration_limit, scenario.run.period
+            ),
+        )
+        builder.ConnectInput("ur3.state_estimated", monitor.GetInputPort("ur3.state_estimated"))
+        builder.ConnectInput("rg2.state_measured", monitor.GetInputPort("rg2.state_measured"))
+        builder.ExportInput(monitor.GetInputPort("operator.body"), "operator.body")
+        builder.Connect(supervisor.GetOutputPort("intent"), monitor.GetInputPort("intent"))
+        builder.Connect(
+            monitor.GetOutputPort("speed_limit"), supervisor.GetInputPort("speed_limit")
+        )
+    diagram = builder.Build()
+    diagram.set_name("cell_controller")
+    return Controller(diagram, supervisor, monitor)
+
+
+def connect_controller(builder: DiagramBuilder, station, controller) -> None:
+    """Wire a station and a controller (both added to `builder`) by their port names: the
+    station's measured outputs into the controller, its commands back (a controller without a
+    separation monitor leaves the tracked body unread)."""
+    for name in MEASURED:
+        if controller.HasInputPort(name):
+            builder.Connect(station.GetOutputPort(name), controller.GetInputPort(name))
+    for name in COMMANDED:
+        builder.Connect(controller.GetOutputPort(name), station.GetInputPort(name))
+
+
+__all__ = ["COMMANDED", "MEASURED", "Controller", "connect_controller", "make_controller"]

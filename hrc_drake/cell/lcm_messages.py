@@ -1,0 +1,696 @@
+"""The cell station's ports as LCM messages: the types, the channels, and the one conversion of
+each port value to its message and back.
+
+The UR3 uses Drake's own types: `lcmt_panda_command` carries joint positions *and* velocities
+with a control-mode word (Drake's `lcmt_iiwa_command` has positions and torques only), and
+`lcmt_panda_status` mirrors what UR's RTDE interface reports (actual_q, actual_qd, target_q,
+target_qd, ...). Everything else is ours, because Drake's types do not fit: `lcmt_schunk_wsg_*`
+count millimetres (a round trip m -> mm -> m is not exact in binary floating point, which the
+lockstep co-simulation's equality needs) and carry no "grip detected" flag, and nothing in Drake
+carries the configuration, the tracked body or the operator's messages.
+
+Our types are written in LCM's own syntax (`DEFINITIONS`, also printed in `docs/hardware.md`) and
+turned into Python classes by `LcmStruct` at import time: no code generator. Their encoding and
+their fingerprint are those lcm-gen gives the same definitions (the hash is checked against
+every Drake type in the tests), so a driver in C++ or Java built with lcm-gen from
+`lcm_definitions()` talks to them unchanged. A message of another type or definition fails to
+decode with `LcmDecodeError`, naming both fingerprints.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import struct
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from io import BytesIO
+from typing import ClassVar
+
+import numpy as np
+from drake import lcmt_panda_command, lcmt_panda_status
+
+from hrc_drake.cell.contacts import Owner
+from hrc_drake.cell.operator_body import BodySpheres
+from hrc_drake.cell.slot_monitor import CellConfiguration, PartPlacement, PartStatus
+from hrc_drake.hri.messages import Indication, Prompt, PromptKind
+from hrc_drake.robot_models import UR3_JOINTS
+
+N_JOINTS = len(UR3_JOINTS)
+# The RG2's gripping force setting sent with every opening: its maximum, 40 N (OnRobot RG2 data,
+# shared/reference/ur3-rg2.md). The simulated gripper is a position servo and ignores it.
+RG2_GRIP_FORCE = 40.0  # N
+
+DEFINITIONS = """
+// The RG2's target: the opening between the finger insides, and the force to grip with.
+struct lcmt_rg2_command {
+    int64_t utime;          // the station time it applies from [us]
+    double opening;         // [m], 0 to 0.110
+    double force;           // [N], 3 to 40
+}
+
+// What the RG2 measures.
+struct lcmt_rg2_status {
+    int64_t utime;          // the station time of the measurement [us]
+    double opening;         // between the finger insides [m]
+    double opening_rate;    // [m/s]
+    boolean grip_detected;  // the fingers stopped on an object before the target opening
+}
+
+// What the operator's interface shows (hrc_drake.hri.messages.Prompt).
+struct lcmt_hri_prompt {
+    int64_t utime;
+    int32_t step;           // decision steps count from 1
+    string kind;            // "none", "choose" or "bolt"
+    int32_t num_state;
+    string state[num_state];  // the tasks done so far
+    string proposal;        // the robot's proposal
+    string part;            // the part instance moved ("" until known)
+}
+
+// The operator's latest indication (hrc_drake.hri.messages.Indication).
+struct lcmt_hri_indication {
+    int64_t utime;
+    int32_t step;
+    boolean has_task;       // false: no task indicated yet (task is "")
+    string task;
+    boolean bolted;
+    double time;            // when it was given [s, station clock]
+}
+
+// One part's placement (hrc_drake.cell.slot_monitor.PartPlacement).
+struct lcmt_part_placement {
+    string instance;        // the part's model instance, e.g. "oval_flange_1"
+    string status;          // "seated", "held", "misplaced", "tray" or "transit"
+    int32_t num_seats;
+    string seats[num_seats];  // seat frames it sits in, e.g. "slot_1"
+    int32_t num_slots;
+    int32_t slots[num_slots]; // the plate's slots under it
+    string host;            // model instance of the host part ("" for none)
+    string token;           // task token, e.g. "F3" ("" unless seated in place)
+}
+
+// The configuration sensor: which part sits where (a camera or the operator's confirmation on
+// a real cell).
+struct lcmt_cell_configuration {
+    int64_t utime;
+    int32_t num_parts;
+    lcmt_part_placement placements[num_parts];  // sorted by instance
+}
+
+// The tracked operator body as world-frame spheres (hrc_drake.cell.operator_body.BodySpheres).
+struct lcmt_operator_body {
+    int64_t utime;
+    int32_t num_spheres;
+    double centres[num_spheres][3];     // [m]
+    double radii[num_spheres];          // [m]
+    double velocities[num_spheres][3];  // [m/s]
+    int32_t num_groups;
+    int32_t groups[num_groups][2];      // [start, end) of each body part's spheres
+}
+
+// Simulation only: the touching pairs of collision geometries (a run's collision watch).
+struct lcmt_contacts {
+    int64_t utime;
+    int32_t num_contacts;
+    string pairs[num_contacts][4];  // model, body, model, body of each touching pair
+}
+
+// The co-simulation session: "end" (controller), "report" and "error" (station).
+struct lcmt_station_session {
+    int64_t utime;
+    string kind;
+    string text;            // JSON for "report", the message for "error"
+}
+"""
+
+_PRIMITIVES = {
+    "int8_t": "b",
+    "int16_t": "h",
+    "int32_t": "i",
+    "int64_t": "q",
+    "byte": "B",
+    "float": "f",
+    "double": "d",
+    "boolean": "b",
+}
+_DEFAULTS = {"float": 0.0, "double": 0.0, "boolean": False, "string": ""}
+_MASK = (1 << 64) - 1
+_FINGERPRINTS: dict[type, bytes] = {}
+
+
+class LcmDecodeError(ValueError):
+    """Bytes that are not a message of the expected type."""
+
+
+@dataclass(frozen=True)
+class Field:
+    """A member of an LCM struct: its type (a primitive name or a struct class), its name, and
+    its dimensions (a number for a fixed size, the name of an earlier member for a variable
+    one)."""
+
+    type: str | type
+    name: str
+    dims: tuple[int | str, ...] = ()
+
+
+def _hash_update(v: int, c: int) -> int:
+    """lcm-gen's hash step on a signed 64-bit value (`c` is a C `char`)."""
+    c = (c + 128) % 256 - 128
+    v = ((v << 8) ^ (v >> 55)) + c
+    v &= _MASK
+    return v - (1 << 64) if v >> 63 else v
+
+
+def _hash_string(v: int, text: str) -> int:
+    v = _hash_update(v, len(text))
+    for byte in text.encode():
+        v = _hash_update(v, byte)
+    return v
+
+
+def struct_hash(fields: Sequence[Field]) -> int:
+    """lcm-gen's hash of a struct's members (`lcm_struct_hash`): names, primitive types and
+    dimensions; the struct's own name does not count, nor the members' struct types (their
+    own hashes are added by `_get_hash_recursive`)."""
+    v = 0x12345678
+    for f in fields:
+        v = _hash_string(v, f.name)
+        if isinstance(f.type, str):
+            v = _hash_string(v, f.type)
+        v = _hash_update(v, len(f.dims))
+        for d in f.dims:
+            v = _hash_update(v, 0 if isinstance(d, int) else 1)  # LCM_CONST, LCM_VAR
+            v = _hash_string(v, str(d))
+    return v & _MASK
+
+
+class LcmStruct:
+    """Base of our LCM types: encode/decode and the fingerprint from `FIELDS`, as lcm-gen's
+    Python code does for the same definition."""
+
+    FIELDS: ClassVar[tuple[Field, ...]] = ()
+    __slots__ = ()
+
+    def __init__(self, **values):
+        for f in self.FIELDS:
+            value = values.pop(f.name) if f.name in values else self._default(f, 0)
+            setattr(self, f.name, value)
+        if values:
+            raise TypeError(f"{type(self).__name__} has no members {sorted(values)}")
+
+    @classmethod
+    def _default(cls, f: Field, depth: int):
+        if depth < len(f.dims):
+            size = f.dims[depth]
+            n = size if isinstance(size, int) else 0
+            return [cls._default(f, depth + 1) for _ in range(n)]
+        if isinstance(f.type, type):
+            return f.type()
+        return _DEFAULTS.get(f.type, 0)
+
+    def __eq__(self, other) -> bool:
+        if type(other) is not type(self):
+            return NotImplemented
+        return all(getattr(self, f.name) == getattr(other, f.name) for f in self.FIELDS)
+
+    def __repr__(self) -> str:
+        members = ", ".join(f"{f.name}={getattr(self, f.name)!r}" for f in self.FIELDS)
+        return f"{type(self).__name__}({members})"
+
+    @classmethod
+    def _get_hash_recursive(cls, parents: list) -> int:
+        if cls in parents:
+            return 0
+        parents = [*parents, cls]
+        children = sum(f.type._get_hash_recursive(parents) for f in cls.FIELDS if _is_struct(f))
+        h = (struct_hash(cls.FIELDS) + children) & _MASK
+        return ((h << 1) & _MASK) + (h >> 63)
+
+    @classmethod
+    def _get_packed_fingerprint(cls) -> bytes:
+        if cls not in _FINGERPRINTS:  # computed once per type, as lcm-gen's code does
+            _FINGERPRINTS[cls] = struct.pack(">Q", cls._get_hash_recursive([]))
+        return _FINGERPRINTS[cls]
+
+    def encode(self) -> bytes:
+        """The message as LCM bytes (fingerprint, then the members)."""
+        buf = BytesIO()
+        buf.write(self._get_packed_fingerprint())
+        self._encode_one(buf)
+        return buf.getvalue()
+
+    def _encode_one(self, buf: BytesIO) -> None:
+        for f in self.FIELDS:
+            sizes = [d if isinstance(d, int) else getattr(self, d) for d in f.dims]
+            _encode_value(buf, f.type, sizes, getattr(self, f.name))
+
+    @classmethod
+    def decode(cls, data: bytes):
+        """The message in `data`; LcmDecodeError if it is not one of this type."""
+        buf = BytesIO(data)
+        fingerprint, expected = buf.read(8), cls._get_packed_fingerprint()
+        if fingerprint != expected:
+            raise LcmDecodeError(
+                f"not a {cls.__name__} message: fingerprint {fingerprint.hex() or 'none'}, "
+                f"{cls.__name__} has {expected.hex()}; both sides must use the same message "
+                "definitions (the same hrc_drake version)"
+            )
+        try:
+            return cls._decode_one(buf)
+        except (struct.error, UnicodeDecodeError) as err:
+            raise LcmDecodeError(f"a truncated or garbled {cls.__name__} message: {err}") from None
+
+    @classmethod
+    def _decode_one(cls, buf: BytesIO):
+        message = cls.__new__(cls)
+        for f in cls.FIELDS:
+            sizes = [d if isinstance(d, int) else getattr(message, d) for d in f.dims]
+            setattr(message, f.name, _decode_value(buf, f.type, sizes))
+        return message
+
+    @classmethod
+    def definition(cls) -> str:
+        """The struct in LCM syntax (for lcm-gen)."""
+        lines = [f"struct {cls.__name__} {{"]
+        for f in cls.FIELDS:
+            kind = f.type if isinstance(f.type, str) else f.type.__name__
+            lines.append(f"    {kind} {f.name}{''.join(f'[{d}]' for d in f.dims)};")
+        return "\n".join([*lines, "}"])
+
+
+def _is_struct(f: Field) -> bool:
+    return isinstance(f.type, type)
+
+
+def _encode_value(buf: BytesIO, kind, sizes: list[int], value) -> None:
+    if sizes:
+        items = list(value)[: sizes[0]]
+        if len(items) != sizes[0]:
+            raise ValueError(f"array of {len(items)} items where {sizes[0]} are declared")
+        if len(sizes) == 1 and kind in _PRIMITIVES:
+            buf.write(struct.pack(f">{sizes[0]}{_PRIMITIVES[kind]}", *items))
+            return
+        for item in items:
+            _encode_value(buf, kind, sizes[1:], item)
+    elif isinstance(kind, type):
+        value._encode_one(buf)
+    elif kind == "string":
+        text = value.encode("utf-8")
+        buf.write(struct.pack(">I", len(text) + 1) + text + b"\0")
+    else:
+        buf.write(struct.pack(f">{_PRIMITIVES[kind]}", value))
+
+
+def _decode_value(buf: BytesIO, kind, sizes: list[int]):
+    if sizes:
+        if len(sizes) == 1 and kind in _PRIMITIVES:
+            code = _PRIMITIVES[kind]
+            values = struct.unpack(f">{sizes[0]}{code}", buf.read(sizes[0] * struct.calcsize(code)))
+            return [bool(v) for v in values] if kind == "boolean" else list(values)
+        return [_decode_value(buf, kind, sizes[1:]) for _ in range(sizes[0])]
+    if isinstance(kind, type):
+        return kind._decode_one(buf)
+    if kind == "string":
+        (length,) = struct.unpack(">I", buf.read(4))
+        return buf.read(length)[:-1].decode("utf-8")
+    code = _PRIMITIVES[kind]
+    (value,) = struct.unpack(f">{code}", buf.read(struct.calcsize(code)))
+    return bool(value) if kind == "boolean" else value
+
+
+_MEMBER = re.compile(r"^(\w+)\s+(\w+)((?:\s*\[\s*\w+\s*\])*)$")
+
+
+def _parse_definitions(text: str) -> dict[str, type]:
+    """Our structs from LCM syntax (a member's struct type must be defined before it)."""
+    text = re.sub(r"//[^\n]*", "", text)
+    types: dict[str, type] = {}
+    for name, body in re.findall(r"struct\s+(\w+)\s*\{([^}]*)\}", text):
+        fields = []
+        for statement in filter(None, (s.strip() for s in body.split(";"))):
+            match = _MEMBER.match(" ".join(statement.split()))
+            if match is None:
+                raise ValueError(f"struct {name}: cannot read the member {statement!r}")
+            kind, member, dims = match.groups()
+            sizes = tuple(int(d) if d.isdigit() else d for d in re.findall(r"\w+", dims))
+            fields.append(Field(types.get(kind, kind), member, sizes))
+        slots = tuple(f.name for f in fields)
+        types[name] = type(name, (LcmStruct,), {"FIELDS": tuple(fields), "__slots__": slots})
+    return types
+
+
+_TYPES = _parse_definitions(DEFINITIONS)
+lcmt_rg2_command = _TYPES["lcmt_rg2_command"]
+lcmt_rg2_status = _TYPES["lcmt_rg2_status"]
+lcmt_hri_prompt = _TYPES["lcmt_hri_prompt"]
+lcmt_hri_indication = _TYPES["lcmt_hri_indication"]
+lcmt_part_placement = _TYPES["lcmt_part_placement"]
+lcmt_cell_configuration = _TYPES["lcmt_cell_configuration"]
+lcmt_operator_body = _TYPES["lcmt_operator_body"]
+lcmt_contacts = _TYPES["lcmt_contacts"]
+lcmt_station_session = _TYPES["lcmt_station_session"]
+
+
+def lcm_definitions() -> str:
+    """Our message types in LCM syntax, with their comments (the input of lcm-gen)."""
+    return DEFINITIONS.strip() + "\n"
+
+
+# --- the station's ports as messages -------------------------------------------------------
+def utime(t: float) -> int:
+    """A time stamp [us] of station time `t` [s]."""
+    return round(t * 1e6)
+
+
+def _count(values, n: int, what: str) -> list[float]:
+    values = [float(x) for x in values]
+    if len(values) != n:
+        raise LcmDecodeError(f"{what}: {len(values)} values where {n} are expected")
+    return values
+
+
+def ur3_command(stamp: int, position, velocity) -> lcmt_panda_command:
+    """`ur3.position` and `ur3.velocity` as a joint position and velocity command."""
+    message = lcmt_panda_command()
+    message.utime = stamp
+    message.num_joint_position = message.num_joint_velocity = N_JOINTS
+    message.joint_position = _count(position, N_JOINTS, "ur3.position")
+    message.joint_velocity = _count(velocity, N_JOINTS, "ur3.velocity")
+    message.num_joint_torque, message.joint_torque = 0, []
+    message.control_mode_expected = (
+        lcmt_panda_status.CONTROL_MODE_POSITION | lcmt_panda_status.CONTROL_MODE_VELOCITY
+    )
+    return message
+
+
+def ur3_command_values(message: lcmt_panda_command) -> tuple[np.ndarray, np.ndarray]:
+    """(`ur3.position`, `ur3.velocity`) of a UR3 command."""
+    position = _count(message.joint_position, N_JOINTS, "UR3 command positions")
+    velocity = _count(message.joint_velocity, N_JOINTS, "UR3 command velocities")
+    return np.array(position), np.array(velocity)
+
+
+_UR3_STATUS_NOT_SIMULATED = (
+    "joint_position_desired",
+    "joint_velocity_desired",
+    "joint_acceleration_desired",
+    "joint_torque",
+    "joint_torque_desired",
+    "joint_torque_external",
+)
+
+
+def ur3_status(stamp: int, state) -> lcmt_panda_status:
+    """`ur3.state_estimated` (positions, then velocities) as a UR3 status. The simulated
+    station measures no torques and reports no targets: those members are NaN (a real driver
+    fills them from RTDE, see docs/hardware.md)."""
+    state = _count(state, 2 * N_JOINTS, "ur3.state_estimated")
+    unknown = [math.nan] * N_JOINTS
+    message = lcmt_panda_status()
+    message.utime = message.robot_utime = stamp
+    message.num_joints = N_JOINTS
+    message.joint_position, message.joint_velocity = state[:N_JOINTS], state[N_JOINTS:]
+    for name in _UR3_STATUS_NOT_SIMULATED:
+        setattr(message, name, unknown)
+    message.control_command_success_rate = math.nan
+    message.robot_mode = lcmt_panda_status.kMove
+    message.control_mode = (
+        lcmt_panda_status.CONTROL_MODE_POSITION | lcmt_panda_status.CONTROL_MODE_VELOCITY
+    )
+    return message
+
+
+def ur3_status_values(message: lcmt_panda_status) -> tuple[np.ndarray]:
+    """(`ur3.state_estimated`,) of a UR3 status."""
+    position = _count(message.joint_position, N_JOINTS, "UR3 status positions")
+    velocity = _count(message.joint_velocity, N_JOINTS, "UR3 status velocities")
+    return (np.array(position + velocity),)
+
+
+def rg2_command(stamp: int, opening) -> lcmt_rg2_command:
+    """`rg2.opening` as an RG2 target (with the grip force `RG2_GRIP_FORCE`)."""
+    (value,) = _count(opening, 1, "rg2.opening")
+    return lcmt_rg2_command(utime=stamp, opening=value, force=RG2_GRIP_FORCE)
+
+
+def rg2_command_values(message) -> tuple[np.ndarray]:
+    """(`rg2.opening`,) of an RG2 command."""
+    return (np.array([message.opening]),)
+
+
+def rg2_status(stamp: int, measured, grip_detected) -> lcmt_rg2_status:
+    """`rg2.state_measured` (opening, rate) and `rg2.grip_detected` as an RG2 status."""
+    opening, rate = _count(measured, 2, "rg2.state_measured")
+    (grip,) = _count(grip_detected, 1, "rg2.grip_detected")
+    return lcmt_rg2_status(
+        utime=stamp, opening=opening, opening_rate=rate, grip_detected=grip > 0.5
+    )
+
+
+def rg2_status_values(message) -> tuple[np.ndarray, np.ndarray]:
+    """(`rg2.state_measured`, `rg2.grip_detected`) of an RG2 status."""
+    grip = 1.0 if message.grip_detected else 0.0
+    return np.array([message.opening, message.opening_rate]), np.array([grip])
+
+
+def prompt_message(stamp: int, prompt: Prompt):
+    """`hri.prompt` as a message."""
+    return lcmt_hri_prompt(
+        utime=stamp,
+        step=prompt.step,
+        kind=str(prompt.kind),
+        num_state=len(prompt.state),
+        state=list(prompt.state),
+        proposal=prompt.proposal,
+        part=prompt.part,
+    )
+
+
+def prompt_value(message) -> tuple[Prompt]:
+    """(`hri.prompt`,) of a prompt message."""
+    try:
+        kind = PromptKind(message.kind)
+    except ValueError:
+        raise LcmDecodeError(f"a prompt of unknown kind {message.kind!r}") from None
+    return (Prompt(message.step, kind, tuple(message.state), message.proposal, message.part),)
+
+
+def indication_message(stamp: int, indication: Indication):
+    """`hri.indication` as a message."""
+    return lcmt_hri_indication(
+        utime=stamp,
+        step=indication.step,
+        has_task=indication.task is not None,
+        task=indication.task or "",
+        bolted=indication.bolted,
+        time=indication.time,
+    )
+
+
+def indication_value(message) -> tuple[Indication]:
+    """(`hri.indication`,) of an indication message."""
+    task = message.task if message.has_task else None
+    return (Indication(message.step, task, message.bolted, message.time),)
+
+
+def configuration_message(stamp: int, configuration: CellConfiguration):
+    """`configuration` as a message ("" stands for a missing host or token)."""
+    placements = [
+        lcmt_part_placement(
+            instance=name,
+            status=p.status.value,
+            num_seats=len(p.seats),
+            seats=list(p.seats),
+            num_slots=len(p.slots),
+            slots=list(p.slots),
+            host=p.host or "",
+            token=p.token or "",
+        )
+        for name, p in configuration.placements
+    ]
+    return lcmt_cell_configuration(utime=stamp, num_parts=len(placements), placements=placements)
+
+
+def configuration_value(message) -> tuple[CellConfiguration]:
+    """(`configuration`,) of a configuration message."""
+    try:
+        placements = tuple(
+            (
+                p.instance,
+                PartPlacement(
+                    PartStatus(p.status),
+                    tuple(p.seats),
+                    tuple(p.slots),
+                    p.host or None,
+                    p.token or None,
+                ),
+            )
+            for p in message.placements
+        )
+    except ValueError as err:
+        raise LcmDecodeError(f"a configuration message: {err}") from None
+    return (CellConfiguration(placements),)
+
+
+def body_message(stamp: int, body: BodySpheres):
+    """`operator.body` as a message."""
+    n = len(body.radii)
+    return lcmt_operator_body(
+        utime=stamp,
+        num_spheres=n,
+        centres=np.asarray(body.centres, dtype=float).reshape(n, 3).tolist(),
+        radii=np.asarray(body.radii, dtype=float).tolist(),
+        velocities=np.asarray(body.velocities, dtype=float).reshape(n, 3).tolist(),
+        num_groups=len(body.groups),
+        groups=[[int(start), int(end)] for start, end in body.groups],
+    )
+
+
+def body_value(message) -> tuple[BodySpheres]:
+    """(`operator.body`,) of a body message."""
+    n = message.num_spheres
+    return (
+        BodySpheres(
+            np.array(message.centres, dtype=float).reshape(n, 3),
+            np.array(message.radii, dtype=float).reshape(n),
+            np.array(message.velocities, dtype=float).reshape(n, 3),
+            tuple((start, end) for start, end in message.groups),
+        ),
+    )
+
+
+Contacts = tuple[tuple[Owner, Owner], ...]
+"""Simulation only: the touching pairs of collision geometries, by owner (model, body)."""
+
+
+def contacts_message(stamp: int, contacts: Contacts):
+    """The touching pairs (simulation only) as a message."""
+    pairs = [[a.model, a.body, b.model, b.body] for a, b in contacts]
+    return lcmt_contacts(utime=stamp, num_contacts=len(pairs), pairs=pairs)
+
+
+def contacts_value(message) -> tuple[Contacts]:
+    """(touching pairs,) of a contacts message."""
+    return (tuple((Owner(ma, ba), Owner(mb, bb)) for ma, ba, mb, bb in message.pairs),)
+
+
+def session_message(stamp: int, kind: str, payload: str | dict = "") -> object:
+    """A session message; a dict payload is sent as JSON."""
+    text = payload if isinstance(payload, str) else json.dumps(payload)
+    return lcmt_station_session(utime=stamp, kind=kind, text=text)
+
+
+@dataclass(frozen=True)
+class Port:
+    """A station port: a vector of `size`, or an abstract value like `model()`."""
+
+    name: str
+    size: int | None = None
+    model: Callable[[], object] | None = None
+
+
+@dataclass(frozen=True)
+class StationChannel:
+    """An LCM channel carrying station ports: `encode(utime, *values)` makes its message from
+    the ports' values, `decode(message)` gives them back (in `ports` order)."""
+
+    channel: str
+    message: type
+    ports: tuple[Port, ...]
+    encode: Callable[..., object]
+    decode: Callable[[object], tuple]
+
+    def stamp_of(self, data: bytes) -> int:
+        """The `utime` of an encoded message (its first member, after the fingerprint)."""
+        if data[:8] != self.message._get_packed_fingerprint():
+            raise LcmDecodeError(
+                f"{self.channel}: not a {self.message.__name__} message; both sides must use "
+                "the same message definitions (the same hrc_drake version)"
+            )
+        return struct.unpack(">q", data[8:16])[0]
+
+
+def _no_body() -> BodySpheres:
+    return BodySpheres(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
+
+
+COMMANDS: tuple[StationChannel, ...] = (
+    StationChannel(
+        "UR3_COMMAND",
+        lcmt_panda_command,
+        (Port("ur3.position", N_JOINTS), Port("ur3.velocity", N_JOINTS)),
+        ur3_command,
+        ur3_command_values,
+    ),
+    StationChannel(
+        "RG2_COMMAND", lcmt_rg2_command, (Port("rg2.opening", 1),), rg2_command, rg2_command_values
+    ),
+    StationChannel(
+        "HRI_PROMPT",
+        lcmt_hri_prompt,
+        (Port("hri.prompt", model=Prompt),),
+        prompt_message,
+        prompt_value,
+    ),
+)
+"""What the controller commands (the station's inputs)."""
+
+MEASUREMENTS: tuple[StationChannel, ...] = (
+    StationChannel(
+        "UR3_STATUS",
+        lcmt_panda_status,
+        (Port("ur3.state_estimated", 2 * N_JOINTS),),
+        ur3_status,
+        ur3_status_values,
+    ),
+    StationChannel(
+        "RG2_STATUS",
+        lcmt_rg2_status,
+        (Port("rg2.state_measured", 2), Port("rg2.grip_detected", 1)),
+        rg2_status,
+        rg2_status_values,
+    ),
+    StationChannel(
+        "CELL_CONFIGURATION",
+        lcmt_cell_configuration,
+        (Port("configuration", model=CellConfiguration),),
+        configuration_message,
+        configuration_value,
+    ),
+    StationChannel(
+        "OPERATOR_BODY",
+        lcmt_operator_body,
+        (Port("operator.body", model=_no_body),),
+        body_message,
+        body_value,
+    ),
+    StationChannel(
+        "HRI_INDICATION",
+        lcmt_hri_indication,
+        (Port("hri.indication", model=Indication),),
+        indication_message,
+        indication_value,
+    ),
+)
+"""What the station measures (its outputs)."""
+
+SIM_CONTACTS = StationChannel(
+    "SIM_CONTACTS",
+    lcmt_contacts,
+    (Port("sim.contacts", model=tuple),),
+    contacts_message,
+    contacts_value,
+)
+"""Simulation only: the touching pairs, for a run's collision watch."""
+
+END_CHANNEL = "CELL_STATION_END"
+"""The controller ends the session ("end")."""
+REPORT_CHANNEL = "CELL_STATION_REPORT"
+"""The station's last word: its "report", or the "error" that stopped it. (Each direction has its
+own channels: DrakeLcm keeps only the newest undelivered message of a channel, and a process
+also hears what it publishes itself.)"""
+PRE_SUFFIX = "_PRE"
+"""Lockstep: the commands as they stand just before the controller's update at a time (see
+`hrc_drake.cell.interface`) go on `<channel>_PRE`."""

@@ -1,0 +1,479 @@
+"""The closed loop: a cell and its controller joined in one simulator, and its run.
+
+A cell side is either the simulated station in this process (`LocalCell`) or a station served
+elsewhere, reached through its LCM interface (`hrc_drake.cell.remote.RemoteCell`): the same
+ports (`docs/station.md`), the same controller. A `Simulator` monitor watches the run: it ends it
+when the Supervisor is done or has stopped, stops at the step where the station's welds change
+(the loop applies them and goes on), watches the robot's contacts, lights the stack light and
+takes the still. Unless the run is live, simulated time stands still while the planner works, so
+that a run is the same whatever the machine does (same seed, same result); the robot's idle time
+at a boundary is then the wall time it waited. Ctrl-C ends a run where it is: the recording and
+the report of what ran are still written, marked interrupted.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import signal
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+from pydrake.geometry import Meshcat
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import Diagram, DiagramBuilder, EventStatus
+
+from hrc_drake.atomic import atomic_write_bytes, atomic_write_text
+from hrc_drake.cell.contacts import Owner, geometry_owners, owner_pairs
+from hrc_drake.cell.controller import Controller, connect_controller
+from hrc_drake.cell.separation import SafetyLog
+from hrc_drake.cell.slot_monitor import CellConfiguration
+from hrc_drake.cell.station import CellStation
+from hrc_drake.cell.supervisor import Mode, SupervisorStatus, TaskRecord
+from hrc_drake.cell.view import frame_cell
+from hrc_drake.cell_models import CellDesign
+from hrc_drake.hri.scenario import Scenario
+from hrc_drake.motion.options import MotionOptions
+from hrc_drake.motion.service import PlanService
+from hrc_drake.progress import ProgressLine
+from hrc_drake.robot_models import GRIPPER, UR3
+from hrc_drake.tasks.graph import StateKind, StateSpace
+from hrc_drake.tasks.policy import Policy
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """What a closed-loop run did, read from the diagram's outputs."""
+
+    scenario: str
+    states: list[tuple[str, ...]]
+    names: list[str]
+    tasks: list[TaskRecord]
+    final_tokens: frozenset[str]
+    final_kind: str
+    done: bool
+    error: str | None
+    collisions: list[str]
+    sim_time: float
+    wall_time: float
+    recording: Path | None = None
+    events: tuple[str, ...] = field(default_factory=tuple)
+    safety: SafetyLog | None = None
+    """Separation monitoring figures (None: the scenario has no operator body)."""
+    speed_changes: tuple[tuple[float, str], ...] = ()
+    """(simulated time, "moving" | "slowed" | "stopped") each time the robot's speed state
+    changes (with the operator body)."""
+    interrupted: bool = False
+    """The run was ended by Ctrl-C before it finished."""
+
+    @property
+    def idle(self) -> tuple[float, ...]:
+        """Per task: wall seconds the robot waited on the planner after the indication."""
+        return tuple(t.idle for t in self.tasks)
+
+    @property
+    def plan_ready(self) -> tuple[bool, ...]:
+        """Per task: the plan was ready (planned ahead) when the operator indicated."""
+        return tuple(t.plan_ready for t in self.tasks)
+
+    @property
+    def real_time_factor(self) -> float | None:
+        """Simulated time over wall time."""
+        return self.sim_time / self.wall_time if self.wall_time > 0 else None
+
+    def to_json(self) -> dict:
+        """A JSON-able summary (the `--json` of `hrc-drake simulate`)."""
+        rtf = self.real_time_factor
+        return {
+            "scenario": self.scenario,
+            "states": [list(s) for s in self.states],
+            "names": self.names,
+            "terminal": bool(self.done),
+            "final_kind": self.final_kind,
+            "final_configuration": sorted(self.final_tokens),
+            "collisions": len(self.collisions),
+            "contacts": list(self.collisions),
+            "steps": [_step_json(t) for t in self.tasks],
+            "mean_idle": round(float(np.mean(self.idle)), 4) if self.tasks else 0.0,
+            "error": self.error,
+            "interrupted": self.interrupted,
+            "sim_time": round(self.sim_time, 3),
+            "wall_time": round(self.wall_time, 3),
+            "real_time_factor": None if rtf is None else round(rtf, 3),
+            "recording": str(self.recording) if self.recording else None,
+            "safety": self.safety.to_json() if self.safety is not None else None,
+        }
+
+
+def _step_json(t: TaskRecord) -> dict:
+    return {
+        "step": t.step,
+        "proposed": t.proposed,
+        "operator": t.indicated,
+        "observed": t.observed,
+        "part": t.part,
+        "sim_time": round(t.end_time - t.start_time, 3),
+        "idle_time": round(t.idle, 4),
+        "plan_ready": t.plan_ready,
+    }
+
+
+@dataclass
+class Setup:
+    """What a run is built from (`hrc_drake.cell.run.prepare_run`)."""
+
+    scenario: Scenario
+    space: StateSpace
+    policy: Policy
+    design: CellDesign
+    options: MotionOptions
+    plans: PlanService
+    home: np.ndarray
+    wait_for_planner: bool
+
+
+class CellSide(Protocol):
+    """What the loop needs of the cell beside the station's ports."""
+
+    diagram: Diagram
+    meshcat: Meshcat | None
+
+    def touching(self, root) -> Sequence[tuple[Owner, Owner]]:
+        """The bodies in contact now (for the collision watch)."""
+
+    def welds_changed(self, root, applied: frozenset) -> bool:
+        """Whether the simulator must stop to apply welds (a simulated station only)."""
+
+    def apply_welds(self, root) -> frozenset:
+        """Apply the wanted welds; returns them."""
+
+    def configuration(self, root) -> CellConfiguration:
+        """The configuration the station measures now."""
+
+    def save_still(self, root, path: Path) -> None:
+        """Save the camera's image (a simulated station only)."""
+
+    def finish(self, root) -> None:
+        """End the run on the cell's side."""
+
+
+class LocalCell:
+    """The simulated station in this process, as the loop's cell side."""
+
+    def __init__(self, station: CellStation):
+        self.station, self.diagram, self.meshcat = station, station.diagram, station.meshcat
+        self._owners = geometry_owners(station.plant)
+
+    def touching(self, root):
+        """The bodies in contact now, from the plant's contact results."""
+        context = self.diagram.GetMyContextFromRoot(root)
+        results = self.diagram.GetOutputPort("sim.contact_results").Eval(context)
+        return owner_pairs(results, self._owners)
+
+    def welds_changed(self, root, applied: frozenset) -> bool:
+        """See `CellStation.welds_changed`."""
+        return self.station.welds_changed(root, applied)
+
+    def apply_welds(self, root) -> frozenset:
+        """See `CellStation.apply_welds`."""
+        return self.station.apply_welds(root)
+
+    def configuration(self, root) -> CellConfiguration:
+        """The configuration sensor's reading."""
+        return self.station.configuration(root)
+
+    def save_still(self, root, path: Path) -> None:
+        """The station camera's image, as PNG, written atomically."""
+        import matplotlib.image
+
+        context = self.diagram.GetMyContextFromRoot(root)
+        image = self.diagram.GetOutputPort("sim.camera.rgb_image").Eval(context)
+        buffer = io.BytesIO()
+        matplotlib.image.imsave(buffer, np.array(image.data, copy=True)[:, :, :3], format="png")
+        atomic_write_bytes(path, buffer.getvalue())
+
+    def finish(self, root) -> None:
+        """Nothing to end."""
+
+
+class ClosedLoop:
+    """A cell and its controller joined in one simulator, ready to run.
+
+    `run()` simulates until the Supervisor is done or stopped (or the time is up, or Ctrl-C)
+    and returns the RunResult; tests may instead `advance_to(t)` in steps and act on the
+    simulation between them (`root_context`). `hrc_drake.cell.run.build_closed_loop` builds one
+    from a scenario."""
+
+    def __init__(self, setup: Setup, cell: CellSide, controller: Controller, still=None):
+        self.setup, self.cell, self.controller = setup, cell, controller
+        builder = DiagramBuilder()
+        side = builder.AddNamedSystem("station", cell.diagram)
+        brain = builder.AddNamedSystem("controller", controller.diagram)
+        connect_controller(builder, side, brain)
+        for index in range(side.num_input_ports()):
+            port = side.get_input_port(index)
+            if port.get_name().startswith("sim."):
+                builder.ExportInput(port, port.get_name())
+        diagram = builder.Build()
+        diagram.set_name("hrc_closed_loop")
+        self.simulator = Simulator(diagram)
+        self.watch = _Watch(
+            _ContactWatch(),
+            _StackLight(cell.meshcat) if setup.scenario.body.enabled else None,
+            (still[0], Path(still[1])) if still is not None else None,
+        )
+        self.simulator.set_monitor(_monitor(self))
+        self._started = False
+
+    @property
+    def station(self) -> CellStation:
+        """The simulated station (a local cell only)."""
+        return self.cell.station
+
+    @property
+    def root_context(self):
+        """The simulator's root context."""
+        return self.simulator.get_mutable_context()
+
+    @property
+    def status(self) -> SupervisorStatus:
+        """The Supervisor's status now."""
+        diagram = self.controller.diagram
+        context = diagram.GetMyContextFromRoot(self.simulator.get_context())
+        return diagram.GetOutputPort("status").Eval(context)
+
+    def start(self) -> None:
+        """Initialize the simulation (once): events at time 0, the welds as the cell wants."""
+        if not self._started:
+            self._started = True
+            self.simulator.Initialize()
+            self.watch.welds = self.cell.apply_welds(self.root_context)
+
+    def advance_to(self, t: float) -> Mode:
+        """Simulate to time `t` (or until the Supervisor is done or stopped), applying the
+        cell's welds as they change; the Supervisor's mode then."""
+        self.start()
+        while self.simulator.get_context().get_time() < t:
+            self.simulator.AdvanceTo(t)
+            mode = self.status.mode
+            if mode in (Mode.DONE, Mode.FAILED):
+                return mode
+            self.watch.welds = self.cell.apply_welds(self.root_context)
+        return self.status.mode
+
+    def run(self, record=None, live: bool = False, progress: bool = False) -> RunResult:
+        """Simulate to the end (see the class docstring); with `record`, save the Meshcat
+        recording there; `live` paces the run to the wall clock."""
+        meshcat = self.cell.meshcat
+        if meshcat is not None:
+            frame_cell(meshcat, self.station.frames)
+        if record is not None:
+            self.station.visualizer.StartRecording()
+        if live:
+            self.simulator.set_target_realtime_rate(1.0)
+            _announce_live(meshcat)
+        start = time.perf_counter()
+        finished = self._run_to_end(progress)
+        wall = time.perf_counter() - start
+        self.cell.finish(self.simulator.get_context())
+        path = None
+        if record is not None:
+            with _ctrl_c_ignored():  # a second Ctrl-C does not cut the recording short
+                self.station.visualizer.StopRecording()
+                self.station.visualizer.PublishRecording()
+                path = Path(atomic_write_text(record, meshcat.StaticHtml()))
+        return _result(self, wall, path, interrupted=not finished)
+
+    def _run_to_end(self, progress: bool) -> bool:
+        """Simulate until the end, in 1 s pieces; False if Ctrl-C ended it first."""
+        limit = self.setup.scenario.run.max_sim_time
+        clock = self.simulator.get_context()
+        with ProgressLine(f"cell {self.setup.scenario.name}", "sim s", interval=2.0) as bar:
+            try:
+                self.start()
+                while clock.get_time() < limit:
+                    mode = self.advance_to(min(limit, clock.get_time() + 1.0))
+                    if mode in (Mode.DONE, Mode.FAILED):
+                        break
+                    if progress:
+                        bar.update(round(clock.get_time(), 1), 0, float(self.status.step))
+            except KeyboardInterrupt:
+                return False
+        return True
+
+
+class _ContactWatch:
+    """Flags contacts of the robot with anything but the part its fingers handle."""
+
+    def __init__(self, station: CellStation | None = None):
+        self._owner = geometry_owners(station.plant) if station is not None else {}
+        self.collisions: list[str] = []
+
+    def check(self, pairs, handled: str | None, now: float) -> None:
+        """Note the robot's contacts among the touching `pairs` (by owner) at `now`
+        (`handled`: the part it moves)."""
+        for first, second in pairs:
+            robot_first = first.model in (UR3, GRIPPER)
+            if not (robot_first or second.model in (UR3, GRIPPER)):
+                continue
+            robot, other = (first, second) if robot_first else (second, first)
+            if robot.body.endswith("finger") and handled is not None and other.model == handled:
+                continue
+            text = f"{first.model}::{first.body} touches {second.model}::{second.body}"
+            if not self.collisions or self.collisions[-1].split(": ", 1)[1] != text:
+                self.collisions.append(f"{now:.2f} s: {text}")
+
+
+_LAMPS = {"moving": (0.1, 0.8, 0.2), "slowed": (1.0, 0.7, 0.0), "stopped": (0.9, 0.1, 0.1)}
+
+
+class _StackLight:
+    """The speed the separation monitor allows over time (`changes`), and with Meshcat a stack
+    light beside the robot (also in recordings): green for the plan's own speed, amber while the
+    monitor slows the robot, red while it stops it."""
+
+    def __init__(self, meshcat):
+        from pydrake.geometry import Cylinder, Rgba, Sphere
+        from pydrake.math import RigidTransform
+
+        self.meshcat, self.state = meshcat, None
+        self.changes: list[tuple[float, str]] = []
+        if meshcat is None:
+            return
+        meshcat.SetObject("/safety/pole", Cylinder(0.008, 0.3), Rgba(0.3, 0.3, 0.3, 1.0))
+        meshcat.SetTransform("/safety/pole", RigidTransform([-0.15, 0.25, 0.15]))
+        for k, (name, rgb) in enumerate(_LAMPS.items()):
+            meshcat.SetObject(f"/safety/{name}", Sphere(0.025), Rgba(*rgb, 1.0))
+            meshcat.SetTransform(f"/safety/{name}", RigidTransform([-0.15, 0.25, 0.32 + 0.055 * k]))
+            meshcat.SetProperty(f"/safety/{name}", "visible", False, 0.0)
+
+    def show(self, status: SupervisorStatus, now: float) -> None:
+        """Light the lamp of the robot's state at `now` (recorded at that time)."""
+        # The speed the monitor allows, also during the hold (a monitored stop: red while the
+        # person is within S_p of the still robot).
+        state = "moving"
+        if status.speed < 1.0 - 1e-9:
+            state = "stopped" if status.speed <= 1e-9 else "slowed"
+        if state == self.state:
+            return
+        self.state = state
+        self.changes.append((round(now, 3), state))
+        if self.meshcat is None:
+            return
+        for name in _LAMPS:
+            self.meshcat.SetProperty(f"/safety/{name}", "visible", name == state, now)
+
+
+@dataclass
+class _Watch:
+    """What the loop's monitor keeps between calls."""
+
+    contacts: _ContactWatch
+    lights: _StackLight | None
+    still: tuple[float, Path] | None
+    next_check: float = 0.0
+    welds: frozenset = frozenset()  # the welds applied last
+
+
+def _monitor(loop: ClosedLoop):
+    """The Simulator monitor of a run (see the module docstring)."""
+    setup, cell, watch = loop.setup, loop.cell, loop.watch
+    root = loop.simulator.get_context()
+    status_port = loop.controller.diagram.GetOutputPort("status")
+    controller_context = loop.controller.diagram.GetMyContextFromRoot(root)
+    period = setup.scenario.run.period
+    waits = setup.wait_for_planner
+
+    def monitor(context) -> EventStatus:
+        now = context.get_time()
+        status: SupervisorStatus = status_port.Eval(controller_context)
+        if now >= watch.next_check:
+            watch.next_check = now + period
+            handled = status.pending[2] if status.pending else None
+            watch.contacts.check(cell.touching(context), handled or None, now)
+        if watch.lights is not None:
+            watch.lights.show(status, now)
+        if watch.still is not None and now >= watch.still[0]:
+            cell.save_still(context, watch.still[1])
+            watch.still = None
+        if status.mode in (Mode.DONE, Mode.FAILED):
+            return EventStatus.ReachedTermination(loop.controller.supervisor, status.mode.value)
+        if waits and status.mode == Mode.ASK:
+            # Simulated time stands still while the planner works (the controller's update
+            # itself never waits): a run does not depend on how fast the machine plans. At a
+            # boundary the plans asked ahead are done, so whether the indicated task's plan
+            # was ready depends on what was predicted, not on the machine.
+            setup.plans.wait_all()
+        if waits and status.mode == Mode.PLAN:
+            setup.plans.wait(status.request)
+        if cell.welds_changed(context, watch.welds):
+            return EventStatus.ReachedTermination(loop.controller.supervisor, "welds")
+        return EventStatus.DidNothing()
+
+    return monitor
+
+
+def _announce_live(meshcat: Meshcat) -> None:
+    """Tell the person in the terminal where the page and its buttons are (on stderr: stdout
+    is kept for `--json`)."""
+    from hrc_drake.hri.live import live_banner
+
+    print(live_banner(meshcat.web_url()), file=sys.stderr, flush=True)
+
+
+@contextlib.contextmanager
+def _ctrl_c_ignored():
+    """Ctrl-C (SIGINT) is ignored inside; in the main thread only (elsewhere Python has no
+    signal handler to change)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _result(loop: ClosedLoop, wall: float, path, interrupted: bool) -> RunResult:
+    setup, watch = loop.setup, loop.watch
+    root, space, status = loop.simulator.get_context(), setup.space, loop.status
+    try:
+        final_index = space.index(status.state)
+        final_kind = space.state_kind(final_index).key
+        terminal = bool(space.kind[final_index] == StateKind.TERMINAL)
+    except KeyError:
+        final_kind, terminal = "unknown", False
+    error = status.error
+    if interrupted:
+        error = f"interrupted at {root.get_time():.2f} s of simulated time (Ctrl-C)"
+    elif status.mode not in (Mode.DONE, Mode.FAILED):
+        error = f"no terminal state within {setup.scenario.run.max_sim_time} s of simulated time"
+    states = status.visited
+    return RunResult(
+        scenario=setup.scenario.name,
+        states=states,
+        names=[space.name(space.index(s)) for s in states],
+        tasks=list(status.history),
+        final_tokens=loop.cell.configuration(root).tokens(),
+        final_kind=final_kind,
+        done=status.mode == Mode.DONE and terminal,
+        error=error,
+        collisions=watch.contacts.collisions,
+        sim_time=root.get_time(),
+        wall_time=wall,
+        recording=path,
+        events=status.events,
+        safety=loop.controller.safety_log(root),
+        speed_changes=tuple(watch.lights.changes) if watch.lights is not None else (),
+        interrupted=interrupted,
+    )
+
+
+__all__ = ["CellSide", "ClosedLoop", "LocalCell", "RunResult", "Setup"]

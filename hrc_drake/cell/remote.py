@@ -1,0 +1,174 @@
+"""Runs with the station in another process, over LCM (`hrc_drake.cell.interface`).
+
+`hrc-drake station --scenario S --lcm URL` serves the simulated station of S (`serve_scenario`);
+`hrc-drake simulate --scenario S --station-lcm URL` runs the controller of S against it
+(`run_over_lcm`). Both sides build what a one-process run (`hrc_drake.cell.run`) builds from
+the same scenario (the station with the arm at the motion planner's home; the controller with
+its policy and planner), and the lockstep keeps the order of its events: the two-process run
+has the same states, terminal and collisions as the one-process run.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import json
+import re
+import sys
+
+from pydrake.lcm import DrakeLcm
+from pydrake.systems.framework import Diagram
+
+from hrc_drake.cell.interface import (
+    DEFAULT_LCM_URL,
+    LockstepTimeouts,
+    StationLinkError,
+    end_station_session,
+    exchange_period,
+    make_cell_station_interface,
+    serve_cell_station,
+)
+from hrc_drake.cell.loop import ClosedLoop, RunResult
+from hrc_drake.cell.run import controller_of, prepare_run
+from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
+from hrc_drake.cell.station import CellStation, make_cell_station
+from hrc_drake.hri.scenario import Scenario
+from hrc_drake.motion.planner import MotionPlanner
+from hrc_drake.paths import UsageError
+from hrc_drake.tasks.policy import Policy
+from hrc_drake.tasks.spec import load_spec
+
+
+def check_lcm_url(url: str, flag: str) -> str:
+    """`url` if it is a UDP multicast LCM URL (the transport between two processes here);
+    UsageError naming `flag` otherwise (DrakeLcm takes a bad URL silently, and then nothing
+    arrives)."""
+    match = re.fullmatch(r"udpm://([0-9.]+):(\d+)(\?.*)?", url)
+    try:
+        multicast = match is not None and ipaddress.IPv4Address(match[1]).is_multicast
+    except ValueError:
+        multicast = False
+    if not multicast or not 0 < int(match[2]) < 65536:
+        raise UsageError(
+            f"{flag} {url}: give an LCM UDP multicast URL udpm://GROUP:PORT?ttl=0 with GROUP in "
+            f"224.0.0.0-239.255.255.255 and PORT in 1-65535, e.g. {DEFAULT_LCM_URL}"
+        )
+    return url
+
+
+def station_of(scenario: Scenario) -> tuple[CellStation, Scenario]:
+    """The station a run of `scenario` simulates, and the scenario it is built from (the
+    run's: the arm starts at the motion planner's home, which a planner in this process
+    computes as the controller's does)."""
+    design = cell_design(scenario, load_spec(scenario.assembly_path))
+    planner = MotionPlanner(motion_options(scenario), design=design)
+    setup = prepare_run(scenario, motion_planner=planner)
+    return make_cell_station(setup.scenario), setup.scenario
+
+
+def serve_scenario(scenario: Scenario, url: str, timeouts: LockstepTimeouts | None = None) -> dict:
+    """Serve the station of `scenario` on the LCM `url` until a controller ends its session;
+    the session's report (see `serve_cell_station`)."""
+    station, built = station_of(scenario)
+    return serve_cell_station(station, DrakeLcm(url), exchange_period(built), timeouts)
+
+
+class RemoteCell:
+    """A station served over LCM, reached through its interface, as a closed loop's cell side
+    (`hrc_drake.cell.loop.CellSide`): no welds or stills here (the station applies its own), the
+    touching pairs the station sends, and the session ended at the end of the run."""
+
+    meshcat = None
+
+    def __init__(self, interface: Diagram):
+        self.diagram = interface
+
+    def _context(self, root):
+        return self.diagram.GetMyContextFromRoot(root)
+
+    def touching(self, root):
+        """The touching pairs by owner the station sent with its last measurements."""
+        return self.diagram.GetOutputPort("sim.contacts").Eval(self._context(root))
+
+    def welds_changed(self, root, applied: frozenset) -> bool:
+        """Never: the station applies its welds itself."""
+        return False
+
+    def apply_welds(self, root) -> frozenset:
+        """Nothing to apply here."""
+        return frozenset()
+
+    def configuration(self, root):
+        """The configuration the station measured last."""
+        return self.diagram.GetOutputPort("configuration").Eval(self._context(root))
+
+    def save_still(self, root, path) -> None:
+        """A still needs the station's camera: `simulate --station-lcm` refuses --still."""
+        raise StationLinkError("a still needs the station in this process")
+
+    def finish(self, root) -> None:
+        """End the station's session."""
+        end_station_session(self.diagram)
+
+
+def run_over_lcm(
+    scenario: Scenario | str,
+    url: str,
+    policy: Policy | None = None,
+    *,
+    progress: bool = False,
+    scenario_text: str | None = None,
+    timeouts: LockstepTimeouts | None = None,
+    on_task=None,
+) -> RunResult:
+    """Run the controller of `scenario` against the station served on the LCM `url` (by
+    `hrc-drake station` or `serve_scenario`), as `run_scenario` runs both in one process.
+    StationLinkError if the station is not there, stops answering, or fails."""
+    if not isinstance(scenario, Scenario):
+        scenario = load_cell_scenario(scenario, scenario_text)
+    setup = prepare_run(scenario, policy)
+    interface = make_cell_station_interface(
+        setup.scenario, DrakeLcm(url), timeouts=timeouts, sim_contacts=True
+    )
+    loop = ClosedLoop(setup, RemoteCell(interface), controller_of(setup, on_task))
+    return loop.run(progress=progress)
+
+
+def station_command(args) -> int:
+    """`hrc-drake station`: serve the scenario's simulated station over LCM until a controller
+    (`hrc-drake simulate --station-lcm URL`) has run against it."""
+    from hrc_drake.cell.command import _scenario
+
+    url = check_lcm_url(args.lcm or DEFAULT_LCM_URL, "--lcm")
+    if not args.timeout > 0:
+        raise UsageError(f"--timeout {args.timeout}: give a number of seconds > 0")
+    scenario = _scenario(args)
+    timeouts = LockstepTimeouts(start=args.timeout, step=args.timeout)
+    print(
+        f"station {scenario.name}: serving on {url}; run `hrc-drake simulate "
+        f"--scenario {args.scenario or scenario.name} --station-lcm {url}` (same options)",
+        file=sys.stderr,
+        flush=True,
+    )
+    try:
+        report = serve_scenario(scenario, url, timeouts)
+    except StationLinkError as err:
+        print(f"hrc-drake station: error: {err}", file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps({"scenario": scenario.name, "lcm": url, **report}))
+    else:
+        print(
+            f"station {scenario.name}: served {report['exchanges']} exchanges, "
+            f"{report['sim_time']:.2f} s simulated"
+        )
+    return 0
+
+
+__all__ = [
+    "RemoteCell",
+    "check_lcm_url",
+    "run_over_lcm",
+    "serve_scenario",
+    "station_command",
+    "station_of",
+]

@@ -1,0 +1,144 @@
+"""The simulated operator inside the station: answers the interface's prompts and bolts parts.
+
+On a real cell a person reads the interface, points at a target, bolts the part the robot holds
+and says so. In the simulated station `SimulatedOperator` does that: it hands each `CHOOSE`
+prompt to an operator model (a script, a population model, or a person clicking in the browser;
+any `hrc_drake.tasks.decide.Operator` callable) and publishes the answer as an `Indication`;
+on a `BOLT` prompt it bolts the held part for `bolt_time` seconds (its body reaches in, see
+`hrc_drake.cell.operator_body`) and says it is bolted; the bolts fix the part in the seat the
+configuration sensor reads it in as soon as it rests there (the robot still holds it a little
+above the seat floor until it lets go). Before an undo it takes the bolts out of the part that
+goes back.
+
+What it does is its `activity` output (for the body) and its `bolts` output (the bolt welds the
+station applies: simulator only). The controller sees none of this: only `hri.indication`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from enum import StrEnum
+
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import LeafSystem
+
+from hrc_drake.cell.slot_monitor import CellConfiguration, PartStatus
+from hrc_drake.cell.welds import Weld
+from hrc_drake.hri.messages import Indication, Prompt, PromptKind
+from hrc_drake.tasks.decide import Operator
+from hrc_drake.tasks.tokens import UNDO
+
+
+class ActivityKind(StrEnum):
+    """What the simulated operator is doing."""
+
+    REST = "rest"
+    BOLT = "bolt"
+
+
+@dataclass(frozen=True)
+class OperatorActivity:
+    """The simulated operator's activity: `kind` on `part` from `start` for `duration` seconds
+    (decision `step`); `answered_step` and `answered_at` say when the operator last indicated
+    a task (scripted body motions may key on it)."""
+
+    kind: ActivityKind = ActivityKind.REST
+    part: str = ""
+    start: float = 0.0
+    duration: float = 0.0
+    step: int = 0
+    answered_step: int = 0
+    answered_at: float = float("-inf")
+
+    def __deepcopy__(self, memo) -> OperatorActivity:
+        return self  # immutable
+
+
+def bolt_weld(configuration: CellConfiguration, part: str) -> Weld | None:
+    """The bolt weld that fixes `part` in the seat the configuration reads it in (None if it is
+    in no seat: the operator cannot bolt it)."""
+    placement = configuration.placement(part)
+    if placement.status != PartStatus.SEATED or not placement.seats:
+        return None
+    if placement.host is None:
+        return Weld("bolt", part, placement.token or "")
+    return Weld("bolt", part, f"{placement.host}/{placement.seats[0]}")
+
+
+class SimulatedOperator(LeafSystem):
+    """The operator of the simulated station (see the module docstring).
+
+    Input ports: `hri.prompt` (Prompt), `configuration` (CellConfiguration). Output ports:
+    `hri.indication` (Indication), `activity` (OperatorActivity), `bolts` (frozenset[Weld]).
+    Updated every `period` seconds."""
+
+    def __init__(self, operator: Operator, bolt_time: float, period: float):
+        super().__init__()
+        self._operator, self._bolt_time = operator, bolt_time
+        self._prompt = self.DeclareAbstractInputPort("hri.prompt", AbstractValue.Make(Prompt()))
+        self._configuration = self.DeclareAbstractInputPort(
+            "configuration", AbstractValue.Make(CellConfiguration())
+        )
+        self._indication = self.DeclareAbstractState(AbstractValue.Make(Indication()))
+        self._activity = self.DeclareAbstractState(AbstractValue.Make(OperatorActivity()))
+        self._bolts = self.DeclareAbstractState(AbstractValue.Make(frozenset()))
+        # Parts bolted that do not rest in a seat yet: the bolts take when they do.
+        self._pending = self.DeclareAbstractState(AbstractValue.Make(frozenset()))
+        self.DeclareStateOutputPort("hri.indication", self._indication)
+        self.DeclareStateOutputPort("activity", self._activity)
+        self.DeclareStateOutputPort("bolts", self._bolts)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
+
+    def _update(self, context, state) -> None:
+        prompt: Prompt = self._prompt.Eval(context)
+        now = context.get_time()
+        indication = context.get_abstract_state(self._indication).get_value()
+        activity = context.get_abstract_state(self._activity).get_value()
+        bolts = context.get_abstract_state(self._bolts).get_value()
+        pending = context.get_abstract_state(self._pending).get_value()
+        if prompt.kind == PromptKind.CHOOSE and indication.step < prompt.step:
+            task = self._operator(prompt.step, prompt.state, prompt.proposal)
+            indication = Indication(prompt.step, task, False, now)
+            activity = replace(activity, answered_step=prompt.step, answered_at=now)
+            if task == UNDO and prompt.state:
+                parts = self._parts_at(context, prompt.state[-1])
+                bolts = frozenset(w for w in bolts if w.part not in parts)
+                pending = pending - parts
+        elif prompt.kind == PromptKind.BOLT and prompt.step == indication.step:
+            if not indication.bolted and activity.kind != ActivityKind.BOLT:
+                activity = replace(
+                    activity,
+                    kind=ActivityKind.BOLT,
+                    part=prompt.part,
+                    start=now,
+                    duration=self._bolt_time,
+                    step=prompt.step,
+                )
+            elif activity.kind == ActivityKind.BOLT and now >= activity.start + activity.duration:
+                pending = pending | {activity.part}
+                indication = replace(indication, bolted=True, time=now)
+                activity = replace(activity, kind=ActivityKind.REST)
+        bolts, pending = self._seat_bolts(context, bolts, pending)
+        state.get_mutable_abstract_state(self._indication).set_value(indication)
+        state.get_mutable_abstract_state(self._activity).set_value(activity)
+        state.get_mutable_abstract_state(self._bolts).set_value(bolts)
+        state.get_mutable_abstract_state(self._pending).set_value(pending)
+
+    def _seat_bolts(self, context, bolts: frozenset, pending: frozenset):
+        """The bolts of the pending parts that now rest in a seat take there."""
+        if not pending:
+            return bolts, pending
+        configuration = self._configuration.Eval(context)
+        for part in pending:
+            weld = bolt_weld(configuration, part)
+            if weld is not None:
+                bolts, pending = bolts | {weld}, pending - {part}
+        return bolts, pending
+
+    def _parts_at(self, context, token: str) -> frozenset[str]:
+        """The parts that sit at `token`."""
+        layout = self._configuration.Eval(context).layout()
+        return frozenset(part for part, at in layout.items() if at == token)
+
+
+__all__ = ["ActivityKind", "OperatorActivity", "SimulatedOperator", "bolt_weld"]

@@ -1,0 +1,447 @@
+"""The simulated cell station: one diagram from one scenario, behind the ports a real cell has.
+
+`make_cell_station(scenario, meshcat)` builds, as Drake's `examples/hardware_sim` and the
+`manipulation` course's `MakeHardwareStation` do, everything from the typed `Scenario`: the
+MultibodyPlant (time step, contact approximation, contact materials), the UR3 and the RG2-like
+gripper with their servos (gains and starting posture from `station:`), the plate, tray and
+parts generated from the assembly spec and its layout, the configuration sensor, the simulated
+operator with its body, and a camera. Its ports (`docs/station.md`):
+
+- inputs, what a controller commands: `ur3.position`, `ur3.velocity`, `rg2.opening`,
+  `hri.prompt`;
+- outputs, what a real cell measures: `ur3.state_estimated`, `rg2.state_measured`,
+  `rg2.grip_detected`, `configuration`, `operator.body`, `hri.indication`;
+- outputs for the simulation only (runner, recordings, tests): `sim.plant_state`,
+  `sim.contact_results`, `sim.body_poses`, `sim.query_object`, `sim.camera.rgb_image`.
+
+What only a simulator can do stays inside: the simulated operator answers the prompts and bolts,
+its body moves by its activity, and grasp and bolt welds hold the parts (`hrc_drake.cell.welds`),
+switched through the station's `Simulator` monitor (`CellStation.welds_changed`,
+`CellStation.apply_welds`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.common.schema import Transform
+from pydrake.common.value import AbstractValue
+from pydrake.geometry import (
+    MakeRenderEngineVtk,
+    Meshcat,
+    MeshcatVisualizer,
+    MeshcatVisualizerParams,
+    ProximityProperties,
+    RenderEngineVtkParams,
+    RoleAssign,
+)
+from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant
+from pydrake.multibody.tree import BodyIndex, JointActuatorIndex, PdControllerGains
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import Context, Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.primitives import ConstantValueSource, Multiplexer
+from pydrake.systems.sensors import CameraConfig, RgbdSensor
+
+from hrc_drake.atomic import atomic_write_text
+from hrc_drake.cell.gripper import add_gripper_ports
+from hrc_drake.cell.operator_body import BodyScript, BodySpheres, OperatorBody
+from hrc_drake.cell.scenario import cell_design, plant_config, scene_graph_config
+from hrc_drake.cell.sim_operator import SimulatedOperator
+from hrc_drake.cell.slot_monitor import CellConfiguration, SlotMonitor
+from hrc_drake.cell.welds import GraspWelds, Weld, WeldConstraints
+from hrc_drake.cell_models import CellDesign, add_cell_models
+from hrc_drake.hri.messages import Prompt
+from hrc_drake.hri.scenario import CameraSettings, Scenario
+from hrc_drake.motion.poses import IN_TRAY, CellFrames, layout_poses
+from hrc_drake.motion.scene import read_cell_frames
+from hrc_drake.robot_models import GRIPPER, UR3, UR3_JOINTS
+from hrc_drake.tasks.decide import Operator
+from hrc_drake.tasks.graph import generate_states
+from hrc_drake.tasks.spec import SpecError, load_spec
+
+_SAP_FAMILY = ("sap", "similar", "lagged")
+
+
+@dataclass(frozen=True)
+class CellStation:
+    """The built station (see the module docstring for its ports)."""
+
+    diagram: Diagram
+    plant: MultibodyPlant
+    scene_graph: object
+    scenario: Scenario
+    design: CellDesign
+    frames: CellFrames
+    instances: Mapping[str, object]
+    welds: WeldConstraints
+    meshcat: Meshcat | None = None
+    visualizer: MeshcatVisualizer | None = None
+
+    @property
+    def has_robot(self) -> bool:
+        """True if the UR3 and the gripper are in the cell."""
+        return UR3 in self.instances
+
+    def part_body(self, part: str):
+        """The body of the part instance `part` (e.g. ``oval_flange_1``)."""
+        if part not in self.design.instance_names:
+            raise KeyError(
+                f"unknown part {part!r}; the parts are {', '.join(self.design.instance_names)}"
+            )
+        return self.plant.get_body(self.plant.GetBodyIndices(self.instances[part])[0])
+
+    def configuration(self, context: Context) -> CellConfiguration:
+        """The configuration sensor's reading in the root `context`."""
+        station_context = self.diagram.GetMyContextFromRoot(context)
+        return self.diagram.GetOutputPort("configuration").Eval(station_context)
+
+    def placement_poses(self, placements: Mapping[str, str]) -> dict[str, RigidTransform]:
+        """World poses of parts seated as `placements` says (part instance -> token or tray)."""
+        return layout_poses(self.frames, placements)
+
+    def wanted_welds(self, context: Context) -> frozenset[Weld]:
+        """The welds the simulated cell holds now (grasps and bolts), in the root `context`."""
+        station_context = self.diagram.GetMyContextFromRoot(context)
+        return frozenset(self.diagram.GetOutputPort("sim.welds").Eval(station_context))
+
+    def welds_changed(self, context: Context, applied: frozenset[Weld]) -> bool:
+        """Whether the wanted welds differ from `applied` (what `apply_welds` returned last):
+        a `Simulator` monitor returns ReachedTermination then, and the runner applies them."""
+        return self.wanted_welds(context) != applied
+
+    def apply_welds(self, context: Context) -> frozenset[Weld]:
+        """Make the wanted welds the active ones in the root `context`; returns them."""
+        plant_context = self.plant.GetMyMutableContextFromRoot(context)
+        wanted = self.wanted_welds(context)
+        self.welds.apply(self.plant, plant_context, wanted)
+        return wanted
+
+    def create_default_context(self) -> Context:
+        """A root context with the welds as wanted (none at the start), nothing on the
+        operator's interface and, with the robot, its command inputs holding the initial posture
+        and opening (so it can be simulated alone)."""
+        context = self.diagram.CreateDefaultContext()
+        if self.has_robot:
+            self.hold_robot(context)
+        self.diagram.GetInputPort("hri.prompt").FixValue(context, Prompt())
+        self.apply_welds(context)
+        return context
+
+    def hold_robot(self, context: Context, opening: float | None = None) -> None:
+        """Fix the robot command inputs of the root `context` to hold the arm where it is,
+        fingers at `opening` (default: as they are)."""
+        plant_context = self.plant.GetMyContextFromRoot(context)
+        q = self.plant.GetPositions(plant_context, self.instances[UR3])
+        self.diagram.GetInputPort("ur3.position").FixValue(context, q)
+        self.diagram.GetInputPort("ur3.velocity").FixValue(context, np.zeros_like(q))
+        if opening is None:
+            opening = float(np.sum(self.plant.GetPositions(plant_context, self.instances[GRIPPER])))
+        self.diagram.GetInputPort("rg2.opening").FixValue(context, [opening])
+
+
+def check_station_scenario(scenario: Scenario, design: CellDesign) -> None:
+    """Value checks of what the station builds; ValueError naming the scenario key."""
+    approximation = scenario.physics.discrete_contact_approximation
+    if approximation not in _SAP_FAMILY:
+        raise ValueError(
+            f"physics.discrete_contact_approximation={approximation!r}: the station's weld "
+            f"constraints need a SAP-family one; use one of {', '.join(_SAP_FAMILY)}"
+        )
+    station = scenario.station
+    for part, where in station.initial_placements.items():
+        key = f"station.initial_placements.{part}"
+        if part not in design.instance_names:
+            raise ValueError(f"{key}: not a part; the parts are {', '.join(design.instance_names)}")
+        if where == IN_TRAY:
+            continue
+        try:
+            placement = design.spec.placement(where)
+        except SpecError as err:
+            raise ValueError(f"{key}: {err}") from err
+        if placement.part != design.symbol_of(part):
+            raise ValueError(
+                f"{key}: {where} places a {placement.part}, {part} is a {design.symbol_of(part)}"
+            )
+    for key, values in (("initial_positions", station.ur3.initial_positions),):
+        if values and len(values) != len(UR3_JOINTS):
+            raise ValueError(f"station.ur3.{key}: give {len(UR3_JOINTS)} joint positions [rad]")
+
+
+def _actuators(plant: MultibodyPlant, model) -> list:
+    # GetJointActuatorIndices(model) is empty before Finalize.
+    actuators = [
+        plant.get_joint_actuator(JointActuatorIndex(i)) for i in range(plant.num_actuators())
+    ]
+    return [a for a in actuators if a.model_instance() == model]
+
+
+def _set_servo_gains(plant: MultibodyPlant, instances, scenario: Scenario) -> None:
+    arm, gripper = scenario.station.ur3, scenario.station.rg2
+    joints = tuple(a.joint().name() for a in _actuators(plant, instances[UR3]))
+    if joints != UR3_JOINTS:
+        raise ValueError(
+            f"ur3 actuators are ordered {list(joints)}, expected {list(UR3_JOINTS)}: the "
+            "`ur3.position` port is documented in UR3_JOINTS order; fix the URDF transmissions"
+        )
+    for actuator, kp, kd in zip(_actuators(plant, instances[UR3]), arm.kp, arm.kd, strict=True):
+        actuator.set_controller_gains(PdControllerGains(p=kp, d=kd))
+    for actuator in _actuators(plant, instances[GRIPPER]):
+        actuator.set_controller_gains(PdControllerGains(p=gripper.kp, d=gripper.kd))
+    # The servo holds the arm without a gravity model, as a UR controller does (gravity is
+    # compensated inside the real controller); held parts still weigh on it.
+    for name in (UR3, GRIPPER):
+        plant.set_gravity_enabled(instances[name], False)
+
+
+def _apply_friction(plant: MultibodyPlant, scene_graph, scenario: Scenario) -> None:
+    """Give every collision geometry the scenario's friction but the gripper's fingers, whose
+    rubber pads state their own (models/rg2/rg2.sdf). Drake's parsers write a friction of 1.0
+    on every geometry whose model states none, so SceneGraph's defaults would never apply."""
+    contact = scenario.physics.contact
+    friction = CoulombFriction(contact.static_friction, contact.dynamic_friction)
+    inspector = scene_graph.model_inspector()
+    for index in range(plant.num_bodies()):
+        body = plant.get_body(BodyIndex(index))
+        if plant.GetModelInstanceName(body.model_instance()) == GRIPPER and body.name().endswith(
+            "finger"
+        ):
+            continue
+        for gid in plant.GetCollisionGeometriesForBody(body):
+            props = ProximityProperties(inspector.GetProximityProperties(gid))
+            props.UpdateProperty("material", "coulomb_friction", friction)
+            scene_graph.AssignRole(plant.get_source_id(), gid, props, RoleAssign.kReplace)
+
+
+def _add_plant(builder: DiagramBuilder, scenario: Scenario, design: CellDesign):
+    """The plant with the cell's models, servos and welds; (plant, scene graph, instances,
+    welds, frames), parts at their initial placements."""
+    plant, scene_graph = AddMultibodyPlant(
+        plant_config(scenario), scene_graph_config(scenario), builder
+    )
+    robot = scenario.station.robot
+    instances = add_cell_models(plant, design, include_robot=robot)
+    _apply_friction(plant, scene_graph, scenario)
+    if robot:
+        _set_servo_gains(plant, instances, scenario)
+    welds = WeldConstraints.declare(plant, instances, design)
+    plant.Finalize()
+    frames = read_cell_frames(plant, scene_graph, plant.CreateDefaultContext(), design)
+    layout = {p: IN_TRAY for p in design.instance_names}
+    layout.update(scenario.station.initial_placements)
+    for part, X_WP in layout_poses(frames, layout).items():
+        plant.SetDefaultFloatingBaseBodyPose(
+            plant.get_body(plant.GetBodyIndices(instances[part])[0]), X_WP
+        )
+    if robot:
+        arm = scenario.station.ur3
+        plant.SetDefaultPositions(instances[UR3], arm.initial_positions or arm.ready)
+        plant.SetDefaultPositions(
+            instances[GRIPPER], [scenario.station.rg2.initial_opening / 2] * 2
+        )
+    return plant, scene_graph, instances, welds, frames
+
+
+def _add_arm(builder: DiagramBuilder, plant: MultibodyPlant, ur3) -> None:
+    """`ur3.position` and `ur3.velocity` into the arm's servo; `ur3.state_estimated` out."""
+    n = len(UR3_JOINTS)
+    command = builder.AddNamedSystem("ur3_command", Multiplexer([n, n]))
+    builder.Connect(command.get_output_port(), plant.get_desired_state_input_port(ur3))
+    builder.ExportInput(command.get_input_port(0), "ur3.position")
+    builder.ExportInput(command.get_input_port(1), "ur3.velocity")
+    builder.ExportOutput(plant.get_state_output_port(ur3), "ur3.state_estimated")
+
+
+def _add_operator(builder, plant, scene_graph, parts, scenario: Scenario, operator, body_script):
+    """The simulated operator and its body (a tracker that sees nobody without one); returns
+    the simulated operator."""
+    run = scenario.run
+    person = builder.AddNamedSystem(
+        "operator", SimulatedOperator(operator, scenario.motion.hold_time, run.period)
+    )
+    builder.ExportInput(person.GetInputPort("hri.prompt"), "hri.prompt")
+    builder.ExportOutput(person.GetOutputPort("hri.indication"), "hri.indication")
+    if not scenario.body.enabled:
+        nobody = BodySpheres(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
+        tracker = builder.AddNamedSystem(
+            "body_tracker", ConstantValueSource(AbstractValue.Make(nobody))
+        )
+        builder.ExportOutput(tracker.get_output_port(), "operator.body")
+        return person
+    body = builder.AddNamedSystem(
+        "operator_body",
+        OperatorBody(scene_graph, plant, parts, scenario.body, run.period, body_script),
+    )
+    builder.Connect(
+        body.GetOutputPort("geometry_pose"), scene_graph.get_source_pose_port(body.source_id)
+    )
+    builder.Connect(plant.get_body_poses_output_port(), body.GetInputPort("body_poses"))
+    builder.Connect(person.GetOutputPort("activity"), body.GetInputPort("activity"))
+    builder.ExportOutput(body.GetOutputPort("spheres"), "operator.body")
+    return person
+
+
+class _WeldUnion(LeafSystem):
+    """Sim only: the union of the grasp welds and the operator's bolts (`sim.welds`)."""
+
+    def __init__(self, with_grasps: bool):
+        super().__init__()
+        empty = AbstractValue.Make(frozenset())
+        self._bolts = self.DeclareAbstractInputPort("bolts", empty)
+        self._grasps = self.DeclareAbstractInputPort("grasps", empty) if with_grasps else None
+        self.DeclareAbstractOutputPort("welds", lambda: AbstractValue.Make(frozenset()), self._calc)
+
+    def _calc(self, context, output) -> None:
+        welds = set(self._bolts.Eval(context))
+        if self._grasps is not None:
+            welds |= self._grasps.Eval(context)
+        output.set_value(frozenset(welds))
+
+
+def _add_welds(builder, plant, frames, instances, person, gripper_command, period) -> None:
+    union = builder.AddNamedSystem("welds", _WeldUnion(with_grasps=gripper_command is not None))
+    builder.Connect(person.GetOutputPort("bolts"), union.GetInputPort("bolts"))
+    if gripper_command is not None:
+        grasps = builder.AddNamedSystem("grasp_welds", GraspWelds(plant, frames, instances, period))
+        builder.Connect(gripper_command.get_output_port(), grasps.GetInputPort("rg2.opening"))
+        builder.Connect(plant.get_body_poses_output_port(), grasps.GetInputPort("body_poses"))
+        builder.Connect(grasps.GetOutputPort("grasps"), union.GetInputPort("grasps"))
+    builder.ExportOutput(union.GetOutputPort("welds"), "sim.welds")
+
+
+def _look_at(position, target) -> RigidTransform:
+    # Camera frame of RgbdSensor: +z forward, +x right, +y down in the image.
+    p, t = np.asarray(position, dtype=float), np.asarray(target, dtype=float)
+    z = (t - p) / np.linalg.norm(t - p)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return RigidTransform(RotationMatrix(np.column_stack([x, y, z])), p)
+
+
+def _add_camera(builder: DiagramBuilder, scene_graph, settings: CameraSettings) -> None:
+    """The operator's-side RGB camera, described by a Drake `CameraConfig`; its image renders
+    only when `sim.camera.rgb_image` is evaluated (a still), as the sensor is built from the
+    config's cameras (`MakeCameras`) rather than `ApplyCameraConfig`, which would also publish
+    every frame on LCM."""
+    config = CameraConfig(
+        name="operator_view",
+        width=settings.width,
+        height=settings.height,
+        focal=CameraConfig.FovDegrees(y=settings.fov_y),
+        clipping_near=0.05,
+        clipping_far=5.0,
+        z_near=0.06,
+        z_far=4.9,
+        X_PB=Transform(_look_at(settings.position, settings.target)),
+        renderer_name="vtk",
+        renderer_class="RenderEngineVtk",
+    )
+    scene_graph.AddRenderer(config.renderer_name, MakeRenderEngineVtk(RenderEngineVtkParams()))
+    color, depth = config.MakeCameras()
+    sensor = builder.AddNamedSystem(
+        config.name,
+        RgbdSensor(scene_graph.world_frame_id(), config.X_PB.GetDeterministicValue(), color, depth),
+    )
+    builder.Connect(scene_graph.get_query_output_port(), sensor.query_object_input_port())
+    builder.ExportOutput(sensor.color_image_output_port(), "sim.camera.rgb_image")
+
+
+def _export_sim_ports(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph) -> None:
+    # A disturbance on the plant's joints (a push on the arm); unconnected, none.
+    builder.ExportInput(
+        plant.get_applied_generalized_force_input_port(), "sim.applied_generalized_force"
+    )
+    builder.ExportOutput(plant.get_state_output_port(), "sim.plant_state")
+    builder.ExportOutput(plant.get_contact_results_output_port(), "sim.contact_results")
+    builder.ExportOutput(plant.get_body_poses_output_port(), "sim.body_poses")
+    builder.ExportOutput(scene_graph.get_query_output_port(), "sim.query_object")
+
+
+def make_cell_station(
+    scenario: Scenario,
+    meshcat: Meshcat | None = None,
+    *,
+    operator: Operator | None = None,
+    body_script: BodyScript | None = None,
+) -> CellStation:
+    """Build the station of `scenario` (see the module docstring).
+
+    `operator` answers the interface's prompts (default: the scenario's operator); `body_script`
+    moves the operator's body (default: `BoltingScript`). With `meshcat` a visualizer draws the
+    cell there (and records, if asked). CellModelError (before anything is simulated) if the
+    spec does not fit the cell; ValueError naming the scenario key for a bad station value."""
+    design = cell_design(scenario, load_spec(scenario.assembly_path))
+    check_station_scenario(scenario, design)
+    if operator is None:
+        operator = scenario.operator_for(generate_states(design.spec))
+    builder = DiagramBuilder()
+    plant, scene_graph, instances, welds, frames = _add_plant(builder, scenario, design)
+    sensor = builder.AddNamedSystem("configuration_sensor", SlotMonitor(plant, scene_graph, frames))
+    builder.Connect(plant.get_contact_results_output_port(), sensor.GetInputPort("contact_results"))
+    builder.Connect(plant.get_body_poses_output_port(), sensor.GetInputPort("body_poses"))
+    builder.ExportOutput(sensor.GetOutputPort("slot_configuration"), "configuration")
+    gripper_command = None
+    if scenario.station.robot:
+        _add_arm(builder, plant, instances[UR3])
+        gripper_command = add_gripper_ports(builder, plant, instances[GRIPPER])
+    parts = {name: instances[name] for name in design.instance_names}
+    person = _add_operator(builder, plant, scene_graph, parts, scenario, operator, body_script)
+    builder.Connect(
+        sensor.GetOutputPort("slot_configuration"), person.GetInputPort("configuration")
+    )
+    _add_welds(builder, plant, frames, instances, person, gripper_command, scenario.run.period)
+    _export_sim_ports(builder, plant, scene_graph)
+    if scenario.station.camera.enabled:
+        _add_camera(builder, scene_graph, scenario.station.camera)
+    visualizer = None
+    if meshcat is not None:
+        params = MeshcatVisualizerParams(delete_on_initialization_event=False)
+        visualizer = MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat, params)
+    diagram = builder.Build()
+    diagram.set_name("cell_station")
+    return CellStation(
+        diagram, plant, scene_graph, scenario, design, frames, instances, welds, meshcat, visualizer
+    )
+
+
+def simulate_station(
+    station: CellStation,
+    context: Context | None = None,
+    duration: float = 0.5,
+    recording: str | Path | None = None,
+) -> Simulator:
+    """Simulate the station alone for `duration` seconds from `context` (default: a fresh
+    `create_default_context()`, the robot holding still); with Meshcat, record the run and save
+    it as HTML at `recording`. Returns the simulator."""
+    context = context if context is not None else station.create_default_context()
+    if recording is not None and station.meshcat is None:
+        raise ValueError("a recording needs Meshcat: pass one to make_cell_station")
+    simulator = Simulator(station.diagram, context)
+    if recording is not None:
+        station.visualizer.StartRecording()
+    simulator.AdvanceTo(context.get_time() + duration)
+    if recording is not None:
+        station.visualizer.StopRecording()
+        station.visualizer.PublishRecording()
+        atomic_write_text(recording, station.meshcat.StaticHtml())
+    return simulator
+
+
+def station_scenario(scenario: Scenario, **station) -> Scenario:
+    """A copy of `scenario` whose `station:` section has the fields given (e.g.
+    `station_scenario(s, robot=False, initial_placements={...})`)."""
+    return dataclasses.replace(scenario, station=dataclasses.replace(scenario.station, **station))
+
+
+__all__ = [
+    "CellStation",
+    "check_station_scenario",
+    "make_cell_station",
+    "simulate_station",
+    "station_scenario",
+]

@@ -1,0 +1,260 @@
+"""`hrc-drake evaluate`: the command line of the Monte Carlo evaluation (`hrc_drake.evaluate`).
+
+Every check that can be made before the runs is made first, in this order: the output path, the
+flags, the spec, the operator model, at cell level the scenario (a wrong key or type is one line)
+and the number of runs (with an estimate of the time they take); only then the cost table, which
+the first evaluation of a spec computes (with a progress line) and later ones read from the
+cache, and the runs. This module joins the task level and the cell (`hrc_drake.cell.evaluate`),
+which do not import each other the other way.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+
+from hrc_drake.evaluate import Setup, evaluate, plot_times
+from hrc_drake.hri.populations import make_operator_model
+from hrc_drake.paths import UsageError, check_output_path
+from hrc_drake.progress import ProgressLine, duration
+from hrc_drake.tasks.costs import CostTable, load_cost_table
+from hrc_drake.tasks.deciders import DECIDERS
+from hrc_drake.tasks.graph import StateSpace
+
+DEFAULT_RUNS = 1000
+DEFAULT_CELL_RUNS = 20
+# Cell runs are closed-loop simulations of about half a minute each: more than this in one
+# evaluation is days of machine time (the estimate says how many); thousands belong at task level.
+MAX_CELL_RUNS = 1000
+# Real-time factors of a cell run (planning included) on this 2-core machine, loaded to quiet:
+# benchmarks/reports/evaluate_cell.md measured 18-47 s of wall time per run of about 36 s
+# simulated. The estimate gives the range.
+CELL_REAL_TIME_FACTORS = (0.75, 2.0)
+# Robot seconds of a task edge when no cost table is at hand yet: the mean of the flange case's
+# table (38 edges, 5.5-7.1 s; `hrc-drake costs`).
+TYPICAL_ROBOT_SECONDS = 6.4
+
+
+def usable_cpus() -> int:
+    """CPUs this process may run on (its affinity, else the machine's count)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def local_workers(workers: int | None, runs: int) -> int | None:
+    """`--workers` capped at the CPUs this process may use and at the runs, with a note on
+    stderr when capped: more processes than CPUs share the CPUs and only add start-up time
+    (each builds its own decider)."""
+    if workers is None or workers <= 1:
+        return workers
+    cpus = usable_cpus()
+    capped = min(workers, cpus, runs)
+    if capped < workers:
+        why = f"this machine has {cpus} CPU(s)" if capped == cpus else f"there are {runs} runs"
+        print(f"note: --workers {workers}: {why}; using {capped}", file=sys.stderr)
+    return capped
+
+
+def parse_params(items: list[str] | None) -> dict[str, str]:
+    """``["p=0.3", "order=S23"]`` -> ``{"p": "0.3", "order": "S23"}``; UsageError otherwise."""
+    params = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise UsageError(f"--param {item!r}: write KEY=VALUE, e.g. --param p=0.3")
+        params[key.strip()] = value.strip()
+    return params
+
+
+def _check_flags(args) -> Path | None:
+    """The checks that need nothing loaded; the `--plot` path."""
+    plot = None
+    if args.plot is not None:
+        from hrc_drake.tasks.plots import FORMATS
+
+        plot = check_output_path(args.plot, "--plot", FORMATS)
+    if args.decider not in DECIDERS:
+        raise UsageError(f"unknown decider {args.decider!r}; known deciders: {', '.join(DECIDERS)}")
+    unused = ["--gamma"] if args.gamma is not None else []
+    if args.mistake_prob != 0.05:  # the common option's default
+        unused.append("--mistake-prob")
+    if unused:
+        raise UsageError(
+            f"{', '.join(unused)}: not used by evaluate (each decider has its own model); set "
+            "the operator population's parameters with --param, e.g. --param p=0.3"
+        )
+    cell_only = [f for f, v in (("--lean", args.lean), ("--scenario", args.scenario)) if v]
+    if args.scenario_text:
+        cell_only.append("--scenario-text")
+    if cell_only and not args.cell:
+        raise UsageError(f"{', '.join(cell_only)}: only for runs through the cell; add --cell")
+    if args.runs is not None and args.runs < 1:
+        raise UsageError(f"--runs {args.runs}: give at least 1 run")
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers {args.workers}: give at least 1 worker")
+    return plot
+
+
+def _cell_options(args, space: StateSpace, operator):
+    """The cell's options, checked now: the scenario loads (a wrong key or type is a one-line
+    ScenarioError) and the operator model is one the cell can play."""
+    from hrc_drake.cell.evaluate import DEFAULT_BASE_SCENARIO, CellOptions
+    from hrc_drake.cell.scenario import LEAN
+
+    overrides = [t for t in (LEAN if args.lean else None, *(args.scenario_text or [])) if t]
+    cell = CellOptions(args.scenario or DEFAULT_BASE_SCENARIO, tuple(overrides))
+    cell.check(operator, args.operator_model)
+    return cell, cell.prepare(space)
+
+
+def cell_run_estimate(space: StateSpace, costs: CostTable | None, scenario) -> float:
+    """Simulated seconds of one cell run: the fewest tasks to finish, each the mean robot time
+    of a task edge in `costs` (without: `TYPICAL_ROBOT_SECONDS`) plus the scenario's bolting
+    hold and settling time."""
+    from hrc_drake.tasks.solve import tasks_to_finish
+
+    tasks = max(1, int(tasks_to_finish(space)[0]))
+    robot = [] if costs is None else [e.robot for e in costs.entries.values() if e.robot]
+    mean_robot = sum(robot) / len(robot) if robot else TYPICAL_ROBOT_SECONDS
+    return tasks * (mean_robot + scenario.motion.hold_time + scenario.run.settle_time)
+
+
+def _check_cell_runs(runs: int, workers: int | None, seconds: float) -> None:
+    """Say at once how long the cell runs take; refuse more than MAX_CELL_RUNS."""
+    per_worker = -(-runs // max(1, workers or 1))
+    fast, slow = (per_worker * seconds / f for f in reversed(CELL_REAL_TIME_FACTORS))
+    estimate = (
+        f"about {seconds:.0f} s simulated per run, {duration(fast)} to {duration(slow)} of wall "
+        f"time on {workers or 1} worker(s)"
+    )
+    if runs > MAX_CELL_RUNS:
+        raise UsageError(
+            f"--runs {runs} with --cell: {estimate}; at most {MAX_CELL_RUNS} cell runs per "
+            "evaluation: evaluate thousands of runs at task level (drop --cell)"
+        )
+    print(f"evaluate --cell: {runs} run(s), {estimate}", file=sys.stderr)
+
+
+def _cost_table(args, space: StateSpace) -> CostTable:
+    """`--costs FILE`, or the cell's table: computed (with a progress line) the first time for
+    a spec and layout, then read from the cache. CellModelError (the UR3 cannot reach the
+    layout) and CostPlanningError are one-line UsageErrors."""
+    if args.costs is not None:
+        return load_cost_table(args.costs, space)
+    from hrc_drake.cell.costs import CostPlanningError, default_cost_table
+    from hrc_drake.cell_models import CellModelError
+
+    label = f"cost table of {space.spec.name} (planned once, then cached)"
+    try:
+        with ProgressLine(label, "edge") as bar:
+            return default_cost_table(space, progress=bar.update)
+    except (CellModelError, CostPlanningError) as err:
+        raise UsageError(str(err)) from None
+
+
+def cmd_evaluate(args) -> int:
+    """`hrc-drake evaluate`: Monte Carlo runs of a decider against an operator model."""
+    from hrc_drake.tasks.graph import generate_states
+    from hrc_drake.tasks.spec import load_spec
+
+    plot = _check_flags(args)
+    space = generate_states(load_spec(args.assembly))
+    params = parse_params(args.param)
+    operator = make_operator_model(args.operator_model, space, seed=0, **params)
+    cell, scenario = (None, None) if not args.cell else _cell_options(args, space, operator)
+    runs = args.runs if args.runs is not None else (DEFAULT_CELL_RUNS if cell else DEFAULT_RUNS)
+    workers = args.workers if args.ray is not None else local_workers(args.workers, runs)
+    if cell is not None and runs > MAX_CELL_RUNS:  # refused before the cost table is built
+        _check_cell_runs(runs, workers, cell_run_estimate(space, None, scenario))
+    costs = _cost_table(args, space)
+    if cell is not None:
+        _check_cell_runs(runs, workers, cell_run_estimate(space, costs, scenario))
+    setup = Setup(space, costs, args.decider, args.operator_model, params, args.seed, cell=cell)
+    misfits: tuple[type[Exception], ...] = ()  # none at task level (which needs no Drake)
+    if cell is not None:
+        from hrc_drake.cell_models import CellModelError
+
+        misfits = (CellModelError,)
+    level = "cell" if cell else "evaluate"
+    with ProgressLine(f"{level} {args.decider} vs {args.operator_model}", unit="run") as line:
+        try:
+            report = evaluate(
+                setup,
+                runs,
+                workers,
+                progress=line.update,
+                ray=args.ray is not None,
+                ray_address=args.ray or None,
+            )
+        except misfits as err:
+            raise UsageError(str(err)) from None
+    if plot is not None:
+        plot_times(report, plot)
+    report.pop("times")
+    if args.json:
+        json.dump(report, sys.stdout, indent=1)
+        sys.stdout.write("\n")
+        return 0
+    for key, value in report.items():
+        print(f"{key:22} {value}")
+    return 0
+
+
+def add_evaluate_parser(add) -> None:
+    """Register `evaluate` with `add(name, func, help)` of `hrc_drake.cli.build_parser`."""
+    p = add("evaluate", cmd_evaluate, "Monte Carlo: a decider against an operator population")
+    p.add_argument("--decider", required=True, help=f"one of {', '.join(DECIDERS)}")
+    p.add_argument(
+        "--operator-model",
+        required=True,
+        help="follows, random, habitual, mistake-prone, change-of-mind, slow",
+    )
+    p.add_argument(
+        "--runs",
+        type=int,
+        default=None,
+        help=f"runs (default {DEFAULT_RUNS}; with --cell {DEFAULT_CELL_RUNS}, at most "
+        f"{MAX_CELL_RUNS})",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="local processes (default 1, at most one per CPU); with --ray, Ray actors "
+        "(default one per CPU of the cluster)",
+    )
+    p.add_argument(
+        "--ray",
+        nargs="?",
+        const="",
+        default=None,
+        metavar="ADDRESS",
+        help="spread the runs on a Ray cluster at ADDRESS (no address: a local one); needs the "
+        "extra hrc_drake[ray]",
+    )
+    p.add_argument(
+        "--cell",
+        action="store_true",
+        help="run through the physical cell (closed-loop simulations; dozens, not thousands)",
+    )
+    p.add_argument(
+        "--scenario",
+        default=None,
+        help="with --cell: the base scenario (default row1-optimal; its operator is replaced)",
+    )
+    p.add_argument("--lean", action="store_true", help="with --cell: short holds (tests)")
+    p.add_argument(
+        "--scenario-text",
+        action="append",
+        default=None,
+        help="with --cell: YAML overrides of the base scenario",
+    )
+    p.add_argument("--plot", type=Path, default=None, help="histogram of assembly times")
+    p.add_argument("--costs", type=Path, default=None, help="cost table (default: the cell's)")
+    p.add_argument(
+        "--param", action="append", default=None, help="operator model parameter KEY=VALUE"
+    )

@@ -1,0 +1,191 @@
+"""A layout the UR3 reaches, to suggest when it cannot reach the one given.
+
+`check_reach` (`hrc_drake.motion.planner`) fails on a layout whose tray or plate is too far.
+Guessing the fix (a smaller `slot_pitch`, a tray position found by trial) is not a hint: here
+candidate layouts near the given one are generated, screened on plain geometry (every target
+within the UR3's reach of its base axis, the tray and the plate apart, on the table and clear of
+the robot's base) and then checked with the reach check itself, nearest first, until one passes.
+Only a layout that passed is suggested.
+
+The caller passes `reaches(design) -> bool` (the reach check on a design), so this module does
+not import the planner.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+from collections.abc import Callable, Iterable
+
+import numpy as np
+
+from hrc_drake.cell_models import PLATE_END, PLATE_WIDTH, TABLE_POSITION, CellDesign, slot_offsets
+from hrc_drake.layout import CellLayout
+
+# Horizontal distance from the UR3's base axis within which a grasp with the tool pointing down
+# passed the reach check in a scan of tray positions (0.494 m passed, 0.511 m failed; the UR3's
+# catalogue reach is 0.5 m, shared/reference/ur3-rg2.md). Screening only: the check decides.
+REACH = 0.49
+# Nearer than this the arm folds over its own base; the tray and the plate keep clear of it.
+NEAR = 0.15
+BASE_CLEARANCE = 0.10
+GAP = 0.015  # between the tray and the plate (the default `tray_gap`)
+TABLE_HALF = 0.5  # the table is 1 m x 1 m (models/cell/table.sdf) centred at TABLE_POSITION
+# Reach checks tried at most (each builds a planner, about 0.4 s).
+BUDGET = 12
+
+Reaches = Callable[[CellDesign], bool]
+
+
+@dataclasses.dataclass(frozen=True)
+class Suggestion:
+    """A layout that passed the reach check, and the `cell:` keys that differ from the given."""
+
+    layout: CellLayout
+    changes: dict
+
+    def as_yaml(self) -> str:
+        """The changed keys as one line of YAML for a spec's (or scenario's) `cell:` section."""
+        items = ", ".join(f"{k}: {_yaml_value(v)}" for k, v in self.changes.items())
+        return f"cell: {{{items}}}"
+
+
+def _yaml_value(value) -> str:
+    if isinstance(value, list):
+        return "[" + ", ".join(f"{v:g}" for v in value) + "]"
+    return f"{value:g}"
+
+
+def _rectangle(center, yaw_deg: float, length: float, width: float) -> np.ndarray:
+    """Corners (4 x 2) of a length x width rectangle turned by yaw about z at center."""
+    c, s = math.cos(math.radians(yaw_deg)), math.sin(math.radians(yaw_deg))
+    half = [(length / 2, width / 2), (-length / 2, width / 2)]
+    corners = [(x, y) for x, y in half] + [(-x, -y) for x, y in half]
+    return np.array([[center[0] + c * x - s * y, center[1] + s * x + c * y] for x, y in corners])
+
+
+def _apart(a: np.ndarray, b: np.ndarray, gap: float) -> bool:
+    """Whether two convex polygons are at least `gap` apart along some edge normal."""
+    for poly in (a, b):
+        for i in range(len(poly)):
+            edge = poly[(i + 1) % len(poly)] - poly[i]
+            normal = np.array([-edge[1], edge[0]]) / np.linalg.norm(edge)
+            pa, pb = a @ normal, b @ normal
+            if pa.max() + gap <= pb.min() or pb.max() + gap <= pa.min():
+                return True
+    return False
+
+
+def _within(points: Iterable, near: float = NEAR, far: float = REACH) -> bool:
+    return all(near <= math.hypot(p[0], p[1]) <= far for p in points)
+
+
+def _on_table(corners: np.ndarray) -> bool:
+    return bool(np.all(np.abs(corners - np.array(TABLE_POSITION[:2])) <= TABLE_HALF))
+
+
+def _clear_of_base(corners: np.ndarray) -> bool:
+    # The base axis is at the origin: keep a disc of BASE_CLEARANCE free.
+    disc = _rectangle((0.0, 0.0), 0.0, 2 * BASE_CLEARANCE, 2 * BASE_CLEARANCE)
+    return _apart(corners, disc, 0.0)
+
+
+def _plate(design: CellDesign) -> tuple[np.ndarray, list]:
+    """The plate's corners and its slot centres in world (x, y)."""
+    layout = design.layout
+    X = design.X_W_plate()
+    length = layout.slot_pitch * (design.slots - 1) + 2 * PLATE_END
+    corners = _rectangle(layout.plate_position, layout.plate_yaw_deg, length, PLATE_WIDTH)
+    slots = [X @ np.array([x, 0.0, 0.0]) for x in slot_offsets(design.slots, layout.slot_pitch)]
+    return corners, slots
+
+
+def _tray(design: CellDesign, position=None) -> tuple[np.ndarray, list]:
+    """The tray's corners and its homes in world (x, y), where the layout puts it or at
+    `position`."""
+    homes, (length, width, _) = design.tray()
+    yaw = design.layout.plate_yaw_deg + design.layout.tray_yaw_deg
+    center = design.X_W_tray().translation() if position is None else position
+    c, s = math.cos(math.radians(yaw)), math.sin(math.radians(yaw))
+    points = [(center[0] + c * h.x - s * h.y, center[1] + s * h.x + c * h.y) for h in homes]
+    return _rectangle(center, yaw, length, width), points
+
+
+def plausible(design: CellDesign, tray_position=None) -> bool:
+    """The geometric screen: every slot and tray home within reach, tray and plate apart, both
+    on the table and clear of the robot's base (the tray at `tray_position` if given)."""
+    plate, slots = _plate(design)
+    tray, homes = _tray(design, tray_position)
+    return (
+        _within(slots)
+        and _within(homes)
+        and _apart(plate, tray, GAP)
+        and all(_on_table(c) and _clear_of_base(c) for c in (plate, tray))
+    )
+
+
+def _tray_positions(design: CellDesign) -> list[list[float]]:
+    """Tray positions on a 2.5 cm grid over the table, nearest to the current one first."""
+    here = design.X_W_tray().translation()
+    z = float(here[2])
+    grid = np.arange(-0.5, 0.5001, 0.025)
+    points = [
+        [round(float(TABLE_POSITION[0] + x), 3), round(float(y), 3), z]
+        for x, y in itertools.product(grid, grid)
+    ]
+    return sorted(points, key=lambda p: (math.hypot(p[0] - here[0], p[1] - here[1]), p))
+
+
+def _plate_candidates(layout: CellLayout) -> list[CellLayout]:
+    """The plate moved toward the robot (2.5 cm steps) and/or its slots closer (5 mm steps),
+    smallest change first."""
+    x0, pitch0 = layout.plate_position[0], layout.slot_pitch
+    xs = [x0 - 0.025 * k for k in range(0, 7)]
+    pitches = [round(pitch0 - 0.005 * k, 3) for k in range(0, 7) if pitch0 - 0.005 * k >= 0.05]
+    pairs = sorted(
+        itertools.product(xs, pitches),
+        key=lambda xp: (abs(xp[0] - x0) / 0.025 + abs(xp[1] - pitch0) / 0.005, -xp[1]),
+    )
+    out = []
+    for x, pitch in pairs:
+        position = [round(x, 3), *layout.plate_position[1:]]
+        out.append(dataclasses.replace(layout, plate_position=position, slot_pitch=pitch))
+    return out
+
+
+def _with_tray(design: CellDesign) -> CellDesign | None:
+    """`design` as is if it passes the screen, else with the nearest tray position that does."""
+    if plausible(design):
+        return design
+    _plate_corners, slots = _plate(design)
+    if not _within(slots):
+        return None  # no tray position helps a plate out of reach
+    for position in _tray_positions(design):
+        if plausible(design, position):
+            layout = dataclasses.replace(design.layout, tray_position=position)
+            return CellDesign.of(design.spec, layout)
+    return None
+
+
+def _changes(before: CellLayout, after: CellLayout) -> dict:
+    keys = ("plate_position", "slot_pitch", "tray_position")
+    return {k: getattr(after, k) for k in keys if getattr(after, k) != getattr(before, k)}
+
+
+def suggest_layout(design: CellDesign, reaches: Reaches, budget: int = BUDGET) -> Suggestion | None:
+    """The nearest layout to `design`'s that passes the screen and then `reaches`, trying the
+    tray alone first, then the plate moved closer and/or its slots closer together (with the
+    tray beside it where that fits, else moved); None if none of `budget` checks passed."""
+    layout = design.layout
+    tried = 0
+    for candidate in _plate_candidates(layout):
+        found = _with_tray(CellDesign.of(design.spec, candidate))
+        if found is None or found.layout.key() == layout.key():
+            continue
+        tried += 1
+        if reaches(found):
+            return Suggestion(found.layout, _changes(layout, found.layout))
+        if tried >= budget:
+            break
+    return None

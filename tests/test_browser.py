@@ -1,0 +1,296 @@
+"""A person in a real browser: Chromium, driven by Playwright, clicks through live runs of the
+cell and plays a recording.
+
+`hrc-drake simulate --live --lean` runs as a separate process on a free port; the page is opened
+at 1280×800, the controls are opened with "Open Controls" as a person would, and at every task
+boundary the test reads the panel, checks that every button is in view and that the scene shows
+the proposal, and clicks. What the run must end in is computed by the task layer
+(`run_decisions` with a `ScriptedOperator` of the same choices).
+
+The browser is Debian's `chromium` (Playwright cannot download its own here), launched with
+Playwright's `executable_path`. Without it the tests fail when `CI` is set (`.ci/run` installs
+it) and are skipped with the reason otherwise. `HRC_DRAKE_SCREENSHOTS=DIR` also saves the
+screenshots the README shows (`live_panel.png`, `recording.png`) in DIR.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import time
+from pathlib import Path
+
+import pytest
+from simulate_process import SimulateProcess, free_port
+
+from hrc_drake.hri.controls import is_safe_control_name
+from hrc_drake.hri.operator import ScriptedOperator
+from hrc_drake.tasks.decide import run_decisions
+from hrc_drake.tasks.graph import generate_states
+from hrc_drake.tasks.solve import exact_policy
+from hrc_drake.tasks.spec import load_spec
+from hrc_drake.tasks.tokens import UNDO
+
+pytestmark = pytest.mark.slow
+
+CHROMIUM = Path(os.environ.get("HRC_DRAKE_CHROMIUM", "/usr/bin/chromium"))
+# No sandbox (CI runs as root), no GPU, and nothing that reaches out to the network.
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+VIEW = {"width": 1280, "height": 800}
+# Our buttons sit in the panel's top level; Drake's own (save_scene, …) are in folders.
+BUTTONS = ".dg.main > ul > li.cr.function"
+STEP_TIMEOUT = 180.0  # s; a task at the wall clock's pace is ~8 s, planning on a busy CI more
+# Drake's MeshcatAnimation records at 64 frames per second (MeshcatVisualizerParams default).
+RECORDING_FRAME = 1.0 / 64
+
+
+def _unavailable(reason: str):
+    if os.environ.get("CI"):
+        pytest.fail(f"{reason}; CI is set, so the browser tests must run (.ci/run installs it)")
+    pytest.skip(reason)
+
+
+@pytest.fixture(scope="module")
+def chromium():
+    """Debian's Chromium under Playwright (see the module docstring)."""
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        _unavailable("Playwright for Python is missing: pip install -e '.[dev]'")
+    if not CHROMIUM.exists():
+        _unavailable(f"no Chromium at {CHROMIUM}: apt-get install chromium (or HRC_DRAKE_CHROMIUM)")
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        yield browser
+        browser.close()
+
+
+@pytest.fixture(scope="module")
+def flange_frames():
+    """The flange cell's frames (plate seats, tray homes), from the models without the robot."""
+    from hrc_drake.cell.station import make_cell_station, station_scenario
+    from hrc_drake.hri.scenario import Scenario
+
+    return make_cell_station(station_scenario(Scenario(), robot=False)).frames
+
+
+class Page:
+    """A 1280×800 page that keeps its console errors, page errors and requests."""
+
+    def __init__(self, browser):
+        self.page = browser.new_page(viewport=VIEW)
+        self.errors: list[str] = []
+        self.requests: list[str] = []
+        self.page.on("console", lambda m: self.errors.append(m.text) if m.type == "error" else None)
+        self.page.on("pageerror", lambda e: self.errors.append(f"page error: {e}"))
+        self.page.on("request", lambda r: self.requests.append(r.url))
+
+    def screenshot(self, tmp_path: Path, name: str) -> Path:
+        """Save a screenshot in tmp_path (and in $HRC_DRAKE_SCREENSHOTS, if set)."""
+        path = tmp_path / name
+        self.page.screenshot(path=str(path))
+        if os.environ.get("HRC_DRAKE_SCREENSHOTS"):
+            shutil.copyfile(path, Path(os.environ["HRC_DRAKE_SCREENSHOTS"]) / name)
+        return path
+
+    def panel(self) -> list[str]:
+        """The labels of our buttons in the control panel, top to bottom."""
+        return self.page.locator(f"{BUTTONS} .property-name").all_inner_texts()
+
+    def wait_for_panel(self, first: str, timeout: float = 30.0) -> list[str]:
+        """The panel's labels once `first` heads it and they no longer change."""
+        deadline = time.monotonic() + timeout
+        previous = None
+        while time.monotonic() < deadline:
+            labels = self.panel()
+            if labels and labels[0] == first and labels == previous:
+                return labels
+            previous = labels
+            time.sleep(0.25)
+        raise AssertionError(f"the panel shows {self.panel()}, not {first!r} first")
+
+    def buttons_out_of_view(self) -> list[str]:
+        """Labels of our buttons not wholly within the 1280×800 view."""
+        outside = []
+        rows = self.page.locator(BUTTONS)
+        for i in range(rows.count()):
+            box = rows.nth(i).bounding_box()
+            inside = box is not None and (
+                box["x"] >= 0
+                and box["y"] >= 0
+                and box["x"] + box["width"] <= VIEW["width"]
+                and box["y"] + box["height"] <= VIEW["height"]
+            )
+            if not inside:
+                outside.append(rows.nth(i).inner_text())
+        return outside
+
+    def click(self, label: str) -> None:
+        """Click the button labelled `label`, as a person does (a mouse click on it)."""
+        row = self.page.locator(BUTTONS).filter(has=self.page.get_by_text(label, exact=True))
+        row.locator(".property-name").click()
+
+    def shown(self, path: list[str]) -> dict:
+        """Whether the scene object at `path` is shown (it and its parents visible) and where
+        its origin falls in the view (normalised device coordinates, -1..1 across)."""
+        return self.page.evaluate(
+            """(path) => {
+                const object = viewer.scene_tree.find(path).object;
+                let visible = true;
+                for (let o = object; o; o = o.parent) visible = visible && o.visible;
+                const p = new MeshCat.THREE.Vector3();
+                object.getWorldPosition(p);
+                p.project(viewer.camera);
+                return {visible: visible, x: p.x, y: p.y};
+            }""",
+            path,
+        )
+
+    def in_view(self, points) -> list[tuple[float, float]]:
+        """World points (Drake's z-up) projected into the view (normalised device coordinates)."""
+        return [
+            tuple(xy)
+            for xy in self.page.evaluate(
+                """(points) => points.map(([x, y, z]) => {
+                    // three.js is y-up: Drake's (x, y, z) is three's (x, z, -y).
+                    const p = new MeshCat.THREE.Vector3(x, z, -y).project(viewer.camera);
+                    return [p.x, p.y];
+                })""",
+                [list(map(float, p)) for p in points],
+            )
+        ]
+
+
+def _check_the_cell_fills_the_view(page: Page, frames) -> None:
+    """The robot's base, every plate seat and every tray home are in view, and they spread over
+    much of it: at Meshcat's default camera they span 0.08 × 0.05 of the view's normalised
+    2 × 2 (measured in a recording made before the framing), at the framed camera 0.36 × 0.53."""
+    points = [[0.0, 0.0, 0.0]]
+    points += [list(X.translation()) for X in frames.seats.values()]
+    points += [list(X.translation()) for X in frames.homes.values()]
+    projected = page.in_view(points)
+    assert all(abs(x) < 1 and abs(y) < 1 for x, y in projected), projected
+    xs, ys = [p[0] for p in projected], [p[1] for p in projected]
+    assert max(xs) - min(xs) > 0.25 and max(ys) - min(ys) > 0.35, projected
+
+
+def _drive_live_run(chromium, tmp_path, frames, scenario, clicks, script, screenshots):
+    """Run `simulate --live` on `scenario` and click through it in Chromium: at step k the
+    button `clicks[k]`, else the proposal's (a screenshot `screenshots[k]` before the click).
+    Checks it against the task layer's run with `ScriptedOperator(script)`; returns the run's
+    JSON."""
+    space = generate_states(load_spec())
+    states, decisions = run_decisions(space, exact_policy(space), ScriptedOperator(script))
+    record = tmp_path / "live.html"
+    port = free_port()
+    args = ["--live", "--lean", "--scenario", scenario, "--port", str(port)]
+    run = SimulateProcess(*args, "--record", str(record), "--json")
+    try:
+        url = run.wait_for_line(r"live: open (http://\S+) in a web browser", STEP_TIMEOUT)[1]
+        assert url.endswith(f":{port}"), url
+        page = Page(chromium)
+        page.page.goto(url)
+        page.page.get_by_text("Open Controls", exact=True).click()
+        for decision in decisions:
+            state, proposal = decision.state, decision.proposed
+            run.wait_for_line(
+                f"^step {decision.step}: the robot proposes {proposal}\\b", STEP_TIMEOUT
+            )
+            labels = page.wait_for_panel(first=f"{proposal} - robot proposal")
+            _check_panel(space, state, proposal, labels)
+            assert page.buttons_out_of_view() == [], f"step {decision.step}: {labels}"
+            mark = ["operator_choices", "undo" if proposal == UNDO else "proposal", "ghost"]
+            shown = page.shown(mark)
+            assert shown["visible"] and abs(shown["x"]) < 1 and abs(shown["y"]) < 1, shown
+            if decision.step in screenshots:
+                page.screenshot(tmp_path, screenshots[decision.step])
+            if decision.step == 1:
+                _check_the_cell_fills_the_view(page, frames)
+            label = clicks.get(decision.step, labels[0])
+            assert label in labels, (decision.step, label, labels)
+            page.click(label)
+        code, out, err = run.finish(STEP_TIMEOUT)
+    finally:
+        run.kill()
+    assert code == 0, err[-5:]
+    assert page.errors == [], page.errors
+    data = json.loads(out)
+    assert data["terminal"] and not data["interrupted"] and data["error"] is None
+    assert data["names"] == [space.name(space.index(s)) for s in states]
+    assert [s["proposed"] for s in data["steps"]] == [d.proposed for d in decisions]
+    assert [s["operator"] for s in data["steps"]] == [d.performed for d in decisions]
+    assert [s["observed"] for s in data["steps"]] == [d.performed for d in decisions]
+    assert data["recording"] == str(record) and record.stat().st_size > 0
+    return data
+
+
+def _check_panel(space, state, proposal, labels) -> None:
+    """The panel offers the proposal first, then every other feasible task, each label safe for
+    Meshcat."""
+    assert all(is_safe_control_name(label) for label in labels), labels
+    feasible = [t for t, _ in space.tasks(space.index(state))]
+    assert labels[0] == f"{proposal} - robot proposal"
+    for task in feasible:
+        if task == proposal:
+            continue
+        assert (f"{task} instead" if task != UNDO else "undo the last part") in labels, labels
+
+
+def test_a_person_clicks_row1_to_its_end(chromium, tmp_path, flange_frames):
+    """Row 1 by hand: the robot's proposal clicked at every boundary; the run ends on the
+    minimum-effort column (1 2 7 10)."""
+    data = _drive_live_run(
+        chromium, tmp_path, flange_frames, "row1-optimal", {}, {}, {1: "live_panel.png"}
+    )
+    assert data["names"] == ["1", "2", "7", "10"]
+
+
+def test_a_person_overrides_makes_a_mistake_and_undoes_it(chromium, tmp_path, flange_frames):
+    """Row 4 by hand with a slip: "F3 instead" of the proposed F1, the proposal S12, then
+    "mistake" (the oval flange lands in the square's other row, F02, a dead end), the robot's
+    proposal to undo it, and the proposal F01: states 1 4 8 12 8 11."""
+    clicks = {1: "F3 instead", 3: "mistake: F01 lands in F02", 4: "undo - robot proposal"}
+    script = {1: "F3", 3: "F02"}
+    data = _drive_live_run(
+        chromium, tmp_path, flange_frames, "row4-forces-4", clicks, script, {4: "live_undo.png"}
+    )
+    assert data["names"] == ["1", "4", "8", "12", "8", "11"]
+    assert [s["operator"] for s in data["steps"]][2:4] == ["F02", UNDO]
+
+
+def test_a_recording_plays_from_file_in_the_browser(chromium, tmp_path, flange_frames, capsys):
+    """`simulate --record` writes one self-contained page: from file:// it loads with no console
+    error and no request beyond the file, plays on its own, lasts as long as the run's simulated
+    time, and opens on the framed cell."""
+    from hrc_drake.cli import main
+
+    record = tmp_path / "row4.html"
+    args = ["simulate", "--scenario", "row4-forces-4", "--lean", "--record", str(record)]
+    assert main([*args, "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    page = Page(chromium)
+    page.page.goto(record.as_uri())
+    page.page.wait_for_function("() => viewer.animator.duration > 0", timeout=30_000)
+    before = page.page.evaluate("viewer.animator.time")
+    time.sleep(1.0)
+    after, duration = page.page.evaluate("[viewer.animator.time, viewer.animator.duration]")
+    assert after > before + 0.3, (before, after)
+    assert abs(duration - data["sim_time"]) <= RECORDING_FRAME + 1e-6, (duration, data)
+    _check_the_cell_fills_the_view(page, flange_frames)
+    # A still of the run, paused in step 2: the robot moves the square flange to S12.
+    middle = data["steps"][0]["sim_time"] + 0.6 * data["steps"][1]["sim_time"]
+    page.page.evaluate(f"viewer.animator.pause(); viewer.animator.seek({middle})")
+    time.sleep(0.5)
+    page.screenshot(tmp_path, "recording.png")
+    assert page.errors == [], page.errors
+    beyond = [u for u in page.requests if u != record.as_uri() and not u.startswith("data:")]
+    assert beyond == [], beyond

@@ -1,0 +1,64 @@
+"""Ctrl-C during `hrc-drake simulate`, live or headless: one line, no traceback, and the
+recording and the JSON of what ran, marked interrupted."""
+
+from __future__ import annotations
+
+import base64
+import json
+import re
+
+import pytest
+from simulate_process import SimulateProcess, free_port
+
+pytestmark = pytest.mark.slow
+
+TIMEOUT = 180.0  # s; a busy CI machine plans and simulates slowly
+
+
+def _interrupted(run: SimulateProcess, record) -> dict:
+    """Send Ctrl-C; check the end: status 130, one line, the recording, the JSON."""
+    run.interrupt()
+    code, out, err = run.finish(TIMEOUT)
+    assert code == 130, err[-5:]
+    assert not any("Traceback" in line for line in err), err
+    assert err[-1].startswith("hrc-drake simulate: interrupted at "), err[-3:]
+    assert "Ctrl-C" in err[-1] and sum("interrupted" in line for line in err) == 1, err
+    data = json.loads(out)
+    assert data["interrupted"] is True and data["terminal"] is False
+    assert data["error"] == err[-1].removeprefix("hrc-drake simulate: ")
+    assert data["recording"] == str(record)
+    assert b"set_animation" in _recorded_commands(record.read_text())
+    return data
+
+
+def _recorded_commands(html: str) -> bytes:
+    """The Meshcat commands a static page replays (base64 msgpack blobs), concatenated."""
+    blobs = re.findall(r"data:application/octet-binary;base64,([A-Za-z0-9+/=]+)", html)
+    return b"".join(base64.b64decode(blob) for blob in blobs)
+
+
+def test_ctrl_c_at_a_live_prompt_keeps_the_recording_and_the_json(tmp_path):
+    """Interrupted while the robot waits for the person's first click: nothing was done yet,
+    and the page's buttons are gone."""
+    record = tmp_path / "live.html"
+    args = ["--live", "--lean", "--port", str(free_port()), "--record", str(record), "--json"]
+    run = SimulateProcess(*args)
+    try:
+        run.wait_for_line(r"^step 1: the robot proposes F1\b", TIMEOUT)
+        data = _interrupted(run, record)
+    finally:
+        run.kill()
+    assert data["names"] == ["1"] and data["steps"] == []
+
+
+def test_ctrl_c_during_a_headless_run_keeps_what_ran(tmp_path):
+    """Interrupted once the simulation is under way (its progress line shows): the JSON holds
+    the simulated time reached."""
+    record = tmp_path / "run.html"
+    run = SimulateProcess("--lean", "--record", str(record), "--json")
+    try:
+        run.wait_for_line(r"cell row1-optimal: sim s", TIMEOUT)
+        data = _interrupted(run, record)
+    finally:
+        run.kill()
+    assert data["sim_time"] > 0 and data["names"][0] == "1"

@@ -1,0 +1,77 @@
+"""The simulated station: one diagram from one scenario, the ports of a real cell, and what only
+a simulator does (the simulated operator, its bolts, the grasp welds) kept inside."""
+
+import pytest
+
+from hrc_drake.cell.controller import COMMANDED, MEASURED
+from hrc_drake.cell.run import build_closed_loop
+from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+from hrc_drake.cell.station import make_cell_station
+from hrc_drake.cell.supervisor import Mode
+from hrc_drake.cell.welds import Weld
+from hrc_drake.hri.scenario import table2_scenarios
+from hrc_drake.resources import scenarios_dir
+
+CATALOGUE = sorted(p.stem for p in scenarios_dir().glob("*.yaml"))
+
+
+@pytest.mark.parametrize("name", CATALOGUE)
+def test_every_catalogue_scenario_builds_a_station_with_the_ports_of_a_real_cell(name):
+    station = make_cell_station(load_cell_scenario(name, LEAN))
+    diagram = station.diagram
+    inputs = {diagram.get_input_port(i).get_name() for i in range(diagram.num_input_ports())}
+    outputs = {diagram.get_output_port(i).get_name() for i in range(diagram.num_output_ports())}
+    # What a controller may use is exactly the contract; the rest is marked simulation-only.
+    assert {n for n in inputs if not n.startswith("sim.")} == set(COMMANDED)
+    assert {n for n in outputs if not n.startswith("sim.")} == set(MEASURED)
+    assert diagram.GetInputPort("ur3.position").size() == 6
+    assert diagram.GetOutputPort("rg2.state_measured").size() == 2
+
+
+def test_the_station_comes_from_the_scenario():
+    text = "{station: {ur3: {kp: [3000, 3000, 1500, 400, 400, 400]}, rg2: {initial_opening: 0.05}}}"
+    station = make_cell_station(load_cell_scenario("row1-optimal", [LEAN, text]))
+    context = station.create_default_context()
+    opening = station.diagram.GetOutputPort("rg2.state_measured").Eval(context)[0]
+    assert opening == pytest.approx(0.05)
+    plant = station.plant
+    pan = plant.GetJointActuatorByName("shoulder_pan_motor")
+    assert pan.get_controller_gains().p == pytest.approx(3000.0)
+
+
+@pytest.mark.slow
+def test_parts_are_bolted_where_they_rest_and_unbolted_for_an_undo():
+    """Row 7: F1, S23, then F03 lands in F02 (a mistake), undo, F03. The simulated operator's
+    bolts take in the seat each part rests in; before the undo it takes the bolts out."""
+    row = next(r for r in table2_scenarios() if r.name == "row7-forces-9")
+    loop = build_closed_loop(load_cell_scenario(row.name, LEAN))
+    welds = []
+    t = 0.0
+    while loop.advance_to(t) not in (Mode.DONE, Mode.FAILED) and t < 60:
+        t += 0.5
+        bolts = {(w.part, w.seat) for w in loop.station.wanted_welds(loop.root_context)}
+        if bolts and (not welds or welds[-1] != bolts):
+            welds.append(bolts)
+    assert loop.status.mode == Mode.DONE and loop.status.error is None
+    ends = [w for w in welds if all(isinstance(x, tuple) for x in w)]
+    assert {("oval_flange_1", "F1")} in ends
+    # The flange bolted on the wrong row is unbolted before the robot takes it back ...
+    wrong = {
+        ("oval_flange_1", "F1"),
+        ("square_flange", "S23"),
+        ("oval_flange_2", "square_flange/row_1"),
+    }
+    right = {
+        ("oval_flange_1", "F1"),
+        ("square_flange", "S23"),
+        ("oval_flange_2", "square_flange/row_2"),
+    }
+    assert wrong in ends and right in ends
+    assert (
+        ends.index(wrong)
+        < ends.index({("oval_flange_1", "F1"), ("square_flange", "S23")}, ends.index(wrong))
+        < ends.index(right)
+    )
+    # ... and every weld the station holds at the end is a bolt.
+    assert all(w.kind == "bolt" for w in loop.station.wanted_welds(loop.root_context))
+    assert isinstance(next(iter(loop.station.wanted_welds(loop.root_context))), Weld)

@@ -1,0 +1,502 @@
+"""The cell station over LCM (hrc_drake.cell.interface, hrc_drake.cell.lcm_messages): the message
+types, the lockstep against a small fake station (tests/fake_station.py) in one process and in
+two, and the errors when the other side is missing."""
+
+from __future__ import annotations
+
+import importlib
+import json
+import math
+import re
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import drake
+import numpy as np
+import pytest
+from pydrake.lcm import DrakeLcm
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder, EventStatus
+
+from hrc_drake.cell import lcm_messages as lm
+from hrc_drake.cell.contacts import Owner, geometry_owners, owner_pairs
+from hrc_drake.cell.controller import connect_controller, make_controller
+from hrc_drake.cell.interface import (
+    CellStationServer,
+    LockstepTimeouts,
+    StationLinkError,
+    cell_station_hooks,
+    end_station_session,
+    exchange_period,
+    make_cell_station_interface,
+)
+from hrc_drake.cell.loop import ClosedLoop
+from hrc_drake.cell.operator_body import BodySpheres
+from hrc_drake.cell.remote import RemoteCell, run_over_lcm, station_of
+from hrc_drake.cell.run import build_closed_loop, run_scenario
+from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+from hrc_drake.hri.messages import Indication, Prompt, PromptKind
+from hrc_drake.hri.scenario import Scenario, ScenarioError
+
+sys.path.insert(0, str(Path(__file__).parent))
+from fake_station import (
+    CONFIGURATION,
+    STEP,
+    FakeController,
+    make_fake_station,
+)
+
+FAKE = Path(__file__).parent / "fake_station.py"
+DURATION = 0.4  # s of simulated time: 80 exchanges, 20 controller updates
+QUICK = LockstepTimeouts(start=3.0, step=3.0, resend=0.2)
+
+
+def _udpm_url() -> str:
+    """A host-local multicast URL on a port no one here uses now (tests may run in parallel)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    return f"udpm://239.241.129.92:{port}?ttl=0"
+
+
+# --- messages --------------------------------------------------------------------------------
+LCM_PRIMITIVES = {"int8_t", "int16_t", "int32_t", "int64_t", "byte", "float", "double", "string"}
+LCM_PRIMITIVES |= {"boolean"}
+
+
+def _drake_fields(cls) -> list[lm.Field]:
+    """The members of one of Drake's lcm-gen classes (a struct member's type as a class)."""
+    return [
+        lm.Field(
+            kind if kind in LCM_PRIMITIVES else object,
+            name,
+            tuple(int(d) if str(d).isdigit() else d for d in dims or ()),
+        )
+        for name, kind, dims in zip(
+            cls.__slots__, cls.__typenames__, cls.__dimensions__, strict=True
+        )
+    ]
+
+
+def test_struct_hash_is_lcm_gens_for_every_drake_type():
+    """Our fingerprints are lcm-gen's: the struct hash of each of Drake's generated types,
+    computed from its member list, is the constant lcm-gen wrote into it."""
+    names = [n for n in dir(drake) if n.startswith("lcmt_")]
+    assert len(names) > 30
+    for name in names:
+        source = Path(importlib.import_module(f"drake.{name}").__file__).read_text()
+        written = int(re.search(r"tmphash = \(\(?(0x[0-9a-f]+)", source).group(1), 16)
+        assert lm.struct_hash(_drake_fields(getattr(drake, name))) == written, name
+
+
+def _examples() -> dict[str, tuple]:
+    """Port values for every channel, unlike the defaults."""
+    body = BodySpheres(
+        np.array([[0.1, 0.2, 0.3], [0.4, 0.5, 0.6], [0.7, 0.8, 0.9]]),
+        np.array([0.05, 0.04, 0.1]),
+        np.array([[1.0, 0.0, -1.0], [0.5, 0.25, 0.125], [0.0, 0.0, 0.0]]),
+        ((0, 2), (2, 3)),
+    )
+    return {
+        "UR3_COMMAND": (np.linspace(-1, 1, 6) / 3, np.linspace(2, 3, 6) / 7),
+        "RG2_COMMAND": (np.array([0.0451]),),
+        "HRI_PROMPT": (Prompt(3, PromptKind.BOLT, ("F1", "S12"), "F3", "oval_flange_2"),),
+        "UR3_STATUS": (np.linspace(-3, 3, 12) / 11,),
+        "RG2_STATUS": (np.array([0.0449, -0.0021]), np.array([1.0])),
+        "CELL_CONFIGURATION": (CONFIGURATION,),
+        "OPERATOR_BODY": (body,),
+        "HRI_INDICATION": (Indication(2, "S12", True, 7.125),),
+        "SIM_CONTACTS": (
+            (
+                (Owner("rg2", "left_finger"), Owner("oval_flange_1", "oval_flange_1")),
+                (Owner("tray", "tray"), Owner("square_flange", "square_flange")),
+            ),
+        ),
+    }
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, np.ndarray):
+        return a.dtype == b.dtype and np.array_equal(a, b)
+    if isinstance(a, BodySpheres):
+        arrays = ("centres", "radii", "velocities")
+        return all(_same(getattr(a, k), getattr(b, k)) for k in arrays) and a.groups == b.groups
+    return a == b
+
+
+@pytest.mark.parametrize("channel", [*lm.COMMANDS, *lm.MEASUREMENTS, lm.SIM_CONTACTS])
+def test_every_message_round_trips(channel):
+    """Port values -> message -> LCM bytes -> message -> port values, bit for bit; and the
+    message bytes' stamp is read without decoding."""
+    values = _examples()[channel.channel]
+    message = channel.encode(123_456, *values)
+    data = message.encode()
+    decoded = channel.message.decode(data)
+    assert decoded.encode() == data
+    assert channel.stamp_of(data) == 123_456
+    back = channel.decode(decoded)
+    assert len(back) == len(values)
+    assert all(_same(a, b) for a, b in zip(values, back, strict=True)), (values, back)
+
+
+def test_defaults_and_session_round_trip():
+    """Empty values (a prompt of nothing, no body, no task yet) and session messages too."""
+    assert lm.prompt_value(lm.lcmt_hri_prompt.decode(lm.prompt_message(0, Prompt()).encode())) == (
+        Prompt(),
+    )
+    nobody = BodySpheres(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
+    (back,) = lm.body_value(lm.lcmt_operator_body.decode(lm.body_message(0, nobody).encode()))
+    assert back.centres.shape == (0, 3) and back.groups == ()
+    message = lm.indication_message(5, Indication())
+    assert lm.indication_value(lm.lcmt_hri_indication.decode(message.encode())) == (Indication(),)
+    report = lm.session_message(7, "report", {"sim_time": 1.5})
+    assert lm.lcmt_station_session.decode(report.encode()) == report
+
+
+def test_ur3_status_leaves_what_a_simulation_does_not_measure_unknown():
+    status = lm.ur3_status(1, np.arange(12.0))
+    assert all(math.isnan(x) for x in status.joint_torque + status.joint_position_desired)
+    assert status.num_joints == 6 and status.joint_velocity == list(np.arange(6.0, 12.0))
+
+
+def test_decode_errors_name_the_type():
+    prompt = lm.prompt_message(1, Prompt()).encode()
+    with pytest.raises(lm.LcmDecodeError, match="not a lcmt_hri_indication message"):
+        lm.lcmt_hri_indication.decode(prompt)
+    with pytest.raises(lm.LcmDecodeError, match="truncated"):
+        lm.lcmt_hri_prompt.decode(prompt[:-3])
+    with pytest.raises(lm.LcmDecodeError, match="HRI_INDICATION: not a lcmt_hri_indication"):
+        lm.MEASUREMENTS[-1].stamp_of(prompt)
+    short = lm.lcmt_panda_status()
+    short.num_joints, short.joint_position, short.joint_velocity = 0, [], []
+    with pytest.raises(lm.LcmDecodeError, match="UR3 status positions: 0 values where 6"):
+        lm.ur3_status_values(short)
+
+
+def test_definitions_are_lcm_syntax_of_the_classes():
+    """The .lcm text docs/hardware.md shows declares exactly the members the classes encode."""
+    text = lm.lcm_definitions()
+    for cls in (lm.lcmt_rg2_status, lm.lcmt_operator_body, lm.lcmt_cell_configuration):
+        for line in cls.definition().splitlines()[1:-1]:
+            assert line.strip() in text, line
+
+
+def test_exchange_period_needs_whole_plant_steps():
+    assert exchange_period(Scenario()) == 0.005
+    scenario = Scenario()
+    scenario.run.period = 0.0175
+    with pytest.raises(ScenarioError, match=r"run.period 0.0175 s is not a whole number"):
+        exchange_period(scenario)
+
+
+# --- the lockstep, one process ----------------------------------------------------------------
+def _run_direct(duration: float = DURATION):
+    builder = DiagramBuilder()
+    station = builder.AddSystem(make_fake_station())
+    controller = builder.AddSystem(FakeController())
+    connect_controller(builder, station, controller)
+    simulator = Simulator(builder.Build())
+    simulator.AdvanceTo(duration)
+    context = station.GetMyContextFromRoot(simulator.get_context())
+    return controller.log, station.GetOutputPort("ur3.state_estimated").Eval(context)
+
+
+def _run_controller(lcm: DrakeLcm, duration: float = DURATION, timeouts=QUICK, monitor=None):
+    """The fake controller against a station interface on `lcm`; (log, session report)."""
+    builder = DiagramBuilder()
+    interface = builder.AddSystem(make_cell_station_interface(Scenario(), lcm, timeouts=timeouts))
+    controller = builder.AddSystem(FakeController())
+    connect_controller(builder, interface, controller)
+    simulator = Simulator(builder.Build())
+    if monitor is not None:
+        simulator.set_monitor(monitor)
+    simulator.AdvanceTo(duration)
+    return controller.log, end_station_session(interface, timeout=3.0)
+
+
+def test_fake_station_over_memq_equals_direct():
+    """The same controller reads exactly the same measurements, and the station ends in
+    exactly the same state, over LCM as in one diagram: the grip sensor's feedthrough of the
+    commanded opening and the operator's update read the commands as they stood before the
+    controller's update; the servo reads them after it."""
+    direct_log, direct_state = _run_direct()
+    lcm = DrakeLcm("memq://")
+    station = make_fake_station()
+    server = CellStationServer(station, lcm, STEP, timeouts=QUICK)
+    log, report = _run_controller(lcm)
+    assert report == {"sim_time": DURATION, "exchanges": round(DURATION / STEP)}
+    assert server.report == report and server.error is None
+    assert len(log) == len(direct_log) == 20
+    assert repr(log) == repr(direct_log)
+    # The run exercised what the order matters for: a grip detected, prompts answered.
+    assert {entry[3] for entry in log} == {0.0, 1.0}
+    assert log[-1][-1].step >= 3
+    state = station.GetOutputPort("ur3.state_estimated").Eval(
+        station.GetMyContextFromRoot(server.root_context)
+    )
+    assert np.array_equal(state, direct_state)
+
+
+def test_station_error_reaches_the_controller():
+    """A station that fails sends its error; the controller's run ends with it."""
+    lcm = DrakeLcm("memq://")
+    server = CellStationServer(make_fake_station(fail_at=0.1), lcm, STEP, timeouts=QUICK)
+    with pytest.raises(StationLinkError, match=r"the fake station broke at t = 0\.100 s"):
+        _run_controller(lcm)
+    assert isinstance(server.error, RuntimeError)
+
+
+def test_repeated_commands_are_answered_again():
+    """A lost datagram: the controller sends its last commands again, the station answers
+    with the same measurements (and does not step twice)."""
+    lcm = DrakeLcm("memq://")
+    server = CellStationServer(make_fake_station(), lcm, STEP, timeouts=QUICK)
+    heard = []
+    lcm.Subscribe("UR3_STATUS", heard.append)
+    commands = [
+        (c.channel, c.encode(0, *(np.zeros(p.size) if p.size else p.model() for p in c.ports)))
+        for c in lm.COMMANDS
+    ]
+    for _ in range(2):
+        for channel, message in commands:
+            lcm.Publish(channel + lm.PRE_SUFFIX, message.encode())
+        lcm.HandleSubscriptions(0)
+        lcm.HandleSubscriptions(0)
+    assert len(heard) == 2 and heard[0] == heard[1]
+    assert server.root_context.get_time() == 0.0 and server.error is None
+
+
+def test_controller_without_a_station_times_out():
+    lcm = DrakeLcm(_udpm_url())
+    quick = LockstepTimeouts(start=0.5, step=0.5, resend=0.1)
+    start = time.monotonic()
+    with pytest.raises(StationLinkError, match=r"no cell station answered on udpm://.* within"):
+        _run_controller(lcm, timeouts=quick)
+    assert time.monotonic() - start < 5.0
+
+
+# --- two processes ----------------------------------------------------------------------------
+def _serve_fake(url: str, start: float = 30.0, step: float = 30.0) -> subprocess.Popen:
+    process = subprocess.Popen(
+        [sys.executable, str(FAKE), url, str(start), str(step)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    assert process.stdout.readline().strip() == "serving"
+    return process
+
+
+def test_two_processes_equal_one_diagram():
+    """The fake station in another process over UDP multicast: the controller reads what it
+    reads in one diagram, and the station ends in the same state."""
+    url = _udpm_url()
+    process = _serve_fake(url)
+    try:
+        log, report = _run_controller(DrakeLcm(url))
+        out, err = process.communicate(timeout=30)
+    finally:
+        process.kill()
+    assert process.returncode == 0, err
+    direct_log, direct_state = _run_direct()
+    assert report["exchanges"] == round(DURATION / STEP)
+    assert repr(log) == repr(direct_log)
+    words = out.split("report", 1)[1].split()
+    assert int(words[0]) == report["exchanges"]
+    assert [float(x) for x in words[1:]] == list(direct_state)
+
+
+def test_station_without_a_controller_times_out():
+    process = _serve_fake(_udpm_url(), start=0.5, step=0.5)
+    _, err = process.communicate(timeout=30)
+    assert process.returncode == 1
+    assert re.search(r"no controller came on udpm://\S+ within 0.5 s", err), err
+
+
+def test_controller_reports_a_station_that_dies():
+    url = _udpm_url()
+    process = _serve_fake(url)
+    quick = LockstepTimeouts(start=5.0, step=1.0, resend=0.2)
+
+    def kill_at_a_tenth(context):
+        if context.get_time() >= 0.1 and process.poll() is None:
+            process.kill()
+            process.wait()
+        return EventStatus.DidNothing()
+
+    try:
+        with pytest.raises(StationLinkError, match="the cell station stopped answering on udpm"):
+            _run_controller(DrakeLcm(url), timeouts=quick, monitor=kill_at_a_tenth)
+    finally:
+        process.kill()
+
+
+# --- the cell's own station ------------------------------------------------------------------
+def _plant_positions(station, root) -> np.ndarray:
+    return station.plant.GetPositions(station.plant.GetMyContextFromRoot(root))
+
+
+@pytest.mark.slow
+def test_cell_station_over_memq_equals_one_diagram():
+    """The cell's station and controller over LCM in one process, against the one-diagram run:
+    while the first part is held (3 s: a grasp weld on) and after it is let go (6 s), the
+    plant's state, the touching pairs the collision watch reads and the Supervisor's events are
+    the same, bit for bit."""
+    scenario = load_cell_scenario("row1-optimal", LEAN)
+    loop = build_closed_loop(scenario)
+    station, built = station_of(scenario)
+    lcm = DrakeLcm("memq://")
+    server = CellStationServer(station.diagram, lcm, STEP, cell_station_hooks(station))
+    setup = loop.setup
+    assert built == setup.scenario
+    controller = make_controller(
+        setup.scenario,
+        setup.design,
+        setup.space,
+        setup.policy,
+        setup.plans,
+        setup.home,
+        setup.options,
+    )
+    interface = make_cell_station_interface(setup.scenario, lcm, timeouts=QUICK, sim_contacts=True)
+    remote = ClosedLoop(setup, RemoteCell(interface), controller)
+    owners = geometry_owners(loop.station.plant)
+    for t, held in ((3.0, True), (6.0, False)):
+        loop.advance_to(t)
+        remote.simulator.AdvanceTo(t)
+        grasps = [w for w in loop.station.wanted_welds(loop.root_context) if w.kind == "grasp"]
+        assert bool(grasps) == held, t
+        assert np.array_equal(
+            _plant_positions(station, server.root_context),
+            _plant_positions(loop.station, loop.root_context),
+        )
+        results = loop.station.diagram.GetOutputPort("sim.contact_results").Eval(
+            loop.station.diagram.GetMyContextFromRoot(loop.root_context)
+        )
+        touching = remote.cell.touching(remote.simulator.get_context())
+        assert touching == tuple(owner_pairs(results, owners))
+        assert any(a.model == "rg2" or b.model == "rg2" for a, b in touching) == held
+        assert remote.status.events == loop.status.events
+        assert repr(remote.status.history) == repr(loop.status.history)
+
+
+@pytest.mark.slow
+def test_cell_station_in_another_process_equals_one_process(tmp_path):
+    """`hrc-drake station` in one process, the controller in this one: the same states,
+    terminal, final configuration, collisions and simulated time as the one-process run."""
+    url = _udpm_url()
+    station = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "hrc_drake.cli",
+            "station",
+            "--scenario",
+            "row1-optimal",
+            "--lean",
+            "--lcm",
+            url,
+            "--json",
+            "--timeout",
+            "120",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        remote = run_over_lcm("row1-optimal", url, scenario_text=LEAN)
+        out, err = station.communicate(timeout=60)
+    finally:
+        station.kill()
+    assert station.returncode == 0, err
+    here = run_scenario("row1-optimal", scenario_text=LEAN)
+    assert here.done and remote.done
+    assert remote.states == here.states
+    assert remote.final_tokens == here.final_tokens
+    assert remote.collisions == here.collisions
+    assert remote.sim_time == here.sim_time
+    assert remote.events == here.events
+    report = json.loads(out)
+    assert report["sim_time"] == pytest.approx(here.sim_time)
+
+
+def test_station_command_without_a_controller_ends_with_one_line():
+    """`hrc-drake station` that no controller comes to: one line, exit status 1."""
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "hrc_drake.cli",
+            "station",
+            "--scenario",
+            "row1-optimal",
+            "--lcm",
+            _udpm_url(),
+            "--timeout",
+            "1",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert result.returncode == 1
+    lines = result.stderr.strip().splitlines()
+    assert lines[0].startswith("station row1-optimal: serving on udpm://")
+    assert re.fullmatch(
+        r"hrc-drake station: error: no controller came on udpm://\S+ within 1 s: "
+        r"run `hrc-drake simulate --scenario S --station-lcm \S+`",
+        lines[-1],
+    )
+
+
+def test_simulate_over_lcm_refuses_what_needs_the_station_here(tmp_path):
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "hrc_drake.cli",
+            "simulate",
+            "--lean",
+            "--station-lcm",
+            _udpm_url(),
+            "--record",
+            str(tmp_path / "run.html"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert result.returncode == 2
+    assert "--station-lcm runs only the controller here" in result.stderr
+    assert not (tmp_path / "run.html").exists()
+
+
+def test_hardware_doc_shows_the_definitions_the_classes_are_made_from():
+    doc = (Path(__file__).parents[1] / "docs" / "hardware.md").read_text()
+    assert lm.lcm_definitions() in doc
+    for channel in (*lm.COMMANDS, *lm.MEASUREMENTS, lm.SIM_CONTACTS):
+        assert f"`{channel.channel}`" in doc
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["station", "--lcm", "udpm://10.1.2.3:7667"],
+        ["station", "--timeout", "0"],
+        ["simulate", "--lean", "--station-lcm", "memq://"],
+    ],
+)
+def test_bad_link_options_are_refused_in_one_line(argv):
+    result = subprocess.run(
+        [sys.executable, "-m", "hrc_drake.cli", *argv],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"hrc-drake {argv[0]}: error: --")
