@@ -16,6 +16,7 @@ DRAKE_FREE = [
     "hrc_drake.tasks.operator_model",
     "hrc_drake.hri.scenario",
     "hrc_drake.hri.populations",
+    "hrc_drake.hri.messages",
     "hrc_drake.motion.options",
     "hrc_drake.evaluate",
     "hrc_drake.gym",
@@ -26,6 +27,8 @@ MOTION = [
     "hrc_drake.motion.validate",
     "hrc_drake.motion.poses",
     "hrc_drake.motion.scene",
+    "hrc_drake.motion.plan_io",
+    "hrc_drake.motion.service",
 ]
 LEARNING = ["hrc_drake.tasks.mdp", "hrc_drake.tasks.learn", "hrc_drake.tasks.deciders"]
 

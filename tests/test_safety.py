@@ -8,13 +8,13 @@ from pydrake.systems.analysis import Simulator
 from hrc_drake.cell.intent import MotionIntent
 from hrc_drake.cell.operator_body import CHAIN_GAP, BodySpheres, ReachInto, body_pose
 from hrc_drake.cell.run import run_scenario, shared_planner
-from hrc_drake.cell.safety import allowed_scale
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario, motion_options
 from hrc_drake.cell.separation import (
     ControllerSeparationMonitor,
     RobotEnvelope,
     SafetyLog,
     SeparationReading,
+    allowed_scale,
     assess,
     log_step,
     nearest_points,

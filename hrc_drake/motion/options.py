@@ -28,7 +28,7 @@ class MotionOptions:
     """m; pre-grasp / pre-place / retreat offset along the tool's approach axis."""
     finger_gap: float = 0.008
     """m; each finger's gap to the part when open around it (the RG2 opens to any width)."""
-    grip_squeeze: float = 0.006
+    grip_squeeze: float = 0.002
     """m the gripper is commanded past a part's width: its fingers stall on the part (a real RG2
     then reports a grip), and close past the width when there is none."""
     straight_steps: int = 6

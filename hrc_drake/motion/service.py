@@ -368,7 +368,7 @@ class WorkerPlanService:
         *,
         start_timeout: float = 120.0,
         plan_timeout: float = 300.0,
-        rebuild_budget: float | None = 0.001,
+        rebuild_budget: float | None = 0.0005,
         nice: int = 0,
     ):
         if multiprocessing.current_process().daemon:

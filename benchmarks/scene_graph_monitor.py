@@ -1,4 +1,8 @@
-"""Speed and separation monitoring (ISO/TS 15066 §5.5.4) between the robot and the operator.
+"""The separation monitor the cell had before the controller got its own (the benchmark's
+baseline, `bench_separation.py`): it reads the simulator's scene graph, which a real controller
+does not have. The cell's monitor is `hrc_drake.cell.separation.ControllerSeparationMonitor`.
+
+Speed and separation monitoring (ISO/TS 15066 §5.5.4) between the robot and the operator.
 
 At every Supervisor update the `SeparationMonitor` takes, for each sphere of the operator's body,
 the nearest robot geometry (the UR3's and the gripper's collision geometry, and the part the
