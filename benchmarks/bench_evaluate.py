@@ -22,38 +22,28 @@ import argparse
 import importlib.util
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 
+from bench_interaction import MISTAKE_P, expected_seconds, oracle_decider, play
 from generated import generated_spec
 
 from hrc_drake.atomic import atomic_write_text
-from hrc_drake.evaluate import (
-    Setup,
-    evaluate,
-    plot_decider_means,
-    run_seed,
-    simulate_run,
-    summarise,
-)
-from hrc_drake.hri.populations import default_habit, make_operator_model
+from hrc_drake.evaluate import Setup, evaluate, plot_decider_means, simulate_run
+from hrc_drake.hri.populations import make_operator_model
 from hrc_drake.resources import models_dir
-from hrc_drake.tasks.costs import operator_seconds, table_from_seconds, task_edges
-from hrc_drake.tasks.deciders import (
-    DECIDERS,
-    DEVIATION_SECONDS,
-    MpcDecider,
-    PolicyDecider,
-    make_decider,
+from hrc_drake.tasks.costs import (
+    operator_seconds,
+    table_from_seconds,
+    task_edges,
+    uniform_bets,
 )
+from hrc_drake.tasks.deciders import DECIDERS, MpcDecider, make_decider
 from hrc_drake.tasks.graph import generate_states
-from hrc_drake.tasks.mdp import MdpConfig, build_mdp
-from hrc_drake.tasks.policy import policy_from_choices
-from hrc_drake.tasks.solve import q_from_values, solve_exact, timed_config
+from hrc_drake.tasks.interaction import make_interaction
 from hrc_drake.tasks.spec import load_spec
 from hrc_drake.tasks.tokens import UNDO
 
@@ -75,99 +65,15 @@ def plot_means(table: dict, path: Path) -> None:
     )
 
 
-class HabitOracle:
-    """Knows the habitual operator: proposes the habit while it is feasible and not yet done
-    (the operator performs it whatever is proposed), else the fastest route of an operator who
-    follows (deterministic, so the shortest path in seconds is optimal)."""
-
-    name = "oracle"
-
-    def __init__(self, space, costs, habit: str):
-        self.habit, self.space = habit, space
-        mdp = build_mdp(space, timed_config(costs, MdpConfig(gamma=1.0, mistake_prob=0.0)))
-        solution = solve_exact(mdp)
-        self.follow = PolicyDecider("follow", policy_from_choices(mdp, solution.choice, "f", {}))
-        # From the empty base the habit is feasible: the operator performs it at once.
-        self.expected = costs.seconds((), habit) - float(solution.values[space.index((habit,))])
-        self.reset()
-
-    def reset(self) -> None:
-        """A new run: the habit is still to come."""
-        self.done = False
-
-    def propose(self, state):
-        """The habit while it is to come and feasible, else the shortest path."""
-        if not self.done and self.habit in dict(self.space.tasks(self.space.index(state))):
-            return self.habit
-        return self.follow.propose(state)
-
-    def observe(self, state, proposed, performed) -> None:
-        """The habit is done once performed."""
-        self.done = self.done or performed == self.habit
-
-
-def oracle_decider(space, costs, model: str, p: float = 0.2):
-    """The exact policy in seconds under the true model of population `model` (`habitual` or
-    `mistake-prone` at mistake probability `p`), deviation cost included; with its expected
-    seconds from the empty base."""
-    if model == "habitual":
-        oracle = HabitOracle(space, costs, default_habit(space))
-        return oracle, oracle.expected
-    solution = solve_exact(mistake_mdp(space, costs, p))
-    policy = policy_from_choices(solution.mdp, solution.choice, "oracle", {})
-    return PolicyDecider("oracle", policy), -float(solution.values[0])
-
-
-def mistake_mdp(space, costs, p: float = 0.2):
-    """The mistake-prone population as an MDP in seconds: mistake probability `p`, and the
-    deviation cost on every misplacement."""
-    mdp = build_mdp(space, timed_config(costs, MdpConfig(gamma=1.0, mistake_prob=p)))
-    out_edge = np.repeat(np.arange(mdp.n_edges), np.diff(mdp.out_start))
-    deviates = mdp.out_dst != mdp.edge_dst[out_edge]
-    return replace(mdp, out_reward=mdp.out_reward - DEVIATION_SECONDS * deviates)
-
-
-def expected_seconds(mdp, decider) -> float:
-    """Expected seconds from the empty base of the decider's current proposals, taken as a fixed
-    policy, in `mdp` (policy evaluation: no sampling noise)."""
-    space = mdp.space
-    active = np.flatnonzero(np.diff(mdp.edge_start) > 0)
-    choice = np.array(
-        [
-            mdp.edge_start[s]
-            + [t for t, _ in space.tasks(s)].index(decider.propose(space.sequence(s)))
-            for s in active
-        ]
-    )
-    values = np.zeros(space.n_states)
-    for _ in range(100_000):
-        new = q_from_values(mdp, values)[choice]
-        change = float(np.max(np.abs(new - values[active])))
-        values[active] = new
-        if change < 1e-10:
-            break
-    return -float(values[0])
-
-
-def play(space, costs, decider, model: str, runs: int, seed: int, keep: bool = False) -> dict:
-    """`runs` runs on the seeds of `evaluate` (serial); the decider is reset before each run
-    unless `keep` (one operator, many assemblies)."""
-    results = []
-    for i in range(runs):
-        if not keep:
-            decider.reset()
-        op = make_operator_model(model, space, seed=run_seed(seed, i))
-        results.append(simulate_run(space, costs, decider, op))
-    return summarise(Setup(space, costs, decider.name, model, {}, seed), results)
-
-
 def synthetic_costs(space):
-    """Seconds per edge: 5 s of robot motion + 0.1 s per token index, plus the bolting time."""
+    """Seconds per edge: 5 s of robot motion + 0.1 s per token index, plus the bolting time;
+    every carry from 2.5 s to 4 s, every re-target 0.8 s and swap 4 s (about the flange's)."""
     seconds = {}
     for state, task in task_edges(space):
         robot = 5.0 if task == UNDO else 5.0 + 0.1 * space.tokens.index(task)
         seconds[state, task] = robot + operator_seconds(space.spec, state, task)
-    return table_from_seconds(space, seconds, cell_hash="synthetic")
+    bets = uniform_bets(space, retarget=0.8, swap=4.0)
+    return table_from_seconds(space, seconds, "synthetic", carry=(2.5, 4.0), bets=bets)
 
 
 def ms(values) -> str:
@@ -212,6 +118,7 @@ def section_all(space, costs, args, table: dict) -> list[str]:
 
 def section_oracle(space, costs, args, table: dict) -> list[str]:
     """2. exact, time, mpc, mpc kept across runs and the oracle on habitual and mistake-prone."""
+    interaction = make_interaction()
     populations = ("habitual", "mistake-prone")
     for decider in ("exact", "time", "mpc"):
         for model in populations:
@@ -224,11 +131,13 @@ def section_oracle(space, costs, args, table: dict) -> list[str]:
         f"{args.runs} runs per column, on the same operators (the seeds of `evaluate`). *mpc "
         "kept*: one",
         "operator, many assemblies: the operator model is kept across the runs instead of",
-        "reset (serial). *oracle*: the exact policy in seconds under the population's true",
-        "model, deviation cost included (habitual: propose the habit `S23` first, the operator",
-        "performs it anyway, then the shortest route of an operator who follows; mistake-prone:",
-        "the MDP with mistake probability 0.2). No decider can beat it on average, so *oracle",
-        "gain* is the most any decider can be faster than exact on that population.",
+        "reset (serial; `evaluate --keep-model`). *oracle*: the exact policy in seconds under the",
+        "population's true model, the interaction priced in (habitual: propose and commit to the",
+        "habit `S23` first, the operator performs it anyway, then the fastest route of an",
+        f"operator who follows; mistake-prone: the MDP with mistake probability {MISTAKE_P}). No",
+        "decider can beat it on average, so *oracle gain* is the most any decider can be faster",
+        "than exact on that population (`benchmarks/bench_interaction.py` has the same with",
+        "the commit rates, re-targets and swaps).",
         "",
         "| population | exact [s] | time [s] | mpc [s] | mpc kept [s] | oracle [s] | "
         "mpc faster | mpc kept faster | oracle gain |",
@@ -236,11 +145,11 @@ def section_oracle(space, costs, args, table: dict) -> list[str]:
     ]
     noise, learned = {}, {}
     for model in populations:
-        mpc = MpcDecider(space, costs)
-        kept = play(space, costs, mpc, model, args.runs, args.seed, True)
+        mpc = MpcDecider(space, costs, interaction)
+        kept = play(space, costs, mpc, model, args.runs, args.seed, interaction, True)
         learned[model] = mpc
-        oracle, _ = oracle_decider(space, costs, model)
-        best = play(space, costs, oracle, model, args.runs, args.seed)
+        oracle = oracle_decider(space, costs, interaction, model)
+        best = play(space, costs, oracle, model, args.runs, args.seed, interaction)
         noise[model] = np.std(best["times"]) / np.sqrt(len(best["times"]))
         e, t, m = (table[d, model]["mean_time"] for d in ("exact", "time", "mpc"))
         k, o = kept["mean_time"], best["mean_time"]
@@ -249,23 +158,24 @@ def section_oracle(space, costs, args, table: dict) -> list[str]:
             f"{100 * (e - k) / e:.1f} % | {100 * (e - o) / e:.1f} % |"
         )
     # Mistake-prone is random: expected seconds by policy evaluation, without sampling noise.
-    mdp = mistake_mdp(space, costs)
-    exact = make_decider("exact", space, costs)
+    deciders = {
+        "exact": make_decider("exact", space, costs),
+        "time": make_decider("time", space, costs),
+        "mpc kept (its policy after the runs)": learned["mistake-prone"],
+        "oracle": oracle_decider(space, costs, interaction, "mistake-prone"),
+    }
     expected = {
-        "exact": expected_seconds(mdp, exact),
-        "time": expected_seconds(mdp, make_decider("time", space, costs)),
-        "mpc kept (its policy after the runs)": expected_seconds(mdp, learned["mistake-prone"]),
-        "oracle": oracle_decider(space, costs, "mistake-prone")[1],
+        k: expected_seconds(space, costs, interaction, d, MISTAKE_P) for k, d in deciders.items()
     }
     e = expected["exact"]
     lines += [
         "",
-        "Habitual is deterministic: every run takes the mean. Mistake-prone is not: the",
+        "Habitual is deterministic but for the indication delays. Mistake-prone is not: the",
         f"standard error of a mean of {args.runs} runs is about "
         f"{noise['mistake-prone']:.2f} s, and deciders that take different routes draw",
         "different mistakes from the same seeds, so differences below ~0.3 s there are noise.",
-        "Expected seconds on mistake-prone (p = 0.2) of the fixed policies, by policy",
-        "evaluation of the MDP above (no sampling):",
+        f"Expected seconds on mistake-prone (p = {MISTAKE_P}) of the deciders' policies and",
+        "bets, by policy evaluation (no sampling):",
         "",
         "| policy | expected [s] | faster than exact |",
         "|---|---|---|",
@@ -358,8 +268,9 @@ def main() -> int:
         "",
         f"`python benchmarks/bench_evaluate.py --runs {args.runs}` (seed {args.seed}): the",
         "flange case, the cell's cost table (cached), `hrc_drake.evaluate` defaults: a run",
-        "ends in a terminal",
-        "state or after 100 tasks; a deviation from the proposal costs 1 s more; the robot",
+        "ends in a terminal state or after 100 tasks; the robot anticipates (pointer delay,",
+        "lognormal, median 2 s: it starts on its proposal or waits for the indication, and a",
+        "wrong bet costs its re-target or swap; see `benchmarks/reports/interaction.md`); it",
         "idles 0.21 s at a boundary whose task was not planned ahead (see section 1). Times are",
         "simulated seconds over the completed runs. Operator models at their default parameters",
         "(habitual: S23 first; mistake-prone p = 0.2; change-of-mind p = 0.2; slow growth 0.1).",

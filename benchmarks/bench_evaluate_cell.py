@@ -28,6 +28,7 @@ from hrc_drake.cell.costs import default_cost_table
 from hrc_drake.cell.evaluate import CellOptions
 from hrc_drake.evaluate import Setup, evaluate
 from hrc_drake.tasks.graph import generate_states
+from hrc_drake.tasks.interaction import WAIT, make_interaction
 from hrc_drake.tasks.spec import load_spec
 
 DECIDERS = ["paper-q", "time", "mpc"]
@@ -56,9 +57,11 @@ KEEP = (
 
 
 def run_pair(space, costs, decider: str, population: str, runs: int, seed: int, workers: int):
-    """The cell's and the task level's reports on the same seeded runs."""
-    task = Setup(space, costs, decider, population, {}, seed)
-    cell = Setup(space, costs, decider, population, {}, seed, cell=CellOptions())
+    """The cell's and the task level's reports on the same seeded runs. The cell does not
+    anticipate yet: its robot waits for the indication, so the task level plays `wait` too."""
+    wait = make_interaction(WAIT)
+    task = Setup(space, costs, decider, population, {}, seed, wait)
+    cell = Setup(space, costs, decider, population, {}, seed, wait, cell=CellOptions())
     start = time.perf_counter()
     in_cell = evaluate(cell, runs, workers, progress=_progress(decider, population))
     print(f"  {time.perf_counter() - start:.0f} s", flush=True)

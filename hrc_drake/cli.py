@@ -12,6 +12,7 @@ import os
 import sys
 from pathlib import Path
 
+from hrc_drake.evaluate_command import add_evaluate_parser, add_interaction_flags
 from hrc_drake.hri.operator import OperatorScriptError, ScriptedOperator, parse_operator_script
 from hrc_drake.hri.scenario import ScenarioError, table2_scenarios
 from hrc_drake.paths import UsageError, check_output_path
@@ -34,6 +35,7 @@ from hrc_drake.tasks.policy import (
     policy_from_choices,
     save_policy,
 )
+from hrc_drake.tasks.profile import ProfileError
 from hrc_drake.tasks.solve import exact_policy, tasks_to_finish, timed_config
 from hrc_drake.tasks.spec import SpecError, load_spec
 
@@ -383,8 +385,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True)
     p.add_argument("--schedule", choices=list(SCHEDULES), default="full")
     p.add_argument("--costs", type=Path, default=None, help=costs_help)
-    p = add("costs", cmd_costs, "plan every task edge -> cost table file (seconds)")
+    p = add("costs", cmd_costs, "plan every task edge and bet -> cost table file (seconds)")
     p.add_argument("--out", type=Path, required=True)
+    add_interaction_flags(p, "; prices the bets with the interface's delay")
     add("policy", cmd_policy, "the policy for every state").add_argument("--policy")
     p = add("react", cmd_react, "decision loop with a scripted operator")
     p.add_argument("--policy")
@@ -436,6 +439,21 @@ def build_parser() -> argparse.ArgumentParser:
         help="run the controller against the station `hrc-drake station` serves on this LCM URL "
         "(e.g. udpm://239.241.129.92:20185?ttl=0), started with the same scenario options",
     )
+    add_interaction_flags(
+        p,
+        " (sets the scenario's interaction). The cell does not anticipate yet: in both modes its "
+        "robot waits for the indication, which the simulated operator gives after the "
+        "interface's delay",
+    )
+    p.add_argument(
+        "--operator-profile",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="the operator's profile (what they do when the robot proposes): loaded if FILE "
+        "exists (refused if made for another assembly), learned from this run and saved "
+        "atomically; the cell's robot does not use it yet",
+    )
     p = add("station", cmd_station, "serve a scenario's simulated station over LCM")
     p.add_argument("--scenario", default=None, help="as for simulate")
     p.add_argument("--scenario-text", default=None, help="as for simulate")
@@ -456,7 +474,6 @@ def build_parser() -> argparse.ArgumentParser:
         help="seconds to wait for the controller to come, and for each of its later messages",
     )
     p.set_defaults(policy=None)
-    from hrc_drake.evaluate_command import add_evaluate_parser
 
     add_evaluate_parser(add)
     return parser
@@ -474,6 +491,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     except (
         SpecError,
+        ProfileError,
         PolicyFileError,
         OperatorScriptError,
         ScenarioError,

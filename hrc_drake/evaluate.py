@@ -1,11 +1,16 @@
 """Monte Carlo evaluation of a decider against an operator population, at task or cell level.
 
-At task level, a run starts from the empty base: the decider proposes, the operator model
-answers, each task takes its time from the cost table (the operator's part scaled by the model's
-``bolt_scale(step)``, for `slow`), plus `deviation_seconds` whenever the operator did not perform
-the proposal (see `hrc_drake.tasks.deciders`); the run ends in a terminal state, or after
-`MAX_TASKS` tasks (not completed). Run i is seeded from (seed, i) and the decider is reset
-before it, so runs are independent: serial and ``--workers K`` give the same report.
+At task level, a run starts from the empty base and plays the interaction timeline of every
+boundary (`hrc_drake.tasks.interaction`): the decider proposes and, in ``anticipate`` mode,
+commits to a placement or waits; the operator model answers; its indication comes after a delay
+drawn for the interface; the task takes its time from the cost table (the operator's part scaled
+by the model's ``bolt_scale(step)``, for `slow`), plus what the interaction adds — the delay when
+the robot waited, the re-target or swap of a wrong bet, the wait above the seat when a right bet
+arrived before the indication. The run ends in a terminal state, or after `MAX_TASKS` tasks (not
+completed). Run i is seeded from (seed, i) (the operator, and the delays in their own stream) and
+the decider is reset before it, so runs are independent: serial and ``--workers K`` give the same
+report. With `Setup.keep_model` the decider keeps its operator model across the runs (one
+operator, many assemblies): runs then follow each other in one process.
 
 Times are simulated seconds, so the report does not depend on the machine; wall-clock figures
 are under ``wall_*`` keys. Robot idle time at a task boundary: while the operator bolts, the cell
@@ -17,9 +22,12 @@ Time figures (mean, p95, worst) are over the completed runs.
 At cell level (``--cell``) each run is a closed-loop simulation of the physical cell: times are
 the cell's simulated seconds, and the robot's idle time at a boundary is the wall time it waited
 for the planner after the operator's answer (``plan_ready_rate``: the share of boundaries whose
-plan was made ahead, while the operator bolted). This module does not know the cell: `Setup.cell`
-is an object that plays cell runs (`CellRuns`; `hrc_drake.cell.evaluate.CellOptions`), so the
-dependency goes one way, from the cell to here. The command line is
+plan was made ahead, while the operator bolted). The cell does not anticipate yet: its robot waits
+for the indication, which the simulated operator gives after the interface's delay
+(`DelayedIndications`), so a cell run plays ``wait`` whatever the mode asked (the report says
+so). This module does not know the cell: `Setup.cell` is an object that plays cell runs
+(`CellRuns`; `hrc_drake.cell.evaluate.CellOptions`), so the dependency goes one way, from the
+cell to here. The command line is
 `hrc_drake.evaluate_command`.
 
 Runs spread over local processes (``workers``) or, with ``ray``, over a Ray cluster (the optional
@@ -31,7 +39,7 @@ way it runs (but for the ``wall_*`` figures and, at cell level, the measured idl
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -40,8 +48,16 @@ import numpy as np
 from hrc_drake.hri.populations import make_operator_model
 from hrc_drake.paths import UsageError
 from hrc_drake.tasks.costs import CostTable, operator_seconds
-from hrc_drake.tasks.deciders import DECIDERS, DEVIATION_SECONDS, make_decider
+from hrc_drake.tasks.deciders import DECIDERS, commit_to_proposal, make_decider
 from hrc_drake.tasks.graph import StateKind, StateSpace
+from hrc_drake.tasks.interaction import (
+    WAIT,
+    DelayedIndications,
+    Interaction,
+    InteractionCosts,
+    delay_generator,
+)
+from hrc_drake.tasks.operator_model import OnlineOperatorModel
 from hrc_drake.tasks.tokens import UNDO
 
 MAX_TASKS = 100
@@ -58,7 +74,11 @@ PREDICT_AT_MOST = 3
 class RunResult:
     """One run: whether it finished, its simulated seconds, tasks, undos and deviations, the
     robot's idle seconds and whether the plan was ready, per boundary; at cell level also the
-    run's error and its robot collisions."""
+    run's error and its robot collisions. The interaction: boundaries where the robot started on
+    its prediction (`commits`), re-targeted and swapped; the indication delays drawn
+    (`indication_delay`, summed) and the seconds the robot stood waiting for an indication
+    (`indication_wait`: the whole delay when it waited, the rest of it when a right bet reached
+    the seat first)."""
 
     completed: bool
     seconds: float
@@ -69,6 +89,11 @@ class RunResult:
     plan_ready: tuple[bool, ...] = ()
     error: str | None = None
     collisions: int = 0
+    commits: int = 0
+    retargets: int = 0
+    swaps: int = 0
+    indication_delay: float = 0.0
+    indication_wait: float = 0.0
 
 
 def run_seed(seed: int, run: int) -> int:
@@ -88,23 +113,64 @@ def predicted_tasks(decider, state: tuple[str, ...], proposal: str) -> list[str]
     return [t for t in ranked if probs[t] >= PREDICT_PROBABILITY][:PREDICT_AT_MOST]
 
 
+def commitment(decider, state: tuple[str, ...], proposal: str, interaction: Interaction):
+    """What the decider starts on before the indication (None: the robot waits): its own
+    choice (`commit`), or for a decider without one its proposal; always None in ``wait``."""
+    if not interaction.anticipates:
+        return None
+    commit = getattr(decider, "commit", None)
+    if commit is None:
+        return commit_to_proposal(interaction, proposal)
+    return commit(state, proposal)
+
+
+@dataclass
+class _Tally:
+    """What a run counts as it goes."""
+
+    seconds: float = 0.0
+    undos: int = 0
+    deviations: int = 0
+    commits: int = 0
+    retargets: int = 0
+    swaps: int = 0
+    delay: float = 0.0
+    wait: float = 0.0
+
+    def result(self, done: bool, tasks: int, ready: list[bool]) -> RunResult:
+        # Idle at a boundary: none when the task was planned ahead, else the planning time.
+        idle = tuple(0.0 if r else PLANNING_SECONDS for r in ready)
+        return RunResult(
+            bool(done), self.seconds, tasks, self.undos, self.deviations, idle, tuple(ready),
+            commits=self.commits, retargets=self.retargets, swaps=self.swaps,
+            indication_delay=self.delay, indication_wait=self.wait,
+        )  # fmt: skip
+
+
 def simulate_run(
     space: StateSpace,
     costs: CostTable,
     decider,
     operator,
-    deviation_seconds: float = DEVIATION_SECONDS,
+    timeline: InteractionCosts | None = None,
+    delays: np.random.Generator | None = None,
     max_tasks: int = MAX_TASKS,
 ) -> RunResult:
-    """Play one run from the empty base (the decider is not reset: it keeps what it learned)."""
-    index, seconds, undos, deviations = 0, 0.0, 0, 0
+    """Play one run from the empty base (the decider is not reset: it keeps what it learned).
+
+    `timeline` prices the interaction (default: `InteractionCosts` of the default interaction,
+    anticipate over the pointer); `delays` draws the indication delays (default: seeded 0)."""
+    timeline = timeline or InteractionCosts(space, costs, Interaction())
+    delays = delays if delays is not None else delay_generator(0)
+    index, tally = 0, _Tally()
     ready: list[bool] = []
     scale = getattr(operator, "bolt_scale", None)
     for step in range(1, max_tasks + 1):
         if space.kind[index] == StateKind.TERMINAL:
-            return _task_result(True, seconds, step - 1, undos, deviations, ready)
+            return tally.result(True, step - 1, ready)
         state = space.sequence(index)
         proposal = decider.propose(state)
+        committed = commitment(decider, state, proposal, timeline.interaction)
         planned = predicted_tasks(decider, state, proposal)
         performed = operator(step, state, proposal)
         ready.append(performed in planned)
@@ -115,28 +181,34 @@ def simulate_run(
                 f"feasible: {sorted(feasible)}"
             )
         cost = costs.cost(state, performed)
-        seconds += cost.seconds
+        tally.seconds += cost.seconds
         if scale is not None:
             factor = scale(step)
             if factor != 1.0:
                 part = cost.operator
                 if part is None:
                     part = min(cost.seconds, operator_seconds(space.spec, state, performed))
-                seconds += (factor - 1.0) * part
-        if performed != proposal:
-            deviations += 1
-            seconds += deviation_seconds
-        undos += performed == UNDO
+                tally.seconds += (factor - 1.0) * part
+        _interaction(tally, timeline, state, committed, performed, delays)
+        tally.deviations += performed != proposal
+        tally.undos += performed == UNDO
         decider.observe(state, proposal, performed)
         index = feasible[performed]
-    done = space.kind[index] == StateKind.TERMINAL
-    return _task_result(bool(done), seconds, max_tasks, undos, deviations, ready)
+    return tally.result(space.kind[index] == StateKind.TERMINAL, max_tasks, ready)
 
 
-def _task_result(done, seconds, tasks, undos, deviations, ready: list[bool]) -> RunResult:
-    # Idle at a boundary: none when the task was planned ahead, else the planning time.
-    idle = tuple(0.0 if r else PLANNING_SECONDS for r in ready)
-    return RunResult(done, seconds, tasks, undos, deviations, idle, tuple(ready))
+def _interaction(tally: _Tally, timeline, state, committed, performed, delays) -> None:
+    """Add one boundary's interaction to the run's tally."""
+    step = timeline.play(state, committed, performed, timeline.interaction.delay.sample(delays))
+    tally.seconds += step.seconds
+    tally.delay += step.delay
+    tally.commits += committed is not None
+    tally.retargets += step.retargeted
+    tally.swaps += step.swapped
+    if committed is None:
+        tally.wait += step.delay
+    elif not (step.retargeted or step.swapped):
+        tally.wait += step.seconds  # a right bet waits only for the rest of the delay
 
 
 class CellRuns(Protocol):
@@ -165,7 +237,12 @@ class Setup:
     operator_model: str
     params: dict[str, Any]
     seed: int
-    deviation_seconds: float = DEVIATION_SECONDS
+    interaction: Interaction = field(default_factory=Interaction)
+    keep_model: bool = False
+    """One operator, many assemblies: the decider keeps its operator model across the runs
+    (`start_run` instead of `reset`), so the runs follow each other in one process."""
+    model: OnlineOperatorModel | None = None
+    """An operator profile's model for `mpc` to start from (None: a fresh one)."""
     cell: CellRuns | None = None
     """None: task level; else runs through the cell (`hrc_drake.cell.evaluate.CellOptions`)."""
 
@@ -178,21 +255,27 @@ def _prepare(setup: Setup) -> None:
     # (seeded, so every process learns the same table).
     _WORKER["setup"] = setup
     _WORKER["decider"] = make_decider(
-        setup.decider, setup.space, setup.costs, setup.seed, setup.deviation_seconds
+        setup.decider, setup.space, setup.costs, setup.seed, setup.interaction, setup.model
     )
+    _WORKER["timeline"] = InteractionCosts(setup.space, setup.costs, setup.interaction)
     if setup.cell is not None:
         _WORKER["cell"] = setup.cell.prepare(setup.space)
 
 
 def _play(run: int) -> RunResult:
     setup, decider = _WORKER["setup"], _WORKER["decider"]
-    decider.reset()
-    operator = make_operator_model(
-        setup.operator_model, setup.space, seed=run_seed(setup.seed, run), **setup.params
-    )
+    if setup.keep_model and run > 0:
+        decider.start_run()
+    else:
+        decider.reset()
+    seed = run_seed(setup.seed, run)
+    operator = make_operator_model(setup.operator_model, setup.space, seed=seed, **setup.params)
     if setup.cell is not None:
+        # The cell's robot waits for the indication; its simulated operator gives it late.
+        operator = DelayedIndications(operator, setup.interaction.delay, seed)
         return setup.cell.play(_WORKER["cell"], setup.space, decider, operator)
-    return simulate_run(setup.space, setup.costs, decider, operator, setup.deviation_seconds)
+    delays = delay_generator(setup.seed, run)
+    return simulate_run(setup.space, setup.costs, decider, operator, _WORKER["timeline"], delays)
 
 
 def _play_many(runs: list[int]) -> list[RunResult]:
@@ -308,10 +391,20 @@ def evaluate(
         raise UsageError(f"--runs {runs}: give at least 1 run")
     if workers is not None and workers < 1:
         raise UsageError(f"--workers {workers}: give at least 1 worker")
-    # Fail fast, in this process, on a bad decider, model or parameter.
+    if setup.keep_model and (ray or workers not in (None, 1)):
+        raise UsageError(
+            "--keep-model: one operator's assemblies follow each other, each learning from the "
+            "last; they run in one process: drop --workers and --ray"
+        )
+    asked = setup.interaction.mode
+    if setup.cell is not None and setup.interaction.anticipates:
+        # The cell does not anticipate yet: its robot waits, and the decider prices waiting.
+        setup = replace(setup, interaction=replace(setup.interaction, mode=WAIT))
+    # Fail fast, in this process, on a bad decider, model, parameter or cost table.
     operator = make_operator_model(setup.operator_model, setup.space, seed=0, **setup.params)
     if setup.decider not in DECIDERS:
         make_decider(setup.decider, setup.space, setup.costs)
+    InteractionCosts(setup.space, setup.costs, setup.interaction)
     if setup.cell is not None:
         setup.cell.check(operator, setup.operator_model)
         setup.cell.prepare(setup.space)
@@ -345,6 +438,8 @@ def evaluate(
                     progress(done, runs)
     wall = time.perf_counter() - start
     report = summarise(setup, results)
+    if setup.cell is not None:
+        report["interaction_asked"] = asked
     report["wall_seconds"] = round(wall, 3)
     report["wall_runs_per_second"] = round(runs / wall, 3) if wall > 0 else None
     report["workers"] = workers
@@ -362,6 +457,8 @@ def summarise(setup: Setup, results: list[RunResult]) -> dict[str, Any]:
     def fig(x):
         return None if x is None else round(float(x), 3)
 
+    boundaries = sum(r.tasks for r in results)
+    interaction = setup.interaction
     report = {
         "decider": setup.decider,
         "operator_model": setup.operator_model,
@@ -379,7 +476,17 @@ def summarise(setup: Setup, results: list[RunResult]) -> dict[str, Any]:
         "mean_idle": round(float(np.mean(idle)), 4) if idle else 0.0,
         "p95_idle": round(float(np.percentile(idle, 95)), 4) if idle else 0.0,
         "plan_ready_rate": round(float(np.mean(ready)), 4) if ready else None,
-        "deviation_seconds": setup.deviation_seconds,
+        "interaction": interaction.mode,
+        "interface": interaction.interface,
+        "indication_delay": interaction.delay.to_json(),
+        "commit_rate": round(sum(r.commits for r in results) / boundaries, 4)
+        if boundaries
+        else 0.0,
+        "mean_retargets": fig(np.mean([r.retargets for r in results])),
+        "mean_swaps": fig(np.mean([r.swaps for r in results])),
+        "mean_indication_delay": fig(np.mean([r.indication_delay for r in results])),
+        "mean_indication_wait": fig(np.mean([r.indication_wait for r in results])),
+        "keep_model": setup.keep_model,
         "seed": setup.seed,
         "level": "task" if setup.cell is None else "cell",
         "times": [round(r.seconds, 3) for r in done],
@@ -388,8 +495,10 @@ def summarise(setup: Setup, results: list[RunResult]) -> dict[str, Any]:
         errors = sorted({r.error for r in results if r.error and not r.completed})
         report.update(
             {
-                # The cell's robot waits for the answer before it moves: no deviation time.
-                "deviation_seconds": 0.0,
+                # The cell's robot waits for every indication (`evaluate` plays wait there);
+                # the simulated operator draws the delays, which the cell does not report.
+                "mean_indication_delay": None,
+                "mean_indication_wait": None,
                 "collisions": int(sum(r.collisions for r in results)),
                 **setup.cell.describe(setup.space),
                 "errors": errors[:5],

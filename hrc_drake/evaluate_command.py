@@ -19,9 +19,18 @@ from hrc_drake.evaluate import Setup, evaluate, plot_times
 from hrc_drake.hri.populations import make_operator_model
 from hrc_drake.paths import UsageError, check_output_path
 from hrc_drake.progress import ProgressLine, duration
-from hrc_drake.tasks.costs import CostTable, load_cost_table
+from hrc_drake.tasks.costs import CostTable, CostTableError, load_cost_table
 from hrc_drake.tasks.deciders import DECIDERS
 from hrc_drake.tasks.graph import StateSpace
+from hrc_drake.tasks.interaction import (
+    DEFAULT_DELAYS,
+    INTERFACES,
+    MODES,
+    Interaction,
+    InteractionCosts,
+    InteractionError,
+    make_interaction,
+)
 
 DEFAULT_RUNS = 1000
 DEFAULT_CELL_RUNS = 20
@@ -70,8 +79,41 @@ def parse_params(items: list[str] | None) -> dict[str, str]:
     return params
 
 
+def interaction_from_flags(args) -> Interaction:
+    """The `--interaction` mode and `--interface` (defaults: anticipate, pointer, with the
+    interface's delay); UsageError naming the flag and the choices otherwise."""
+    try:
+        return make_interaction(
+            getattr(args, "interaction", None), getattr(args, "interface", None)
+        )
+    except InteractionError as err:
+        flag = "--interaction" if "mode" in str(err) else "--interface"
+        raise UsageError(f"{flag}: {err}") from None
+
+
+def add_interaction_flags(p, cell_note: str = "") -> None:
+    """Register `--interaction` and `--interface` on the parser `p`; `cell_note` is added to the
+    help of `--interaction` (what the cell does with it)."""
+    delays = ", ".join(f"{k} {v.median:g} s" for k, v in DEFAULT_DELAYS.items())
+    p.add_argument(
+        "--interaction",
+        default=None,
+        metavar="MODE",
+        help=f"{' or '.join(MODES)} (default anticipate): the robot starts on its prediction, or "
+        f"waits for the operator's indication{cell_note}",
+    )
+    p.add_argument(
+        "--interface",
+        default=None,
+        metavar="NAME",
+        help=f"{', '.join(INTERFACES)} (default pointer): sets the indication delay (median "
+        f"{delays}; our assumption, see docs/evaluation.md)",
+    )
+
+
 def _check_flags(args) -> Path | None:
     """The checks that need nothing loaded; the `--plot` path."""
+    interaction_from_flags(args)
     plot = None
     if args.plot is not None:
         from hrc_drake.tasks.plots import FORMATS
@@ -96,6 +138,11 @@ def _check_flags(args) -> Path | None:
         raise UsageError(f"--runs {args.runs}: give at least 1 run")
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers {args.workers}: give at least 1 worker")
+    if args.keep_model and (args.ray is not None or (args.workers or 1) > 1):
+        raise UsageError(
+            "--keep-model: one operator's assemblies follow each other, each learning from the "
+            "last; they run in one process: drop --workers and --ray"
+        )
     return plot
 
 
@@ -111,16 +158,29 @@ def _cell_options(args, space: StateSpace, operator):
     return cell, cell.prepare(space)
 
 
-def cell_run_estimate(space: StateSpace, costs: CostTable | None, scenario) -> float:
+def cell_run_estimate(
+    space: StateSpace, costs: CostTable | None, scenario, delay: float = 0.0
+) -> float:
     """Simulated seconds of one cell run: the fewest tasks to finish, each the mean robot time
     of a task edge in `costs` (without: `TYPICAL_ROBOT_SECONDS`) plus the scenario's bolting
-    hold and settling time."""
+    hold and settling time, and the mean indication `delay` the robot waits for."""
     from hrc_drake.tasks.solve import tasks_to_finish
 
     tasks = max(1, int(tasks_to_finish(space)[0]))
     robot = [] if costs is None else [e.robot for e in costs.entries.values() if e.robot]
     mean_robot = sum(robot) / len(robot) if robot else TYPICAL_ROBOT_SECONDS
-    return tasks * (mean_robot + scenario.motion.hold_time + scenario.run.settle_time)
+    return tasks * (mean_robot + scenario.motion.hold_time + scenario.run.settle_time + delay)
+
+
+def cell_interaction(args, scenario) -> Interaction:
+    """The interaction of a cell evaluation: the base scenario's `interaction` section, with
+    `--interaction` and `--interface` over it (a delay the scenario gives stays)."""
+    it = scenario.interaction
+    delay = scenario.interaction_model().delay if it.delay is not None else None
+    flags = interaction_from_flags(args)  # checked (one line) whatever the scenario says
+    mode = it.mode if getattr(args, "interaction", None) is None else flags.mode
+    interface = it.interface if getattr(args, "interface", None) is None else flags.interface
+    return make_interaction(mode, interface, delay)
 
 
 def _check_cell_runs(runs: int, workers: int | None, seconds: float) -> None:
@@ -150,7 +210,7 @@ def _cost_table(args, space: StateSpace) -> CostTable:
 
     label = f"cost table of {space.spec.name} (planned once, then cached)"
     try:
-        with ProgressLine(label, "edge") as bar:
+        with ProgressLine(label, "plan") as bar:
             return default_cost_table(space, progress=bar.update)
     except (CellModelError, CostPlanningError) as err:
         raise UsageError(str(err)) from None
@@ -168,12 +228,30 @@ def cmd_evaluate(args) -> int:
     cell, scenario = (None, None) if not args.cell else _cell_options(args, space, operator)
     runs = args.runs if args.runs is not None else (DEFAULT_CELL_RUNS if cell else DEFAULT_RUNS)
     workers = args.workers if args.ray is not None else local_workers(args.workers, runs)
+    interaction = interaction_from_flags(args)
+    if cell is not None:
+        interaction = cell_interaction(args, scenario)
+    delay = interaction.delay.mean if cell is not None else 0.0
     if cell is not None and runs > MAX_CELL_RUNS:  # refused before the cost table is built
-        _check_cell_runs(runs, workers, cell_run_estimate(space, None, scenario))
+        _check_cell_runs(runs, workers, cell_run_estimate(space, None, scenario, delay))
     costs = _cost_table(args, space)
     if cell is not None:
-        _check_cell_runs(runs, workers, cell_run_estimate(space, costs, scenario))
-    setup = Setup(space, costs, args.decider, args.operator_model, params, args.seed, cell=cell)
+        _check_cell_runs(runs, workers, cell_run_estimate(space, costs, scenario, delay))
+    if cell is None:
+        try:
+            InteractionCosts(space, costs, interaction)  # the table has what the mode needs
+        except CostTableError as err:
+            raise UsageError(str(err)) from None
+    elif interaction.anticipates:
+        print(
+            "note: evaluate --cell: the cell does not anticipate yet; its robot waits for every "
+            f"indication, which comes after the {interaction.interface}'s delay",
+            file=sys.stderr,
+        )
+    setup = Setup(
+        space, costs, args.decider, args.operator_model, params, args.seed,
+        interaction=interaction, keep_model=args.keep_model, cell=cell,
+    )  # fmt: skip
     misfits: tuple[type[Exception], ...] = ()  # none at task level (which needs no Drake)
     if cell is not None:
         from hrc_drake.cell_models import CellModelError
@@ -257,4 +335,13 @@ def add_evaluate_parser(add) -> None:
     p.add_argument("--costs", type=Path, default=None, help="cost table (default: the cell's)")
     p.add_argument(
         "--param", action="append", default=None, help="operator model parameter KEY=VALUE"
+    )
+    add_interaction_flags(
+        p, "; with --cell the cell plays wait in both modes (its robot does not anticipate yet)"
+    )
+    p.add_argument(
+        "--keep-model",
+        action="store_true",
+        help="one operator, many assemblies: the decider keeps its operator model across the "
+        "runs (serial)",
     )

@@ -22,8 +22,9 @@ from hrc_drake.cell.interface import CellStationServer, LockstepTimeouts
 from hrc_drake.cell.operator_body import BodySpheres
 from hrc_drake.cell.slot_monitor import CellConfiguration, PartPlacement, PartStatus
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
+from hrc_drake.hri.scenario import Scenario
 
-STEP = 0.005  # the plant's time step (the default scenario's physics.time_step)
+STEP = Scenario().physics.time_step  # the plant's time step: the lockstep's exchange period
 CONTROL_PERIOD = 0.02  # the default scenario's run.period
 CONFIGURATION = CellConfiguration(
     (
@@ -44,6 +45,7 @@ class FakeStation(LeafSystem):
         self._position = self.DeclareVectorInputPort("ur3.position", BasicVector(6))
         self._velocity = self.DeclareVectorInputPort("ur3.velocity", BasicVector(6))
         self._opening = self.DeclareVectorInputPort("rg2.opening", BasicVector(1))
+        self.DeclareVectorInputPort("rg2.force", BasicVector(1))
         self._prompt = self.DeclareAbstractInputPort("hri.prompt", AbstractValue.Make(Prompt()))
         self._state = self.DeclareDiscreteState(np.r_[np.zeros(12), 0.08, 0.0])
         self._indication = self.DeclareAbstractState(AbstractValue.Make(Indication()))
@@ -137,6 +139,9 @@ class FakeController(LeafSystem):
         self.DeclareVectorOutputPort("ur3.position", 6, self._position, prerequisites_of_calc=deps)
         self.DeclareVectorOutputPort("ur3.velocity", 6, self._velocity, prerequisites_of_calc=deps)
         self.DeclareVectorOutputPort("rg2.opening", 1, self._opening, prerequisites_of_calc=deps)
+        self.DeclareVectorOutputPort(
+            "rg2.force", 1, lambda c, o: o.SetFromVector([20.0]), prerequisites_of_calc=deps
+        )
         self.DeclareAbstractOutputPort(
             "hri.prompt",
             lambda: AbstractValue.Make(Prompt()),

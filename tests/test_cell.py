@@ -21,8 +21,9 @@ from hrc_drake.cell import (
 )
 from hrc_drake.cell.controller import COMMANDED, MEASURED
 from hrc_drake.cell.scenario import load_cell_scenario, plant_config, scene_graph_config
+from hrc_drake.cell.sim_operator import bolt_weld
 from hrc_drake.cell.welds import Weld
-from hrc_drake.cell_models import CellDesign, CellModelError, add_cell_models
+from hrc_drake.cell_models import PLATE, CellDesign, CellModelError, add_cell_models
 from hrc_drake.hri.messages import Indication
 from hrc_drake.hri.scenario import Scenario, ScenarioError
 from hrc_drake.motion.poses import default_layout
@@ -136,22 +137,29 @@ def test_whole_cell_builds_with_ports_and_constraints(cell, workcell):
     assert {n for n in inputs if not n.startswith("sim.")} == set(COMMANDED)
     assert {n for n in outputs if not n.startswith("sim.")} == set(MEASURED)
     assert set(SIM_PORTS) <= outputs
-    for name, size in (("ur3.position", 6), ("ur3.velocity", 6), ("rg2.opening", 1)):
+    for name, size in (
+        ("ur3.position", 6),
+        ("ur3.velocity", 6),
+        ("rg2.opening", 1),
+        ("rg2.force", 1),
+    ):
         assert diagram.GetInputPort(name).size() == size, name
     for name, size in (("ur3.state_estimated", 12), ("rg2.state_measured", 2)):
         assert diagram.GetOutputPort(name).size() == size, name
     assert diagram.GetOutputPort("rg2.grip_detected").size() == 1
-    assert set(cell.welds.grasps) == set(PARTS)
-    rows = ("square_flange/row_1", "square_flange/row_2")
-    assert set(cell.welds.bolts) == {
-        *((oval, key) for oval in PARTS[:2] for key in ("F1", "F2", "F3", *rows)),
-        ("square_flange", "S12"),
-        ("square_flange", "S23"),
+    # What each part may be bolted to: the ovals to the plate or the square's rows, the square
+    # to the plate. No grasp welds (no constraints at all): the fingers hold by friction.
+    assert dict(cell.bolts.supports) == {
+        "oval_flange_1": (PLATE, "square_flange"),
+        "oval_flange_2": (PLATE, "square_flange"),
+        "square_flange": (PLATE,),
     }
+    assert cell.bolts.holds(Weld("oval_flange_1", "square_flange/row_2"))
+    assert not cell.bolts.holds(Weld("square_flange", "square_flange/row_1"))
+    assert cell.plant.num_constraints() == 0
     context = cell.create_default_context()
     plant_context = cell.plant.GetMyContextFromRoot(context)
-    for cid in [*cell.welds.grasps.values(), *cell.welds.bolts.values()]:
-        assert not cell.plant.GetConstraintActiveStatus(plant_context, cid)
+    assert cell.bolts.bolted(plant_context) == set()
     assert cell.wanted_welds(context) == frozenset()
     # The default context: the arm at the scenario's ready posture, at rest, the fingers at
     # the initial opening, on nothing; the operator has said nothing.
@@ -163,10 +171,10 @@ def test_whole_cell_builds_with_ports_and_constraints(cell, workcell):
     assert diagram.GetOutputPort("rg2.grip_detected").Eval(context)[0] == 0.0
     assert diagram.GetOutputPort("hri.indication").Eval(context) == Indication()
     # The workpieces-only station has no robot ports.
-    robot_inputs = {"ur3.position", "ur3.velocity", "rg2.opening"}
+    robot_inputs = {"ur3.position", "ur3.velocity", "rg2.opening", "rg2.force"}
     assert not robot_inputs & _port_names(workcell.diagram, inputs=True)
     assert "hri.prompt" in _port_names(workcell.diagram, inputs=True)
-    assert dict(workcell.welds.grasps) == {}
+    assert dict(workcell.bolts.supports) == dict(cell.bolts.supports)
 
 
 def test_no_penetration_at_the_initial_state(cell):
@@ -241,6 +249,79 @@ def test_straddling_flange_is_misplaced(workcell):
     assert reading.tokens() == frozenset()
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("offset", "seated"),
+    [
+        # In the pocket's corner, turned: as far off as the 1.5 mm clearance lets a part sit.
+        (RigidTransform(RollPitchYaw(0, 0, 0.05), [0.0014, 0.0014, 0.001]), True),
+        # Beside the pocket: its boss stands on the plate, a pocket's depth high.
+        (RigidTransform([0.0, 0.025, 0.001]), False),
+    ],
+)
+def test_a_part_is_seated_exactly_when_it_sits_in_its_pocket(workcell, offset, seated):
+    """The seat tolerances are what the pocket's clearance allows."""
+    X_W_seat = workcell.placement_poses({"oval_flange_1": "F2"})["oval_flange_1"]
+    context = workcell.create_default_context()
+    _set_parts(workcell, context, {"oval_flange_1": X_W_seat @ offset})
+    simulate_station(workcell, context, SETTLE)
+    reading = workcell.configuration(context)
+    expected = PartStatus.SEATED if seated else PartStatus.MISPLACED
+    assert reading.status("oval_flange_1") is expected
+    assert reading.tokens() == ({"F2"} if seated else frozenset())
+
+
+@pytest.mark.slow
+def test_a_bolt_fixes_a_part_where_it_sits_not_at_its_seat(workcell):
+    """Parts resting off their nominal seats (within the pocket's clearance) are bolted: each
+    stays where it sat, within 0.1 mm, and the sensor still reads them seated (their contact
+    with their seats is filtered out while bolted)."""
+    offsets = {
+        "square_flange": RigidTransform(RollPitchYaw(0, 0, 0.02), [0.0010, -0.0006, 0.0]),
+        "oval_flange_1": RigidTransform(RollPitchYaw(0, 0, -0.03), [-0.0009, 0.0007, 0.0]),
+        "oval_flange_2": RigidTransform(RollPitchYaw(0, 0, 0.04), [0.0008, 0.0008, 0.0]),
+    }
+    placements = {"square_flange": "S12", "oval_flange_1": "F3", "oval_flange_2": "F01"}
+    seated = workcell.placement_poses(placements)
+    context = workcell.create_default_context()
+    _set_parts(workcell, context, {p: X @ offsets[p] for p, X in seated.items()})
+    simulate_station(workcell, context, SETTLE)
+    assert workcell.configuration(context).tokens() == {"S12", "F3", "F01"}
+    plant = workcell.plant
+    plant_context = plant.GetMyMutableContextFromRoot(context)
+
+    def pose(part):
+        return plant.EvalBodyPoseInWorld(plant_context, workcell.part_body(part))
+
+    before = {p: pose(p) for p in placements}
+    # The bolts the simulated operator puts in: in the seat the sensor reads each part in.
+    configuration = workcell.configuration(context)
+    bolts = {bolt_weld(configuration, p) for p in placements}
+    assert Weld("oval_flange_2", "square_flange/row_1") in bolts
+    filters = workcell.scene_graph.collision_filter_manager(
+        workcell.scene_graph.GetMyMutableContextFromRoot(context)
+    )
+    workcell.bolts.apply(plant_context, bolts, filters)
+    assert workcell.bolts.bolted(plant_context) == set(placements)
+    simulate_station(workcell, context, SETTLE)
+    for part, X in before.items():
+        moved = X.InvertAndCompose(pose(part))
+        assert np.linalg.norm(moved.translation()) < 1e-4, part
+        assert moved.rotation().ToAngleAxis().angle() < 1e-3, part
+    # Not pulled to the nominal seats: the parts rested up to about a millimetre off them,
+    # and stay there.
+    off = [np.linalg.norm(seated[p].InvertAndCompose(pose(p)).translation()[:2]) for p in before]
+    assert max(off) > 0.0007
+    assert workcell.configuration(context).tokens() == {"S12", "F3", "F01"}
+    # Unbolted, the parts are free again and rest on their seats by contact.
+    workcell.bolts.apply(plant_context, set(), filters)
+    assert workcell.bolts.bolted(plant_context) == set()
+    simulate_station(workcell, context, SETTLE)
+    assert workcell.configuration(context).tokens() == {"S12", "F3", "F01"}
+    for part, X in before.items():
+        assert np.linalg.norm(X.InvertAndCompose(pose(part)).translation()) < 1e-4, part
+
+
 def _arm_posture_with_tcp_at(X_W_tcp: RigidTransform) -> np.ndarray:
     """UR3 joint positions putting the gripper's tcp at `X_W_tcp` (IK on the robot alone)."""
     plant = MultibodyPlant(0.0)
@@ -261,39 +342,72 @@ def _arm_posture_with_tcp_at(X_W_tcp: RigidTransform) -> np.ndarray:
     return result.GetSolution(ik.q())[:6]
 
 
-@pytest.mark.slow
-def test_held_flange_above_the_plate_is_held_not_seated(cell):
+def _hold_above_slot_2(cell, part: str, force: float | None = None):
+    """The gripper closed on `part` 1.5 mm above slot 2 (boss inside the pocket), commanded
+    2 mm past the part's width with `force` (default: the scenario's), simulated SETTLE s;
+    (root context, the part's pose at the start)."""
     plant = cell.plant
-    part = "oval_flange_1"
     default = plant.CreateDefaultContext()
     X_W_slot2 = plant.GetFrameByName("slot_2").CalcPoseInWorld(default)
     X_PG = plant.GetFrameByName("grasp", cell.instances[part]).GetFixedPoseInBodyFrame()
-    # 1.5 mm above its seat, boss inside the pocket: within the seat's pose tolerance, so only
-    # the missing contact with the seat floor tells that it is not seated.
     X_W_part = X_W_slot2 @ RigidTransform([0, 0, 0.0015])
     q = _arm_posture_with_tcp_at(X_W_part @ X_PG)
-
     context = cell.create_default_context()
     plant_context = plant.GetMyContextFromRoot(context)
     plant.SetPositions(plant_context, cell.instances["ur3"], q)
     width = 0.045
     plant.SetPositions(plant_context, cell.instances["rg2"], [width / 2, width / 2])
     plant.SetFreeBodyPose(plant_context, cell.part_body(part), X_W_part)
-    # The grasp weld stands in for the fingers' friction; the runner switches it on when the
-    # station wants it (below), here from the start.
-    cell.welds.apply(plant, plant_context, {Weld("grasp", part)})
-    cell.hold_robot(context, opening=width - 0.002)
+    cell.hold_robot(context, opening=width - 0.002, force=force)
     simulate_station(cell, context, SETTLE)
-    # The station wants that weld too: the fingers are commanded closed on the part at the tcp.
-    assert cell.wanted_welds(context) == {Weld("grasp", part)}
+    return context, X_W_part
 
+
+@pytest.mark.slow
+def test_held_flange_above_the_plate_is_held_not_seated(cell):
+    part = "oval_flange_1"
+    # The fingers stall on the part and hold it by friction alone, its boss in the pocket but
+    # clear of the floor: held, not seated.
+    context, X_W_part = _hold_above_slot_2(cell, part)
+    station_context = cell.diagram.GetMyContextFromRoot(context)
+    assert cell.diagram.GetOutputPort("rg2.grip_detected").Eval(station_context)[0] == 1.0
     reading = cell.configuration(context)
     assert reading.status(part) is PartStatus.HELD
     assert reading.tokens() == frozenset()
+    plant_context = cell.plant.GetMyContextFromRoot(context)
     drift = X_W_part.InvertAndCompose(
-        plant.EvalBodyPoseInWorld(plant_context, cell.part_body(part))
+        cell.plant.EvalBodyPoseInWorld(plant_context, cell.part_body(part))
     )
     assert np.linalg.norm(drift.translation()) < 0.001
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("force", [5.0, 30.0])
+def test_the_fingers_squeeze_with_the_commanded_force(cell, force):
+    """The RG2 servo is force-limited: fingers stalled on a part push with the commanded
+    force, whatever the target past it (here 1 mm past each side)."""
+    context, _ = _hold_above_slot_2(cell, "oval_flange_1", force)
+    results = cell.diagram.GetOutputPort("sim.contact_results").Eval(
+        cell.diagram.GetMyContextFromRoot(context)
+    )
+    inspector = cell.scene_graph.model_inspector()
+    plant_context = cell.plant.GetMyContextFromRoot(context)
+    rg2 = cell.instances["rg2"]
+    squeeze = {}
+    for i in range(results.num_hydroelastic_contacts()):
+        info = results.hydroelastic_contact_info(i)
+        surface = info.contact_surface()
+        for gid, sign in ((surface.id_M(), 1.0), (surface.id_N(), -1.0)):
+            body = cell.plant.GetBodyFromFrameId(inspector.GetFrameId(gid))
+            if body.model_instance() == rg2 and body.name().endswith("finger"):
+                # The force on the finger (F_Ac_W acts on M), along its closing direction.
+                X_W_finger = cell.plant.EvalBodyPoseInWorld(plant_context, body)
+                y = X_W_finger.rotation().col(1) * (1.0 if body.name() == "left_finger" else -1.0)
+                f = sign * info.F_Ac_W().translational()
+                squeeze[body.name()] = squeeze.get(body.name(), 0.0) + float(f @ y)
+    assert set(squeeze) == {"left_finger", "right_finger"}
+    for name, newtons in squeeze.items():
+        assert newtons == pytest.approx(force, rel=0.05), name
 
 
 def test_scenario_yaml_is_typed_and_checked():

@@ -33,6 +33,7 @@ class _BareCell(LeafSystem):
         self._position = self.DeclareVectorInputPort("ur3.position", 6)
         self.DeclareVectorInputPort("ur3.velocity", 6)
         self._opening = self.DeclareVectorInputPort("rg2.opening", 1)
+        self.DeclareVectorInputPort("rg2.force", 1)
         self._prompt = self.DeclareAbstractInputPort("hri.prompt", AbstractValue.Make(Prompt()))
         self.DeclareVectorOutputPort("ur3.state_estimated", 12, self._arm)
         self.DeclareVectorOutputPort("rg2.state_measured", 2, self._gripper)
@@ -99,8 +100,12 @@ def _spec(scenario):
     return load_spec(scenario.assembly_path)
 
 
+# The operator answers at once: these tests time the arm's motion, not the indication delay.
+NO_DELAY = "{interaction: {delay: {distribution: fixed, median: 0}}}"
+
+
 def _loop(scenario_name: str = "row1-optimal"):
-    scenario = load_cell_scenario(scenario_name, LEAN)
+    scenario = load_cell_scenario(scenario_name, [LEAN, NO_DELAY])
     return build_closed_loop(scenario)
 
 

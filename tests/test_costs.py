@@ -4,6 +4,7 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from hrc_drake.tasks.costs import (
@@ -249,6 +250,28 @@ def test_planned_edges_add_robot_and_bolting_time(flange_space, planner):
     assert place.robot == pytest.approx(plan.duration, abs=1e-3)
 
 
+def test_planned_bets_and_carry_milestones(flange_space, planner):
+    """A placement's carry runs from the lift's end to the pre-place pose; a re-target (the
+    flange carried to seat 1, then on to 2 or 3) costs well under a second, a swap (the flange
+    put back, then the square or the undo fetched) seconds: lowered, released, up, across."""
+    from hrc_drake.cell.costs import bet_seconds, carry_milestones, compute_cost_table
+    from hrc_drake.motion import Stage
+
+    plan = planner.plan_task(frozenset(), "F1")
+    start, end = carry_milestones(plan)
+    carry = plan.segment(Stage.CARRY)
+    assert carry.start < start < end == pytest.approx(carry.end, abs=1e-3)
+    table = compute_cost_table(flange_space, planner, edges=[((), "F1"), (("F1",), "undo")])
+    assert (table.cost((), "F1").carry_start, table.cost((), "F1").carry_end) == (start, end)
+    assert table.cost(("F1",), "undo").carry_start is None and table.bets is None
+    retargets = [bet_seconds(planner, flange_space, (), "F1", t) for t in ("F2", "F3")]
+    swap = bet_seconds(planner, flange_space, (), "F1", "S12")
+    undo = bet_seconds(planner, flange_space, ("F1",), "S23", "undo")
+    put_back = 2 * planner.options.gripper_time  # at least: closed, then opened again
+    assert all(0.0 <= r < 2.0 for r in retargets)
+    assert max(retargets) + put_back < swap < 8.0 and put_back < undo < 8.0
+
+
 def test_cell_hash_names_the_options_and_frames(flange_space, planner):
     from hrc_drake.cell.costs import cell_hash, timing_options, timing_planner
     from hrc_drake.motion import MotionOptions, MotionPlanner
@@ -305,3 +328,29 @@ def test_cli_costs_solve_and_train(tmp_path, monkeypatch, capsys, flange_space, 
     out.write_text(out.read_text().replace('"seconds": 10.96', '"seconds": 1.0'))
     assert main(["solve", "--costs", str(out), "--out", str(policy_file)]) == 2
     assert "checksum mismatch" in capsys.readouterr().err
+
+
+def test_cli_costs_prints_the_bets(tmp_path, monkeypatch, capsys, toy_costs):
+    import hrc_drake.cell.costs as cell_costs
+    from hrc_drake.cli import main
+
+    monkeypatch.setattr(cell_costs, "timing_planner", lambda space: None)
+    monkeypatch.setattr(
+        cell_costs, "compute_cost_table", lambda space, planner, progress: toy_costs
+    )
+    out = tmp_path / "costs.json"
+    assert main(["costs", "--out", str(out), "--interface", "touch", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)["interaction"]
+    assert report["interface"] == "touch" and report["delay"]["median"] == 2.5
+    rows = {(tuple(b["state"]), b["committed"], b["indicated"]): b for b in report["bets"]}
+    assert len(rows) == len(toy_costs.bets) == 42
+    retarget, swap = rows[(), "F1", "F3"], rows[(), "F1", "S12"]
+    assert (retarget["kind"], retarget["planned"], swap["kind"], swap["planned"]) == (
+        "retarget", 0.8, "swap", 4.0,
+    )  # fmt: skip
+    # With the touch delay (median 2.5 s) the indication comes about when the carry starts.
+    assert 0.0 < retarget["expected"] < 0.8 and 2.5 < swap["expected"] < 4.0 + 1.5
+    assert report["wait_seconds"] == pytest.approx(2.5 * np.exp(0.045), abs=1e-3)
+    assert main(["costs", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "42 bets" in text and "F1 -> S12   swap" in text and "waiting for the indication" in text

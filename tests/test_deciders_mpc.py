@@ -10,7 +10,7 @@ import pytest
 from hrc_drake.evaluate import simulate_run
 from hrc_drake.hri.populations import make_operator_model
 from hrc_drake.resources import models_dir
-from hrc_drake.tasks.costs import operator_seconds, table_from_seconds, task_edges
+from hrc_drake.tasks.costs import operator_seconds, table_from_seconds, task_edges, uniform_bets
 from hrc_drake.tasks.deciders import MpcDecider, subtree_levels
 from hrc_drake.tasks.graph import StateKind, generate_states
 from hrc_drake.tasks.spec import load_spec, parse_spec
@@ -19,7 +19,7 @@ from hrc_drake.tasks.tokens import UNDO
 
 def reference_q(decider: MpcDecider, state: int, values: np.ndarray):
     """Jacobi value iteration over the subtree below `state`, one Python row per proposal:
-    expected seconds of every answer the model gives, plus the deviation cost."""
+    expected seconds of every answer the model gives, plus the price of the best bet."""
     space, mdp = decider.space, decider.mdp
     below = np.concatenate(subtree_levels(space, state))
     states = [int(s) for s in below if space.kind[s] != StateKind.TERMINAL]
@@ -29,13 +29,14 @@ def reference_q(decider: MpcDecider, state: int, values: np.ndarray):
         names = [t for t, _ in tasks]
         edges = list(mdp.edges_of(s))
         rows[s] = []
-        for a, proposed in enumerate(names):
+        for proposed in names:
             p = decider.model.outcome_probabilities(s, proposed)
             outcome = [
                 (p[t], float(decider.cost[e]), int(mdp.edge_dst[e]))
                 for t, e in zip(names, edges, strict=True)
             ]
-            rows[s].append((outcome, decider.deviation * (1.0 - p[names[a]])))
+            price = decider.bets.best_bet(space.sequence(s), p, proposed)[1]
+            rows[s].append((outcome, price))
     values = values.copy()
     for _ in range(100_000):
         q = {
@@ -76,7 +77,8 @@ def seconds_table(space):
     for state, task in task_edges(space):
         robot = 5.0 if task == UNDO else 5.0 + 0.1 * space.tokens.index(task)
         seconds[state, task] = robot + operator_seconds(space.spec, state, task)
-    return table_from_seconds(space, seconds, cell_hash="test")
+    bets = uniform_bets(space, retarget=0.8, swap=4.0)
+    return table_from_seconds(space, seconds, cell_hash="test", carry=(2.5, 4.0), bets=bets)
 
 
 @pytest.fixture(scope="module", params=["flange", "generated"])

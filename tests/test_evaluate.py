@@ -67,14 +67,19 @@ def test_online_model_learns_and_pools_over_proposals(space):
 
 
 def test_mpc_learns_a_habit_and_proposes_it(space, costs):
+    # A habit of another part than the proposal: a robot that bets on its proposal swaps parts
+    # (another seat of the same part would cost little: the re-target).
     decider = MpcDecider(space, costs)
     first = decider.propose(())
-    assert first != "S23"
-    proposals = []
+    assert first.startswith("F") and decider.commit((), first) == first
+    runs = []
     for i in range(5):
-        simulate_run(space, costs, decider, make_operator_model("habitual", space, seed=i))
-        proposals.append(decider.propose(()))
-    assert proposals[-1] == "S23"
+        operator = make_operator_model("habitual", space, seed=i)  # the square on 2-3 first
+        runs.append(simulate_run(space, costs, decider, operator))
+    assert runs[0].swaps == 1  # it bet on a flange; the operator took the square
+    learned = decider.propose(())
+    assert learned.startswith("S") and decider.commit((), learned) == learned
+    assert runs[-1].swaps == 0 and runs[-1].seconds < runs[0].seconds - 1.0
     assert decider.solve_seconds
 
 

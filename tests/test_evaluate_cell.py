@@ -22,6 +22,7 @@ from hrc_drake.paths import UsageError
 from hrc_drake.resources import models_dir
 from hrc_drake.tasks.deciders import make_decider
 from hrc_drake.tasks.graph import StateKind, generate_states
+from hrc_drake.tasks.interaction import ANTICIPATE, WAIT, make_interaction
 from hrc_drake.tasks.policy import PolicyFileError
 from hrc_drake.tasks.spec import load_spec
 
@@ -40,8 +41,13 @@ DECISIONS = ("runs", "completed", "completion_rate", "mean_tasks", "mean_undos",
 
 @pytest.mark.slow
 def test_cell_runs_play_the_task_level_runs_and_are_independent(flange_space, toy_costs):
-    task = Setup(flange_space, toy_costs, "mpc", "mistake-prone", {"p": "0.5"}, SEED)
-    cell = dataclasses.replace(task, cell=CellOptions(overrides=(LEAN, NO_BODY)))
+    # The cell does not anticipate yet: its robot waits for the indication, as at task level in
+    # `wait` mode (asked to anticipate, `evaluate` plays wait in the cell and says so).
+    wait = make_interaction(WAIT)
+    task = Setup(flange_space, toy_costs, "mpc", "mistake-prone", {"p": "0.5"}, SEED, wait)
+    cell = dataclasses.replace(
+        task, interaction=make_interaction(), cell=CellOptions(overrides=(LEAN, NO_BODY))
+    )
     expected = evaluate(task, 2)
     assert expected["mean_deviations"] == 0.5  # the seed does exercise a mistake
     report = evaluate(cell, 2)
@@ -49,9 +55,11 @@ def test_cell_runs_play_the_task_level_runs_and_are_independent(flange_space, to
     # are those of the task level, run for run.
     assert _keys(report, *DECISIONS) == _keys(expected, *DECISIONS)
     assert report["level"] == "cell" and report["collisions"] == 0 and report["errors"] == []
-    assert report["deviation_seconds"] == 0.0
-    # Simulated seconds of the cell: three lean tasks take well over 15 s, five over 25 s.
-    assert 15.0 < min(report["times"]) < 25.0 < max(report["times"]) < 60.0
+    assert report["interaction"] == WAIT and report["interaction_asked"] == ANTICIPATE
+    assert report["commit_rate"] == 0.0
+    # Simulated seconds of the cell: three lean tasks take well over 15 s, five over 25 s, and
+    # before each the robot waits for the indication (the pointer's delay, about 2 s).
+    assert 20.0 < min(report["times"]) < 35.0 < max(report["times"]) < 75.0
     assert 0.0 <= report["plan_ready_rate"] <= 1.0 and report["mean_idle"] >= 0.0
     # Run 1 alone in a fresh process state gives what it gave after run 0: runs share no plans
     # and no decider memory, so the way runs are spread does not change the report.
@@ -62,7 +70,8 @@ def test_cell_runs_play_the_task_level_runs_and_are_independent(flange_space, to
 
 
 def test_decider_policy_proposes_predicts_and_learns(flange_space, toy_costs):
-    decider = make_decider("mpc", flange_space, toy_costs)
+    # The cell's robot waits for the indication: the decider prices waiting.
+    decider = make_decider("mpc", flange_space, toy_costs, interaction=make_interaction(WAIT))
     policy = DeciderPolicy(decider, flange_space)
     policy.matches(flange_space.spec)
     first = policy.next_task(())
@@ -75,11 +84,12 @@ def test_decider_policy_proposes_predicts_and_learns(flange_space, toy_costs):
         proposed: str
         observed: str
 
-    for _ in range(3):
+    for _ in range(6):
         policy.observe(Record((), first, other))
     predicted = policy.predicted_tasks(())
-    # After three overrides the model expects the operator's own choice; planning ahead plans
-    # it (most likely first) besides what the robot proposes.
+    # After six overrides the model expects the operator's own choice more than its following
+    # (its 4 pseudo-counts); planning ahead plans it (most likely first) besides what the robot
+    # proposes.
     assert predicted[0] == other and policy.next_task(()) in predicted
     terminal = int(np.flatnonzero(flange_space.kind == StateKind.TERMINAL)[0])
     assert policy.next_task(flange_space.sequence(terminal)) is None

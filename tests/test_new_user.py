@@ -296,8 +296,8 @@ def test_the_first_evaluation_of_a_spec_shows_progress_while_it_plans_the_cost_t
     argv = ["evaluate", "--decider", "exact", "--operator-model", "follows", "--runs", "2"]
     code, _, err = run(capsys, *argv)
     assert code == 0
-    edges = len(toy_costs.entries)
-    assert "cost table of flange" in err and f"edge {edges}/{edges}" in err
+    plans = len(toy_costs.entries)  # the task edges here; a planned table has its bets too
+    assert "cost table of flange" in err and f"plan {plans}/{plans}" in err
     code, _, err = run(capsys, *argv)  # cached now: nothing to plan
     assert code == 0 and "cost table" not in err
 
@@ -337,8 +337,9 @@ def test_cell_runs_start_with_an_estimate(capsys, monkeypatch, toy_costs):
     with pytest.raises(NoWork):
         run(capsys, *argv, "--runs", "4")
     err = capsys.readouterr().err
-    # Three tasks (no robot times in the toy table: the typical 6.4 s), 0.5 s holds, 0.2 s settling.
-    assert "evaluate --cell: 4 run(s), about 21 s simulated per run" in err
+    # Three tasks (no robot times in the toy table: the typical 6.4 s), 0.5 s holds, 0.2 s
+    # settling, and the pointer's mean indication delay (2.09 s) the cell's robot waits for.
+    assert "evaluate --cell: 4 run(s), about 28 s simulated per run" in err
 
 
 def test_workers_are_capped_at_the_cpus_with_a_note(capsys, tmp_path, toy_costs):

@@ -44,7 +44,22 @@ def _scenario(args) -> Scenario:
         )
     if args.policy is not None:
         scenario = dataclasses.replace(scenario, policy=str(args.policy))
-    return scenario
+    return _with_interaction(args, scenario)
+
+
+def _with_interaction(args, scenario: Scenario) -> Scenario:
+    """`--interaction` and `--interface` set the scenario's interaction (a delay the scenario
+    gives stays; left out, the interface's). The cell does not anticipate yet: its robot waits
+    for the indication in both modes, which the simulated operator gives after the delay."""
+    from hrc_drake.evaluate_command import interaction_from_flags
+
+    interaction_from_flags(args)  # a bad mode or interface: one line, before anything is built
+    mode, interface = getattr(args, "interaction", None), getattr(args, "interface", None)
+    if mode is None and interface is None:
+        return scenario
+    it = scenario.interaction
+    changed = dataclasses.replace(it, mode=mode or it.mode, interface=interface or it.interface)
+    return dataclasses.replace(scenario, interaction=changed)
 
 
 def _check_still_time(still_time: float, scenario: Scenario, space, policy, live: bool) -> None:
@@ -143,16 +158,46 @@ def _checked_run(args, live: bool, still):
     return scenario, policy
 
 
+def _profile(args, scenario: Scenario):
+    """`--operator-profile FILE`: the profile in FILE, or a new one when FILE does not exist
+    (None without the flag); a one-line error for an unusable file or one made for another
+    assembly, before anything is simulated."""
+    path = getattr(args, "operator_profile", None)
+    if path is None:
+        return None
+    from hrc_drake.tasks.profile import ProfileError, load_or_new_profile
+
+    check_output_path(path, "--operator-profile", (".json",))
+    try:
+        return load_or_new_profile(path, generate_states(load_spec(scenario.assembly_path)))
+    except ProfileError as err:
+        raise UsageError(f"--operator-profile: {err}") from None
+
+
+def _save_profile(args, profile, result) -> None:
+    """Learn the run's tasks (what the cell observed) into the profile and save it."""
+    from hrc_drake.tasks.profile import learn, save_profile
+
+    save_profile(learn(profile, result.tasks), args.operator_profile)
+    print(
+        f"operator profile: {profile.assemblies} assemblies learned -> {args.operator_profile}",
+        file=sys.stderr,
+    )
+
+
 def _simulate(args) -> int:
     record, still = _outputs(args)
     live = getattr(args, "live", False)
     if live and args.operator is not None:
         raise UsageError("--live with --operator: in a live run you are the operator; drop one")
     scenario, policy = _checked_run(args, live, still)
+    profile = _profile(args, scenario)
     port = getattr(args, "port", None)
     if port is not None:
         _check_port(port)
     result = _run(args, scenario, policy, record, still, live, port)
+    if profile is not None:
+        _save_profile(args, profile, result)
     problems = []
     if still is not None and result.sim_time < args.still_time:
         problems.append(

@@ -3,10 +3,10 @@ are exactly what a real cell offers (`docs/station.md`).
 
 Inputs (measured): `ur3.state_estimated`, `rg2.state_measured`, `rg2.grip_detected`,
 `configuration`, `operator.body`, `hri.indication`. Outputs (commanded): `ur3.position`,
-`ur3.velocity`, `rg2.opening`, `hri.prompt`; and `status` (the Supervisor's, for whoever runs
-the controller: progress lines, the stack light, reports). The planner runs beside it, behind a
-`PlanService` (`hrc_drake.motion.service`). Built the same whether the station is the simulated
-one in this process (`make_cell_station`) or one served over LCM.
+`ur3.velocity`, `rg2.opening`, `rg2.force`, `hri.prompt`; and `status` (the Supervisor's, for
+whoever runs the controller: progress lines, the stack light, reports). The planner runs beside
+it, behind a `PlanService` (`hrc_drake.motion.service`). Built the same whether the station is
+the simulated one in this process (`make_cell_station`) or one served over LCM.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ MEASURED = (
     "operator.body",
     "hri.indication",
 )
-COMMANDED = ("ur3.position", "ur3.velocity", "rg2.opening", "hri.prompt")
+COMMANDED = ("ur3.position", "ur3.velocity", "rg2.opening", "rg2.force", "hri.prompt")
 
 
 @dataclass(frozen=True)
@@ -64,6 +64,7 @@ def supervisor_limits(scenario: Scenario, options: MotionOptions) -> SupervisorL
         joint_acceleration=options.joint_acceleration_limit,
         tracking_tolerance=station.ur3.tracking_tolerance,
         grip_tolerance=station.rg2.grip_tolerance,
+        grip_force=station.rg2.grip_force,
         plan_ahead=run.plan_ahead,
     )
 
@@ -91,9 +92,9 @@ def make_controller(
         if name != "operator.body":
             builder.ExportInput(supervisor.GetInputPort(name), name)
     n = len(home)
-    split = builder.AddNamedSystem("command_split", Demultiplexer([n, n, 1]))
+    split = builder.AddNamedSystem("command_split", Demultiplexer([n, n, 1, 1]))
     builder.Connect(supervisor.GetOutputPort("command"), split.get_input_port())
-    for k, name in enumerate(("ur3.position", "ur3.velocity", "rg2.opening")):
+    for k, name in enumerate(("ur3.position", "ur3.velocity", "rg2.opening", "rg2.force")):
         builder.ExportOutput(split.get_output_port(k), name)
     for name in ("hri.prompt", "status"):
         builder.ExportOutput(supervisor.GetOutputPort(name), name)

@@ -1,10 +1,16 @@
-"""Cost tables from the motion layer: plan every task edge, add the operator's bolting time.
+"""Cost tables from the motion layer: plan every task edge, add the operator's bolting time, and
+plan the re-target and swap of every bet.
 
 `compute_cost_table(space)` plans each (state, task) edge of the state graph with a
 `MotionPlanner` whose bolting holds are zero, so that a plan's duration is the robot's time
 only (home, pick, carry, place, release, retreat, home); the operator's part is the spec's
 bolting time of the part placed (or unbolting time of the part undone, taken equal; see
-`hrc_drake.tasks.costs`). `cell_hash(planner)` names the cell a table was planned in, and
+`hrc_drake.tasks.costs`). A placement's carry milestones are its plan's: the lift done, the
+pre-place pose reached. Each bet (a placement committed to, another task indicated) is planned
+with the same planner (`bet_seconds`): a re-target as a collision-free carry from the committed
+seat's pre-place posture to the indicated one's, a swap as the part put back (the lift run
+backwards, the gripper opened, up again) and a free path from its pre-grasp to the indicated
+task's. `cell_hash(planner)` names the cell a table was planned in, and
 `default_cost_table(space)` computes the table once per (spec, cell) and caches it under the
 user's cache folder. `hrc-drake costs --out FILE` is `costs_command`.
 """
@@ -22,13 +28,17 @@ from pathlib import Path
 
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.motion import MotionOptions, MotionPlanner, Plan, PlanningError, UnreachableError
-from hrc_drake.motion.planner import check_reach
+from hrc_drake.motion.planner import check_reach, resolve_task
+from hrc_drake.motion.scene import Layout
+from hrc_drake.motion.trajectory import free_path, retime
 from hrc_drake.resources import models_dir
 from hrc_drake.tasks.costs import (
+    BetKey,
     CostTable,
     CostTableError,
     Edge,
     EdgeCost,
+    bet_pairs,
     cost_summary,
     load_cost_table,
     operator_seconds,
@@ -36,6 +46,7 @@ from hrc_drake.tasks.costs import (
     task_edges,
 )
 from hrc_drake.tasks.graph import StateSpace
+from hrc_drake.tasks.interaction import Bet, bet_kind
 from hrc_drake.tasks.mdp import MdpConfig
 from hrc_drake.tasks.tokens import UNDO
 
@@ -105,37 +116,119 @@ def _robot_seconds(planner: MotionPlanner, plan: Plan, task: str) -> float:
     return float(plan.duration) - hold
 
 
+def _motion(plan: Plan, name: str):
+    """The arm motion `name` of a plan (`MotionPlanner` names them)."""
+    return next(m for m in plan.motions if m.name == name)
+
+
+def carry_milestones(plan: Plan) -> tuple[float, float]:
+    """(carry_start, carry_end) of a placement's plan: when the part is lifted out of the tray,
+    and when it reaches the pre-place pose above its seat [s from the start]."""
+    carry = _motion(plan, "carry to pre-place")
+    return round(carry.start, 4), round(carry.start + carry.duration, 4)
+
+
+def _free_seconds(planner: MotionPlanner, layout: Layout, q_start, q_end) -> float:
+    """Seconds of a collision-free path between two postures at rest in `layout`, retimed as
+    the planner's own free motions are."""
+    scene = planner.scene(layout)
+    scene.set_allowed_contacts(())
+    path, _ = free_path(scene, q_start, q_end, planner.limits, planner.options)
+    return retime(scene, path, planner.limits, planner.options).duration
+
+
+def bet_seconds(
+    planner: MotionPlanner,
+    space: StateSpace,
+    state: tuple[str, ...],
+    committed: str,
+    indicated: str,
+) -> float:
+    """The planned seconds a bet adds at most (`hrc_drake.tasks.costs`): a re-target carries the
+    part from the committed seat's pre-place posture to the indicated one's (against carrying it
+    there directly); a swap puts the part back in its tray home and goes from its pre-grasp to
+    the indicated task's (against going there from home)."""
+    a = _plan_edge(planner, space, state, committed)
+    b = _plan_edge(planner, space, state, indicated)
+    configuration = space.configuration(space.index(state))
+    last = state[-1] if state else None
+    if bet_kind(space, committed, indicated) == Bet.RETARGET:
+        move = resolve_task(planner.frames, configuration, committed, last)
+        carry = Layout.of(move.before, move.instance, planner.frames.widths[move.instance])
+        (_, end_a), (_, end_b) = carry_milestones(a), carry_milestones(b)
+        between = _free_seconds(planner, carry, a.positions(end_a), b.positions(end_b))
+        return round(max(0.0, end_a + between - end_b), 4)
+    move = resolve_task(planner.frames, configuration, indicated, last)
+    opening = max(a.gripper_opening(0.0), b.gripper_opening(0.0))
+    pregrasp_a, pregrasp_b = _motion(a, "home to pre-grasp"), _motion(b, "home to pre-grasp")
+    at_a = pregrasp_a.start + pregrasp_a.duration
+    at_b = pregrasp_b.start + pregrasp_b.duration
+    empty = Layout.of(move.before, None, opening)
+    between = _free_seconds(planner, empty, a.positions(at_a), b.positions(at_b))
+    # Lowered back (the lift run backwards), released, up again: at the committed pre-grasp.
+    put_back = 2.0 * _motion(a, "lift").duration + planner.options.gripper_time
+    return round(max(0.0, carry_milestones(a)[0] + put_back + between - at_b), 4)
+
+
+def _planning_error(what: str, err: Exception) -> CostPlanningError:
+    return CostPlanningError(
+        f"cannot plan {what}: {err}; a cost table needs every task edge and bet (check the cell "
+        "layout or the motion options)"
+    )
+
+
+def _edge_cost(planner: MotionPlanner, space: StateSpace, state, task: str) -> EdgeCost:
+    try:
+        plan = _plan_edge(planner, space, tuple(state), task)
+    except (PlanningError, UnreachableError, RuntimeError, ValueError) as err:
+        raise _planning_error(f"task {task!r} from state {list(state)}", err) from err
+    robot = round(_robot_seconds(planner, plan, task), 4)
+    operator = operator_seconds(space.spec, tuple(state), task)
+    start, end = (None, None) if task == UNDO else carry_milestones(plan)
+    return EdgeCost(round(robot + operator, 4), robot, operator, start, end)
+
+
 def compute_cost_table(
     space: StateSpace,
     planner: MotionPlanner | None = None,
     progress: Progress | None = None,
     edges: Iterable[Edge] | None = None,
 ) -> CostTable:
-    """Plan every task edge of `space` (or only `edges`) and return the cost table.
+    """Plan every task edge of `space` and every bet (`bet_pairs`), and return the cost table;
+    with `edges`, only those edges and no bets.
 
     Seconds = robot time (the plan's duration without bolting holds) + the operator's
     (un)bolting time from the spec. First the reach check (`check_reach`): CellModelError naming
     the part or slot the UR3 cannot reach and a layout that it can, the same error `simulate`
-    gives. CostPlanningError naming the edge if one cannot be planned.
+    gives. CostPlanningError naming the edge or bet if one cannot be planned.
     """
     planner = planner or timing_planner(space)
     check_reach(planner)
     todo = list(task_edges(space) if edges is None else edges)
+    pairs: list[BetKey] = bet_pairs(space) if edges is None else []
+    total = len(todo) + len(pairs)
     entries: dict[Edge, EdgeCost] = {}
     for i, (state, task) in enumerate(todo):
-        try:
-            plan = _plan_edge(planner, space, tuple(state), task)
-        except (PlanningError, UnreachableError, RuntimeError, ValueError) as err:
-            raise CostPlanningError(
-                f"cannot plan task {task!r} from state {list(state)}: {err}; a cost table needs "
-                "every task edge (check the cell layout or the motion options)"
-            ) from err
-        robot = round(_robot_seconds(planner, plan, task), 4)
-        operator = operator_seconds(space.spec, tuple(state), task)
-        entries[tuple(state), task] = EdgeCost(round(robot + operator, 4), robot, operator)
+        entries[tuple(state), task] = cost = _edge_cost(planner, space, state, task)
         if progress:
-            progress(i + 1, len(todo), robot + operator)
-    return CostTable(space.spec.spec_hash, cell_hash(planner), entries, space.spec.name)
+            progress(i + 1, total, cost.seconds)
+    bets: dict[BetKey, float] = {}
+    for i, (state, committed, indicated) in enumerate(pairs):
+        try:
+            seconds = bet_seconds(planner, space, state, committed, indicated)
+        except (PlanningError, UnreachableError, RuntimeError, ValueError) as err:
+            what = f"the bet on {committed!r} when {indicated!r} is indicated in {list(state)}"
+            raise _planning_error(what, err) from err
+        bets[state, committed, indicated] = seconds
+        if progress:
+            progress(len(todo) + i + 1, total, seconds)
+    return CostTable(
+        space.spec.spec_hash,
+        cell_hash(planner),
+        entries,
+        space.spec.name,
+        bets=bets if edges is None else None,
+    )
 
 
 def cache_dir() -> Path:
@@ -171,17 +264,20 @@ def costs_command(args) -> int:
     """`hrc-drake costs --out FILE [--json]`: plan every edge, save the table, rank sequences.
     A layout the UR3 cannot reach, or an edge that cannot be planned, is a one-line UsageError."""
     from hrc_drake.cell_models import CellModelError
+    from hrc_drake.evaluate_command import interaction_from_flags
     from hrc_drake.paths import UsageError, check_output_path
     from hrc_drake.progress import ProgressLine
     from hrc_drake.tasks.graph import generate_states
+    from hrc_drake.tasks.interaction import bet_summary
     from hrc_drake.tasks.spec import load_spec
 
     check_output_path(args.out, "--out")
+    interaction = interaction_from_flags(args)
     space = generate_states(load_spec(args.assembly))
     start = time.perf_counter()
     try:
         planner = timing_planner(space)
-        with ProgressLine("planning task edges", "edge") as bar:
+        with ProgressLine("planning task edges and bets", "plan") as bar:
             table = compute_cost_table(space, planner, progress=bar.update)
     except (CellModelError, CostPlanningError) as err:
         raise UsageError(str(err)) from None
@@ -193,16 +289,24 @@ def costs_command(args) -> int:
     summary = {
         "out": str(args.out),
         **cost_summary(space, table, config),
+        "interaction": bet_summary(space, table, interaction),
         "wall_time": round(wall, 2),
     }
     if args.json:
         json.dump(summary, sys.stdout, indent=1)
         sys.stdout.write("\n")
         return 0
+    bets = len(table.bets or {})
     print(
-        f"{summary['edges']} task edges of {space.spec.name!r} planned in {wall:.1f} s "
-        f"(cell {table.cell_hash}) -> {args.out}"
+        f"{summary['edges']} task edges and {bets} bets of {space.spec.name!r} planned in "
+        f"{wall:.1f} s (cell {table.cell_hash}) -> {args.out}"
     )
+    _print_summary(summary)
+    return 0
+
+
+def _print_summary(summary: dict) -> None:
+    """The sequences ranked, the two policies' choices and the bets, as text."""
     print(
         "shortest sequences, fastest first (as proposed; expected with the operator's "
         f"{summary['mistake_prob']:.0%} mistakes):"
@@ -219,7 +323,28 @@ def costs_command(args) -> int:
             f"{label} choice: {c['states']} ({' '.join(c['tasks'])}), {c['seconds']:.2f} s, "
             f"expected {c['expected_seconds']:.3f} s"
         )
-    return 0
+    _print_bets(summary["interaction"])
+
+
+def _print_bets(interaction: dict) -> None:
+    """The bets of `bet_summary`: planned at most, and added on average with the delay."""
+    delay = interaction["delay"]
+    print(
+        f"interaction {interaction['mode']} over the {interaction['interface']} (delay "
+        f"{delay['distribution']}, median {delay['median']} s, mean {delay['mean']} s): waiting "
+        f"for the indication costs {interaction['wait_seconds']:.2f} s per boundary"
+    )
+    if interaction["bets"] is None:
+        print("  no re-target or swap times in this table")
+        return
+    print("  bets (robot starts on the first, the operator indicates the second): planned at "
+          "most, added on average with this delay")  # fmt: skip
+    for b in interaction["bets"]:
+        state = " ".join(b["state"]) or "(empty base)"
+        print(
+            f"  {state:<12} {b['committed']:>4} -> {b['indicated']:<5} {b['kind']:<8} "
+            f"{b['planned']:5.2f} s  {b['expected']:5.2f} s"
+        )
 
 
 __all__ = [

@@ -38,9 +38,6 @@ from hrc_drake.hri.messages import Indication, Prompt, PromptKind
 from hrc_drake.robot_models import UR3_JOINTS
 
 N_JOINTS = len(UR3_JOINTS)
-# The RG2's gripping force setting sent with every opening: its maximum, 40 N (OnRobot RG2 data,
-# shared/reference/ur3-rg2.md). The simulated gripper is a position servo and ignores it.
-RG2_GRIP_FORCE = 40.0  # N
 
 DEFINITIONS = """
 // The RG2's target: the opening between the finger insides, and the force to grip with.
@@ -429,15 +426,16 @@ def ur3_status_values(message: lcmt_panda_status) -> tuple[np.ndarray]:
     return (np.array(position + velocity),)
 
 
-def rg2_command(stamp: int, opening) -> lcmt_rg2_command:
-    """`rg2.opening` as an RG2 target (with the grip force `RG2_GRIP_FORCE`)."""
+def rg2_command(stamp: int, opening, force) -> lcmt_rg2_command:
+    """`rg2.opening` and `rg2.force` as an RG2 target."""
     (value,) = _count(opening, 1, "rg2.opening")
-    return lcmt_rg2_command(utime=stamp, opening=value, force=RG2_GRIP_FORCE)
+    (newtons,) = _count(force, 1, "rg2.force")
+    return lcmt_rg2_command(utime=stamp, opening=value, force=newtons)
 
 
-def rg2_command_values(message) -> tuple[np.ndarray]:
-    """(`rg2.opening`,) of an RG2 command."""
-    return (np.array([message.opening]),)
+def rg2_command_values(message) -> tuple[np.ndarray, np.ndarray]:
+    """(`rg2.opening`, `rg2.force`) of an RG2 command."""
+    return np.array([message.opening]), np.array([message.force])
 
 
 def rg2_status(stamp: int, measured, grip_detected) -> lcmt_rg2_status:
@@ -625,7 +623,11 @@ COMMANDS: tuple[StationChannel, ...] = (
         ur3_command_values,
     ),
     StationChannel(
-        "RG2_COMMAND", lcmt_rg2_command, (Port("rg2.opening", 1),), rg2_command, rg2_command_values
+        "RG2_COMMAND",
+        lcmt_rg2_command,
+        (Port("rg2.opening", 1), Port("rg2.force", 1)),
+        rg2_command,
+        rg2_command_values,
     ),
     StationChannel(
         "HRI_PROMPT",

@@ -86,6 +86,7 @@ def scene_graph_config(scenario: Scenario) -> SceneGraphConfig:
             compliance_type="compliant",
             hydroelastic_modulus=contact.hydroelastic_modulus,
             resolution_hint=contact.resolution_hint,
+            margin=contact.margin,
             hunt_crossley_dissipation=contact.hunt_crossley_dissipation,
             relaxation_time=contact.relaxation_time,
             static_friction=contact.static_friction,

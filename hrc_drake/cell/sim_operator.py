@@ -3,12 +3,14 @@
 On a real cell a person reads the interface, points at a target, bolts the part the robot holds
 and says so. In the simulated station `SimulatedOperator` does that: it hands each `CHOOSE`
 prompt to an operator model (a script, a population model, or a person clicking in the browser;
-any `hrc_drake.tasks.decide.Operator` callable) and publishes the answer as an `Indication`;
+any `hrc_drake.tasks.decide.Operator` callable) and publishes the answer as an `Indication`,
+after the operator's `indication_delay(step)` when it has one (the interface's delay);
 on a `BOLT` prompt it bolts the held part for `bolt_time` seconds (its body reaches in, see
-`hrc_drake.cell.operator_body`) and says it is bolted; the bolts fix the part in the seat the
-configuration sensor reads it in as soon as it rests there (the robot still holds it a little
-above the seat floor until it lets go). Before an undo it takes the bolts out of the part that
-goes back.
+`hrc_drake.cell.operator_body`) and says it is bolted; the bolts take once the robot has let
+the part go and it rests (`resting`) where the configuration sensor reads it in a seat, and
+fix it where it sits then, not at the nominal seat (`hrc_drake.cell.welds`): a part released
+settles in its pocket under contact first. Before an undo it takes the bolts out of the part
+that goes back.
 
 What it does is its `activity` output (for the body) and its `bolts` output (the bolt welds the
 station applies: simulator only). The controller sees none of this: only `hri.indication`.
@@ -61,14 +63,15 @@ def bolt_weld(configuration: CellConfiguration, part: str) -> Weld | None:
     if placement.status != PartStatus.SEATED or not placement.seats:
         return None
     if placement.host is None:
-        return Weld("bolt", part, placement.token or "")
-    return Weld("bolt", part, f"{placement.host}/{placement.seats[0]}")
+        return Weld(part, placement.token or "")
+    return Weld(part, f"{placement.host}/{placement.seats[0]}")
 
 
 class SimulatedOperator(LeafSystem):
     """The operator of the simulated station (see the module docstring).
 
-    Input ports: `hri.prompt` (Prompt), `configuration` (CellConfiguration). Output ports:
+    Input ports: `hri.prompt` (Prompt), `configuration` (CellConfiguration), `resting`
+    (frozenset of the parts at rest and out of the gripper; unconnected: all). Output ports:
     `hri.indication` (Indication), `activity` (OperatorActivity), `bolts` (frozenset[Weld]).
     Updated every `period` seconds."""
 
@@ -79,11 +82,15 @@ class SimulatedOperator(LeafSystem):
         self._configuration = self.DeclareAbstractInputPort(
             "configuration", AbstractValue.Make(CellConfiguration())
         )
+        # The parts at rest and out of the gripper (unconnected: every part).
+        self._resting = self.DeclareAbstractInputPort("resting", AbstractValue.Make(frozenset()))
         self._indication = self.DeclareAbstractState(AbstractValue.Make(Indication()))
         self._activity = self.DeclareAbstractState(AbstractValue.Make(OperatorActivity()))
         self._bolts = self.DeclareAbstractState(AbstractValue.Make(frozenset()))
         # Parts bolted that do not rest in a seat yet: the bolts take when they do.
         self._pending = self.DeclareAbstractState(AbstractValue.Make(frozenset()))
+        # (step, time) the indication of the step is due: the prompt seen plus the delay.
+        self._asked = self.DeclareAbstractState(AbstractValue.Make((0, 0.0)))
         self.DeclareStateOutputPort("hri.indication", self._indication)
         self.DeclareStateOutputPort("activity", self._activity)
         self.DeclareStateOutputPort("bolts", self._bolts)
@@ -96,7 +103,11 @@ class SimulatedOperator(LeafSystem):
         activity = context.get_abstract_state(self._activity).get_value()
         bolts = context.get_abstract_state(self._bolts).get_value()
         pending = context.get_abstract_state(self._pending).get_value()
-        if prompt.kind == PromptKind.CHOOSE and indication.step < prompt.step:
+        if (
+            prompt.kind == PromptKind.CHOOSE
+            and indication.step < prompt.step
+            and now >= self._due(context, state, prompt.step, now)
+        ):
             task = self._operator(prompt.step, prompt.state, prompt.proposal)
             indication = Indication(prompt.step, task, False, now)
             activity = replace(activity, answered_step=prompt.step, answered_at=now)
@@ -124,14 +135,31 @@ class SimulatedOperator(LeafSystem):
         state.get_mutable_abstract_state(self._bolts).set_value(bolts)
         state.get_mutable_abstract_state(self._pending).set_value(pending)
 
+    def _due(self, context, state, step: int, now: float) -> float:
+        """When the answer to the prompt of `step` is due: `indication_delay(step)` seconds after
+        the prompt was first seen, for an operator that has one (`hrc_drake.tasks.interaction.
+        DelayedIndications`, the interface's delay), else at once (a person in the browser)."""
+        asked, due = context.get_abstract_state(self._asked).get_value()
+        if asked != step:
+            delay = getattr(self._operator, "indication_delay", None)
+            due = now + (0.0 if delay is None else float(delay(step)))
+            state.get_mutable_abstract_state(self._asked).set_value((step, due))
+        return due
+
     def _seat_bolts(self, context, bolts: frozenset, pending: frozenset):
-        """The bolts of the pending parts that now rest in a seat take there."""
+        """The bolts of the pending parts that now rest in a seat, let go, take there."""
         if not pending:
             return bolts, pending
         configuration = self._configuration.Eval(context)
-        for part in pending:
+        resting = self._resting.Eval(context) if self._resting.HasValue(context) else pending
+        for part in pending & resting:
             weld = bolt_weld(configuration, part)
-            if weld is not None:
+            # A part on a host is bolted to it once the host is bolted (it always is first:
+            # the robot places a host before anything on it).
+            takes = weld is not None and (
+                "/" not in weld.seat or weld.support in {b.part for b in bolts}
+            )
+            if takes:
                 bolts, pending = bolts | {weld}, pending - {part}
         return bolts, pending
 

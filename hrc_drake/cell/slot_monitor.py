@@ -2,7 +2,9 @@
 
 A part is in a seat iff it touches that seat's floor geometry (`slot_k_seat` on the plate,
 `row_j_seat` on a host part) and its pose is within a tolerance of the seat frame. Nothing else
-counts: not the script that placed it, not a commanded pose.
+counts: not the script that placed it, not a commanded pose. Touching is contact; for a pair
+whose contact the simulation skips (a bolted part and what it is bolted to,
+`hrc_drake.cell.welds`), it is the pair's signed distance within `SlotTolerances.touch`.
 """
 
 from __future__ import annotations
@@ -13,14 +15,14 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.geometry import GeometryId, SceneGraph
+from pydrake.geometry import GeometryId, QueryObject, SceneGraph
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import ContactResults, MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex
 from pydrake.systems.framework import LeafSystem
 
 from hrc_drake.cell.contacts import contact_pairs, geometry_owners
-from hrc_drake.cell_models import PLATE
+from hrc_drake.cell_models import BOSS, PLATE, POCKET_CLEARANCE, POCKET_DEPTH
 from hrc_drake.motion.poses import CellFrames, seat_pose
 from hrc_drake.robot_models import GRIPPER
 from hrc_drake.tasks.spec import SpecError
@@ -78,13 +80,31 @@ class CellConfiguration:
         return {name: p.token for name, p in self.placements if p.token is not None}
 
 
+# A seated part is in its pocket: its boss(es) can stand off the seat by the pocket's clearance
+# along each side (cell_models: POCKET_CLEARANCE), no more; the little above that allows for the
+# contact's compliance. A part whose boss stands on the pocket's rim is POCKET_DEPTH high.
+_SEAT_SLACK = 0.0003  # m
+
+
 @dataclass(frozen=True)
 class SlotTolerances:
-    """How close to a frame a part must be. Seat tolerances exceed the pocket clearance (1.5 mm)."""
+    """How close to a frame a part must be. The seat tolerances are what the pocket allows: a
+    part read as seated sits in its pocket (so a bolt, which fixes it where it sits, fixes it
+    in its seat), and one off by more is not in it."""
 
-    seat_xy: float = 0.003
-    seat_z: float = 0.002
-    seat_angle: float = 0.06  # rad, tilt and yaw (yaw modulo pi: the flanges are symmetric)
+    # m: the clearance on both sides at once (a boss in a pocket's corner).
+    seat_xy: float = math.hypot(POCKET_CLEARANCE, POCKET_CLEARANCE) + _SEAT_SLACK
+    # m: a quarter of the pocket's depth (a boss on the rim stands a whole depth high).
+    seat_z: float = POCKET_DEPTH / 4
+    # rad: a part resting on its seat floor lies flat; its underside stands SEAT_GAP above the
+    # plate, so a tilt past this puts an end of a 65 mm flange on the plate.
+    seat_tilt: float = 0.03
+    # rad (modulo pi: the flanges are symmetric): a boss turned this far touches its pocket's
+    # walls with its corners (half its length turned by this angle is the clearance).
+    seat_yaw: float = 2 * POCKET_CLEARANCE / BOSS[0]
+    # m: a part's boss and a seat floor whose contact the simulation skips (a bolted part's,
+    # `hrc_drake.cell.welds`) touch when they are this close (the hydroelastic margin).
+    touch: float = 0.0001
     held_position: float = 0.005
     held_angle: float = 0.1
     tray_position: float = 0.01
@@ -152,8 +172,9 @@ class SlotMonitor(LeafSystem):
     """Reports the placement of every part from contact results and body poses.
 
     Input ports: `contact_results` (ContactResults), `body_poses` (list of RigidTransform, by
-    BodyIndex), both from the MultibodyPlant. Output port: `slot_configuration`
-    (CellConfiguration).
+    BodyIndex), both from the MultibodyPlant; `query_object` (the SceneGraph's, optional: with
+    it, a part's boss and a seat floor whose contact is filtered out touch when they are within
+    `touch` of each other). Output port: `slot_configuration` (CellConfiguration).
 
     Args:
         plant: the finalized cell plant.
@@ -184,6 +205,9 @@ class SlotMonitor(LeafSystem):
         self._read_gripper(plant)
         self.DeclareAbstractInputPort("contact_results", AbstractValue.Make(ContactResults()))
         self.DeclareAbstractInputPort("body_poses", AbstractValue.Make([RigidTransform()]))
+        self._query = self.DeclareAbstractInputPort(
+            "query_object", AbstractValue.Make(QueryObject())
+        )
         self.DeclareAbstractOutputPort(
             "slot_configuration",
             lambda: AbstractValue.Make(CellConfiguration()),
@@ -203,6 +227,7 @@ class SlotMonitor(LeafSystem):
     def _read_parts(self, plant: MultibodyPlant, inspector, host_tags) -> None:
         self._parts: dict[str, object] = {}  # instance -> body
         self._part_geometries: dict[str, set[GeometryId]] = {}
+        self._bosses: dict[str, list[GeometryId]] = {}
         self._span: dict[str, int] = {}
         self._X_BG: dict[str, RigidTransform] = {}  # grasp frame in the part body
         # Geometry -> the part instance it belongs to (parts are one body each).
@@ -216,6 +241,9 @@ class SlotMonitor(LeafSystem):
             body = plant.get_body(plant.GetBodyIndices(model)[0])
             self._parts[name] = body
             self._part_geometries[name] = set(plant.GetCollisionGeometriesForBody(body))
+            self._bosses[name] = [
+                g for n, g in _named_geometries(plant, inspector, body).items() if n[:4] == "boss"
+            ]
             self._span[name] = self._spec.part(self._symbols[name]).footprint
             if plant.HasFrameNamed("grasp", model):
                 self._X_BG[name] = plant.GetFrameByName("grasp", model).GetFixedPoseInBodyFrame()
@@ -252,10 +280,27 @@ class SlotMonitor(LeafSystem):
                 touching[self._owner[b]].add(a)
         return touching
 
+    def _touch_skipped(self, query: QueryObject, touching: dict[str, set[GeometryId]]) -> None:
+        """Add to `touching` the seat floors a part's boss touches where their contact is
+        filtered out: within `touch` of each other (a signed-distance query ignores filters)."""
+        inspector = query.inspector()
+        floors = [(None, s.floor) for s in self._slots.values()]
+        floors += [(host, s.floor) for host, seats in self._host_seats.items() for s in seats]
+        for part, bosses in self._bosses.items():
+            for boss in bosses:
+                for host, floor in floors:
+                    if host == part or floor in touching[part]:
+                        continue
+                    if not inspector.CollisionFiltered(boss, floor):
+                        continue
+                    pair = query.ComputeSignedDistancePairClosestPoints(boss, floor)
+                    if pair.distance <= self._tol.touch:
+                        touching[part].add(floor)
+
     def _within_seat(self, X_W_seat: RigidTransform, X_W_part: RigidTransform) -> bool:
         xy, z, tilt, yaw = _pose_error(X_W_seat, X_W_part)
         t = self._tol
-        return xy <= t.seat_xy and z <= t.seat_z and tilt <= t.seat_angle and yaw <= t.seat_angle
+        return xy <= t.seat_xy and z <= t.seat_z and tilt <= t.seat_tilt and yaw <= t.seat_yaw
 
     def _base_placement(self, part, X_WP, X_W_plate, touching) -> PartPlacement | None:
         span = self._span[part]
@@ -345,6 +390,8 @@ class SlotMonitor(LeafSystem):
         contacts = self.get_input_port(0).Eval(context)
         poses = self.get_input_port(1).Eval(context)
         touching = self._touches(contacts)
+        if self._query.HasValue(context):
+            self._touch_skipped(self._query.Eval(context), touching)
         X_W_plate = poses[int(next(iter(self._slots.values())).body_index)]
         placements: dict[str, PartPlacement] = {}
         for part, body in self._parts.items():

@@ -8,14 +8,16 @@ parts generated from the assembly spec and its layout, the configuration sensor,
 operator with its body, and a camera. Its ports (`docs/station.md`):
 
 - inputs, what a controller commands: `ur3.position`, `ur3.velocity`, `rg2.opening`,
-  `hri.prompt`;
+  `rg2.force`, `hri.prompt`;
 - outputs, what a real cell measures: `ur3.state_estimated`, `rg2.state_measured`,
   `rg2.grip_detected`, `configuration`, `operator.body`, `hri.indication`;
-- outputs for the simulation only (runner, recordings, tests): `sim.plant_state`,
+- outputs for the simulation only (runner, recordings, tests): `sim.welds`, `sim.plant_state`,
   `sim.contact_results`, `sim.body_poses`, `sim.query_object`, `sim.camera.rgb_image`.
 
-What only a simulator can do stays inside: the simulated operator answers the prompts and bolts,
-its body moves by its activity, and grasp and bolt welds hold the parts (`hrc_drake.cell.welds`),
+The gripper holds a part by its pads' contact and friction, squeezing with the commanded force
+(`hrc_drake.cell.gripper`): a part can slip, fall or fail to seat. What only a simulator can do
+stays inside: the simulated operator answers the prompts and bolts, its body moves by its
+activity, and its bolts fix each part where it sits when bolted (`hrc_drake.cell.welds`),
 switched through the station's `Simulator` monitor (`CellStation.welds_changed`,
 `CellStation.apply_welds`).
 """
@@ -40,7 +42,13 @@ from pydrake.geometry import (
     RoleAssign,
 )
 from pydrake.math import RigidTransform, RotationMatrix
-from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant
+from pydrake.multibody.math import SpatialVelocity
+from pydrake.multibody.plant import (
+    AddMultibodyPlant,
+    ContactResults,
+    CoulombFriction,
+    MultibodyPlant,
+)
 from pydrake.multibody.tree import BodyIndex, JointActuatorIndex, PdControllerGains
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder, LeafSystem
@@ -48,12 +56,14 @@ from pydrake.systems.primitives import ConstantValueSource, Multiplexer
 from pydrake.systems.sensors import CameraConfig, RgbdSensor
 
 from hrc_drake.atomic import atomic_write_text
+from hrc_drake.cell.arm_servo import GravityCompensation
+from hrc_drake.cell.contacts import contact_pairs, geometry_owners
 from hrc_drake.cell.gripper import add_gripper_ports
 from hrc_drake.cell.operator_body import BodyScript, BodySpheres, OperatorBody
 from hrc_drake.cell.scenario import cell_design, plant_config, scene_graph_config
 from hrc_drake.cell.sim_operator import SimulatedOperator
 from hrc_drake.cell.slot_monitor import CellConfiguration, SlotMonitor
-from hrc_drake.cell.welds import GraspWelds, Weld, WeldConstraints
+from hrc_drake.cell.welds import Bolts, Weld
 from hrc_drake.cell_models import CellDesign, add_cell_models
 from hrc_drake.hri.messages import Prompt
 from hrc_drake.hri.scenario import CameraSettings, Scenario
@@ -78,7 +88,7 @@ class CellStation:
     design: CellDesign
     frames: CellFrames
     instances: Mapping[str, object]
-    welds: WeldConstraints
+    bolts: Bolts
     meshcat: Meshcat | None = None
     visualizer: MeshcatVisualizer | None = None
 
@@ -105,7 +115,8 @@ class CellStation:
         return layout_poses(self.frames, placements)
 
     def wanted_welds(self, context: Context) -> frozenset[Weld]:
-        """The welds the simulated cell holds now (grasps and bolts), in the root `context`."""
+        """The bolts the simulated operator has put in (those that take), in the root
+        `context`."""
         station_context = self.diagram.GetMyContextFromRoot(context)
         return frozenset(self.diagram.GetOutputPort("sim.welds").Eval(station_context))
 
@@ -115,16 +126,20 @@ class CellStation:
         return self.wanted_welds(context) != applied
 
     def apply_welds(self, context: Context) -> frozenset[Weld]:
-        """Make the wanted welds the active ones in the root `context`; returns them."""
+        """Make the wanted bolts the ones that hold in the root `context` (a new one fixes its
+        part where it sits now); returns them."""
         plant_context = self.plant.GetMyMutableContextFromRoot(context)
         wanted = self.wanted_welds(context)
-        self.welds.apply(self.plant, plant_context, wanted)
+        filters = self.scene_graph.collision_filter_manager(
+            self.scene_graph.GetMyMutableContextFromRoot(context)
+        )
+        self.bolts.apply(plant_context, wanted, filters)
         return wanted
 
     def create_default_context(self) -> Context:
-        """A root context with the welds as wanted (none at the start), nothing on the
+        """A root context with the bolts as wanted (none at the start), nothing on the
         operator's interface and, with the robot, its command inputs holding the initial posture
-        and opening (so it can be simulated alone)."""
+        and opening at the scenario's grip force (so it can be simulated alone)."""
         context = self.diagram.CreateDefaultContext()
         if self.has_robot:
             self.hold_robot(context)
@@ -132,9 +147,12 @@ class CellStation:
         self.apply_welds(context)
         return context
 
-    def hold_robot(self, context: Context, opening: float | None = None) -> None:
+    def hold_robot(
+        self, context: Context, opening: float | None = None, force: float | None = None
+    ) -> None:
         """Fix the robot command inputs of the root `context` to hold the arm where it is,
-        fingers at `opening` (default: as they are)."""
+        fingers at `opening` (default: as they are) with the grip `force` (default: the
+        scenario's `station.rg2.grip_force`)."""
         plant_context = self.plant.GetMyContextFromRoot(context)
         q = self.plant.GetPositions(plant_context, self.instances[UR3])
         self.diagram.GetInputPort("ur3.position").FixValue(context, q)
@@ -142,6 +160,9 @@ class CellStation:
         if opening is None:
             opening = float(np.sum(self.plant.GetPositions(plant_context, self.instances[GRIPPER])))
         self.diagram.GetInputPort("rg2.opening").FixValue(context, [opening])
+        if force is None:
+            force = self.scenario.station.rg2.grip_force
+        self.diagram.GetInputPort("rg2.force").FixValue(context, [force])
 
 
 def check_station_scenario(scenario: Scenario, design: CellDesign) -> None:
@@ -149,8 +170,8 @@ def check_station_scenario(scenario: Scenario, design: CellDesign) -> None:
     approximation = scenario.physics.discrete_contact_approximation
     if approximation not in _SAP_FAMILY:
         raise ValueError(
-            f"physics.discrete_contact_approximation={approximation!r}: the station's weld "
-            f"constraints need a SAP-family one; use one of {', '.join(_SAP_FAMILY)}"
+            f"physics.discrete_contact_approximation={approximation!r}: the station's bolts "
+            f"(weld constraints) need a SAP-family one; use one of {', '.join(_SAP_FAMILY)}"
         )
     station = scenario.station
     for part, where in station.initial_placements.items():
@@ -192,10 +213,10 @@ def _set_servo_gains(plant: MultibodyPlant, instances, scenario: Scenario) -> No
         actuator.set_controller_gains(PdControllerGains(p=kp, d=kd))
     for actuator in _actuators(plant, instances[GRIPPER]):
         actuator.set_controller_gains(PdControllerGains(p=gripper.kp, d=gripper.kd))
-    # The servo holds the arm without a gravity model, as a UR controller does (gravity is
-    # compensated inside the real controller); held parts still weigh on it.
-    for name in (UR3, GRIPPER):
-        plant.set_gravity_enabled(instances[name], False)
+    # The arm's servo compensates its links' weight (`hrc_drake.cell.arm_servo`), as a UR
+    # controller does; the gripper's fingers are servoed without a weight model. Held parts
+    # still weigh on both.
+    plant.set_gravity_enabled(instances[GRIPPER], False)
 
 
 def _apply_friction(plant: MultibodyPlant, scene_graph, scenario: Scenario) -> None:
@@ -218,8 +239,8 @@ def _apply_friction(plant: MultibodyPlant, scene_graph, scenario: Scenario) -> N
 
 
 def _add_plant(builder: DiagramBuilder, scenario: Scenario, design: CellDesign):
-    """The plant with the cell's models, servos and welds; (plant, scene graph, instances,
-    welds, frames), parts at their initial placements."""
+    """The plant with the cell's models and servos; (plant, scene graph, instances, bolts,
+    frames), parts at their initial placements."""
     plant, scene_graph = AddMultibodyPlant(
         plant_config(scenario), scene_graph_config(scenario), builder
     )
@@ -228,8 +249,8 @@ def _add_plant(builder: DiagramBuilder, scenario: Scenario, design: CellDesign):
     _apply_friction(plant, scene_graph, scenario)
     if robot:
         _set_servo_gains(plant, instances, scenario)
-    welds = WeldConstraints.declare(plant, instances, design)
     plant.Finalize()
+    bolts = Bolts.of(plant, instances, design)
     frames = read_cell_frames(plant, scene_graph, plant.CreateDefaultContext(), design)
     layout = {p: IN_TRAY for p in design.instance_names}
     layout.update(scenario.station.initial_placements)
@@ -243,7 +264,7 @@ def _add_plant(builder: DiagramBuilder, scenario: Scenario, design: CellDesign):
         plant.SetDefaultPositions(
             instances[GRIPPER], [scenario.station.rg2.initial_opening / 2] * 2
         )
-    return plant, scene_graph, instances, welds, frames
+    return plant, scene_graph, instances, bolts, frames
 
 
 def _add_arm(builder: DiagramBuilder, plant: MultibodyPlant, ur3) -> None:
@@ -254,6 +275,9 @@ def _add_arm(builder: DiagramBuilder, plant: MultibodyPlant, ur3) -> None:
     builder.ExportInput(command.get_input_port(0), "ur3.position")
     builder.ExportInput(command.get_input_port(1), "ur3.velocity")
     builder.ExportOutput(plant.get_state_output_port(ur3), "ur3.state_estimated")
+    weight = builder.AddNamedSystem("ur3_gravity", GravityCompensation(plant, ur3))
+    builder.Connect(plant.get_state_output_port(ur3), weight.get_input_port())
+    builder.Connect(weight.get_output_port(), plant.get_actuation_input_port(ur3))
 
 
 def _add_operator(builder, plant, scene_graph, parts, scenario: Scenario, operator, body_script):
@@ -285,32 +309,47 @@ def _add_operator(builder, plant, scene_graph, parts, scenario: Scenario, operat
     return person
 
 
-class _WeldUnion(LeafSystem):
-    """Sim only: the union of the grasp welds and the operator's bolts (`sim.welds`)."""
+# A part slower than this rests (a bolt takes where it rests).
+REST_SPEED = 0.001  # m/s
 
-    def __init__(self, with_grasps: bool):
+
+class RestingParts(LeafSystem):
+    """Sim only: the parts at rest (slower than REST_SPEED) and out of the gripper (no finger
+    touches them), for the simulated operator's bolts. Inputs: `contact_results`,
+    `body_spatial_velocities` (the plant's). Output: `resting` (frozenset of part instances)."""
+
+    def __init__(self, plant: MultibodyPlant, parts: Mapping[str, object]):
         super().__init__()
-        empty = AbstractValue.Make(frozenset())
-        self._bolts = self.DeclareAbstractInputPort("bolts", empty)
-        self._grasps = self.DeclareAbstractInputPort("grasps", empty) if with_grasps else None
-        self.DeclareAbstractOutputPort("welds", lambda: AbstractValue.Make(frozenset()), self._calc)
+        self._bodies = {name: int(plant.GetBodyIndices(model)[0]) for name, model in parts.items()}
+        owners = geometry_owners(plant)
+        self._part_of = {g: o.model for g, o in owners.items() if o.model in parts}
+        self._gripper = {g for g, o in owners.items() if o.model == GRIPPER}
+        self._contacts = self.DeclareAbstractInputPort(
+            "contact_results", AbstractValue.Make(ContactResults())
+        )
+        self._velocities = self.DeclareAbstractInputPort(
+            "body_spatial_velocities", AbstractValue.Make([SpatialVelocity()])
+        )
+        self.DeclareAbstractOutputPort(
+            "resting", lambda: AbstractValue.Make(frozenset()), self._calc
+        )
 
     def _calc(self, context, output) -> None:
-        welds = set(self._bolts.Eval(context))
-        if self._grasps is not None:
-            welds |= self._grasps.Eval(context)
-        output.set_value(frozenset(welds))
-
-
-def _add_welds(builder, plant, frames, instances, person, gripper_command, period) -> None:
-    union = builder.AddNamedSystem("welds", _WeldUnion(with_grasps=gripper_command is not None))
-    builder.Connect(person.GetOutputPort("bolts"), union.GetInputPort("bolts"))
-    if gripper_command is not None:
-        grasps = builder.AddNamedSystem("grasp_welds", GraspWelds(plant, frames, instances, period))
-        builder.Connect(gripper_command.get_output_port(), grasps.GetInputPort("rg2.opening"))
-        builder.Connect(plant.get_body_poses_output_port(), grasps.GetInputPort("body_poses"))
-        builder.Connect(grasps.GetOutputPort("grasps"), union.GetInputPort("grasps"))
-    builder.ExportOutput(union.GetOutputPort("welds"), "sim.welds")
+        held = set()
+        for a, b in contact_pairs(self._contacts.Eval(context)):
+            if a in self._gripper and b in self._part_of:
+                held.add(self._part_of[b])
+            elif b in self._gripper and a in self._part_of:
+                held.add(self._part_of[a])
+        velocities = self._velocities.Eval(context)
+        output.set_value(
+            frozenset(
+                name
+                for name, body in self._bodies.items()
+                if name not in held
+                and np.linalg.norm(velocities[body].translational()) < REST_SPEED
+            )
+        )
 
 
 def _look_at(position, target) -> RigidTransform:
@@ -362,6 +401,28 @@ def _export_sim_ports(builder: DiagramBuilder, plant: MultibodyPlant, scene_grap
     builder.ExportOutput(scene_graph.get_query_output_port(), "sim.query_object")
 
 
+def _add_part_sensors(builder, plant, scene_graph, frames, parts, person) -> None:
+    """The configuration sensor (exported as `configuration`) and, for the simulated operator
+    only, which parts rest out of the gripper (a bolt takes once its part rests)."""
+    sensor = builder.AddNamedSystem("configuration_sensor", SlotMonitor(plant, scene_graph, frames))
+    builder.Connect(plant.get_contact_results_output_port(), sensor.GetInputPort("contact_results"))
+    builder.Connect(plant.get_body_poses_output_port(), sensor.GetInputPort("body_poses"))
+    builder.Connect(scene_graph.get_query_output_port(), sensor.GetInputPort("query_object"))
+    builder.ExportOutput(sensor.GetOutputPort("slot_configuration"), "configuration")
+    builder.Connect(
+        sensor.GetOutputPort("slot_configuration"), person.GetInputPort("configuration")
+    )
+    resting = builder.AddNamedSystem("resting_parts", RestingParts(plant, parts))
+    builder.Connect(
+        plant.get_contact_results_output_port(), resting.GetInputPort("contact_results")
+    )
+    builder.Connect(
+        plant.get_body_spatial_velocities_output_port(),
+        resting.GetInputPort("body_spatial_velocities"),
+    )
+    builder.Connect(resting.GetOutputPort("resting"), person.GetInputPort("resting"))
+
+
 def make_cell_station(
     scenario: Scenario,
     meshcat: Meshcat | None = None,
@@ -380,21 +441,14 @@ def make_cell_station(
     if operator is None:
         operator = scenario.operator_for(generate_states(design.spec))
     builder = DiagramBuilder()
-    plant, scene_graph, instances, welds, frames = _add_plant(builder, scenario, design)
-    sensor = builder.AddNamedSystem("configuration_sensor", SlotMonitor(plant, scene_graph, frames))
-    builder.Connect(plant.get_contact_results_output_port(), sensor.GetInputPort("contact_results"))
-    builder.Connect(plant.get_body_poses_output_port(), sensor.GetInputPort("body_poses"))
-    builder.ExportOutput(sensor.GetOutputPort("slot_configuration"), "configuration")
-    gripper_command = None
+    plant, scene_graph, instances, bolts, frames = _add_plant(builder, scenario, design)
     if scenario.station.robot:
         _add_arm(builder, plant, instances[UR3])
-        gripper_command = add_gripper_ports(builder, plant, instances[GRIPPER])
+        add_gripper_ports(builder, plant, instances[GRIPPER], scenario.station.rg2.kp)
     parts = {name: instances[name] for name in design.instance_names}
     person = _add_operator(builder, plant, scene_graph, parts, scenario, operator, body_script)
-    builder.Connect(
-        sensor.GetOutputPort("slot_configuration"), person.GetInputPort("configuration")
-    )
-    _add_welds(builder, plant, frames, instances, person, gripper_command, scenario.run.period)
+    _add_part_sensors(builder, plant, scene_graph, frames, parts, person)
+    builder.ExportOutput(person.GetOutputPort("bolts"), "sim.welds")
     _export_sim_ports(builder, plant, scene_graph)
     if scenario.station.camera.enabled:
         _add_camera(builder, scene_graph, scenario.station.camera)
@@ -405,7 +459,16 @@ def make_cell_station(
     diagram = builder.Build()
     diagram.set_name("cell_station")
     return CellStation(
-        diagram, plant, scene_graph, scenario, design, frames, instances, welds, meshcat, visualizer
+        diagram,
+        plant,
+        scene_graph,
+        scenario,
+        design,
+        frames,
+        instances,
+        bolts,
+        meshcat,
+        visualizer,
     )
 
 

@@ -163,6 +163,7 @@ class SupervisorLimits:
     joint_acceleration: float = 5.0
     tracking_tolerance: float = 0.05
     grip_tolerance: float = 0.004
+    grip_force: float = 20.0
     plan_ahead: bool = True
 
 
@@ -172,8 +173,9 @@ class Supervisor(LeafSystem):
     Input ports: `configuration` (CellConfiguration), `hri.indication` (Indication),
     `ur3.state_estimated` (12), `rg2.state_measured` (2: opening, rate), `rg2.grip_detected`
     (1), `speed_limit` (1: the speed scale the separation monitor allows; unconnected, 1).
-    Output ports: `command` (13: the arm's joint positions and velocities, then the gripper's
-    opening; the controller splits it into `ur3.position`, `ur3.velocity`, `rg2.opening`),
+    Output ports: `command` (14: the arm's joint positions and velocities, then the gripper's
+    opening and grip force; the controller splits it into `ur3.position`, `ur3.velocity`,
+    `rg2.opening`, `rg2.force`),
     `hri.prompt` (Prompt), `intent` (MotionIntent), `status` (SupervisorStatus).
     `policy` needs `next_task(state)` and `matches(spec)` (a `Policy`, or a decider wrapped by
     `hrc_drake.cell.evaluate.DeciderPolicy`), and may offer `predicted_tasks(state)` (most likely
@@ -222,7 +224,7 @@ class Supervisor(LeafSystem):
         deps = {self.time_ticket(), self.abstract_state_ticket(self._status_index)}
         # One command, evaluated once per plant step, split into the arm's and the gripper's.
         self.DeclareVectorOutputPort(
-            "command", 2 * N_JOINTS + 1, self._calc_command, prerequisites_of_calc=deps
+            "command", 2 * N_JOINTS + 2, self._calc_command, prerequisites_of_calc=deps
         )
         for name, empty, calc in (
             ("hri.prompt", Prompt(), self._calc_prompt),
@@ -242,7 +244,9 @@ class Supervisor(LeafSystem):
 
     def _calc_command(self, context, output) -> None:
         q, v, opening = self._status(context).command(context.get_time())
-        output.SetFromVector(np.concatenate([q, v, [opening]]))
+        # The gripper always grips with the scenario's force (a real RG2 takes one with every
+        # target width); the opening says whether it closes on a part.
+        output.SetFromVector(np.concatenate([q, v, [opening, self._limits.grip_force]]))
 
     def _calc_prompt(self, context, output) -> None:
         output.set_value(self._status(context).prompt)

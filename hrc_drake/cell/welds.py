@@ -1,181 +1,132 @@
-"""Weld constraints: what only the simulated station does to hold a part (simulator only).
+"""Bolts: what only the simulated station does to fix a part where it sits (simulator only).
 
-A real cell holds a part by the gripper's friction and fixes it with bolts; the simulated
-station welds it. Both welds are declared in the plant before it is finalized and switched on
-and off by the station, never by the controller:
+A real cell fixes a placed part with bolts; the simulated operator bolts it too, and the station
+then holds the part where it sits at that moment, relative to what it sits on (the plate, or the
+host part whose row it is in): never at the nominal seat. (The gripper holds a part by its
+fingers' contact and friction alone: `hrc_drake.cell.gripper`.)
 
-- a grasp weld while the fingers are closed on a part whose grasp frame is at the gripper's tcp
-  (`GraspWelds`, from the commanded opening and the body poses);
-- a bolt weld from the moment the simulated operator has bolted a part, at the seat the
-  configuration sensor reads it in (`hrc_drake.cell.sim_operator.SimulatedOperator`).
+A bolt locks the part's floating joint (SAP's joint locking, `Joint.Lock`): the part stays
+exactly where it is, and its degrees of freedom leave the contact problem. While it holds, the
+part's contact with its support is filtered out in the SceneGraph context: the two are one
+body, and that contact would cost the step most of its time while changing nothing; the
+configuration sensor reads such a filtered pair by distance instead
+(`hrc_drake.cell.slot_monitor`). A lock fixes the part in the world, which is fixing it relative
+to its support while the support does not move: the plate never does, and a host part is
+bolted before anything is bolted on it (`hrc_drake.cell.sim_operator`) and unbolted only after
+(an undo takes the parts off in the reverse order).
 
-A Drake system cannot write the plant's constraint parameters from its events, so the station's
-`Simulator` monitor stops the simulation at the step where the wanted welds change and the runner
-applies them (`WeldConstraints.apply`) before it advances again.
+Why not weld constraints: Drake 1.51 cannot change a weld constraint's poses once the plant is
+finalized, and SAP's weld constraints are compliant: an anchor body welded to a frame whose pose
+is a context parameter, held to the part by an identity weld, worked, but at 10 ms steps the
+weld gave 0.1-0.5 mm under a flange's weight and the gripper's release.
+
+A Drake system cannot write the plant's context from its events, so the station's `Simulator`
+monitor stops the simulation at the step where the wanted bolts change and the runner applies
+them (`Bolts.apply`) before it advances again.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
-import numpy as np
-from pydrake.common.value import AbstractValue
-from pydrake.math import RigidTransform
+from pydrake.geometry import CollisionFilterDeclaration, CollisionFilterManager, GeometrySet
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import MultibodyConstraintId
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.multibody.tree import JointIndex
 
 from hrc_drake.cell_models import PLATE, CellDesign
-from hrc_drake.motion.poses import CellFrames, seat_pose
-from hrc_drake.robot_models import GRIPPER
 
 
 @dataclass(frozen=True)
 class Weld:
-    """A weld the station wants active: a grasp, or a bolt at a seat."""
+    """A bolt the station wants: `part` fixed where it sits in `seat` (a token on the plate,
+    `"<host>/row_<j>"` in a host's row)."""
 
-    kind: str  # "grasp" | "bolt"
     part: str
-    seat: str = ""  # bolt: the seat key (token on the plate, "<host>/row_<j>" on a host part)
+    seat: str
+
+    @property
+    def support(self) -> str:
+        """The model instance the part is bolted to: the plate, or the host part."""
+        return self.seat.split("/", 1)[0] if "/" in self.seat else PLATE
 
     def __deepcopy__(self, memo) -> Weld:
         return self  # immutable
-
-
-def _fixed_pose(plant: MultibodyPlant, model, frame: str) -> RigidTransform:
-    return plant.GetFrameByName(frame, model).GetFixedPoseInBodyFrame()
 
 
 def _body(plant: MultibodyPlant, model):
     return plant.get_body(plant.GetBodyIndices(model)[0])
 
 
-@dataclass(frozen=True)
-class WeldConstraints:
-    """The declared weld constraints of every part (ids of the plant's constraints)."""
+def _supports(design: CellDesign, symbol: str) -> list[str]:
+    """The model instances a part of `symbol` may be bolted to: the plate if it mounts on the
+    base, and every host instance it mounts on."""
+    mounts_on = {m.on for m in design.spec.mounts if m.part == symbol}
+    supports = [PLATE] if "base" in mounts_on else []
+    supports += [p.name for p in design.parts if p.symbol in mounts_on]
+    return supports
 
-    grasps: Mapping[str, MultibodyConstraintId]
-    bolts: Mapping[tuple[str, str], MultibodyConstraintId]
+
+@dataclass(frozen=True)
+class Bolts:
+    """What the station bolts with: every part's floating joint, and the collision geometry of
+    the part and of each support it may be bolted to."""
+
+    joints: Mapping[str, object]  # part instance -> its floating joint
+    supports: Mapping[str, tuple[str, ...]]  # part instance -> what it may be bolted to
+    geometries: Mapping[str, GeometrySet]  # part or support instance -> its collision geometry
 
     @staticmethod
-    def declare(
-        plant: MultibodyPlant, instances: Mapping[str, object], design: CellDesign
-    ) -> WeldConstraints:
-        """Declare (before Finalize) a bolt weld for every seat a part may take, on the plate
-        and on every host row, and a grasp weld to the gripper's tcp (with the robot)."""
-        spec = design.spec
-        plate = instances[PLATE]
-        seats = {k: _fixed_pose(plant, plate, f"slot_{k}") for k in range(1, design.slots + 1)}
-        hosts = [p for p in design.parts if spec.part(p.symbol).is_host]
-        grasps, bolts = {}, {}
-        for part in design.parts:
-            body = _body(plant, instances[part.name])
-            for token, mount, slots in spec.placements():
-                if mount.part == part.symbol and mount.on == "base":
-                    bolts[(part.name, token)] = plant.AddWeldConstraint(
-                        _body(plant, plate), seat_pose(seats, slots), body, RigidTransform()
-                    )
-            mounts_on = {m.on for m in spec.mounts if m.part == part.symbol}
-            for host in (h for h in hosts if h.symbol in mounts_on):
-                host_model = instances[host.name]
-                for j in range(1, spec.part(host.symbol).footprint + 1):
-                    X_host_row = _fixed_pose(plant, host_model, f"row_{j}")
-                    bolts[(part.name, f"{host.name}/row_{j}")] = plant.AddWeldConstraint(
-                        _body(plant, host_model), X_host_row, body, RigidTransform()
-                    )
-            if GRIPPER in instances:
-                tcp = plant.GetFrameByName("tcp", instances[GRIPPER])
-                X_part_grasp = _fixed_pose(plant, instances[part.name], "grasp")
-                grasps[part.name] = plant.AddWeldConstraint(
-                    tcp.body(), tcp.GetFixedPoseInBodyFrame(), body, X_part_grasp
-                )
-        return WeldConstraints(grasps, bolts)
-
-    def ids(self, welds: Iterable[Weld]) -> set[MultibodyConstraintId]:
-        """The constraint ids of `welds` (a bolt at a seat that has no constraint is skipped:
-        the operator cannot bolt a part where it does not fit)."""
-        ids = set()
-        for weld in welds:
-            if weld.kind == "grasp":
-                ids.add(self.grasps[weld.part])
-            elif (weld.part, weld.seat) in self.bolts:
-                ids.add(self.bolts[(weld.part, weld.seat)])
-        return ids
-
-    def active(self, plant: MultibodyPlant, plant_context) -> set[MultibodyConstraintId]:
-        """The ids active in `plant_context`."""
-        every = [*self.grasps.values(), *self.bolts.values()]
-        return {cid for cid in every if plant.GetConstraintActiveStatus(plant_context, cid)}
-
-    def apply(self, plant: MultibodyPlant, plant_context, welds: Iterable[Weld]) -> None:
-        """Make exactly `welds` active in `plant_context`."""
-        wanted = self.ids(welds)
-        for cid in [*self.grasps.values(), *self.bolts.values()]:
-            status = cid in wanted
-            if plant.GetConstraintActiveStatus(plant_context, cid) != status:
-                plant.SetConstraintActiveStatus(plant_context, cid, status)
-
-
-class GraspWelds(LeafSystem):
-    """Sim only: which parts the gripper holds, as the grasp welds stand in for friction.
-
-    A part is welded to the gripper when the commanded opening closes below its width plus
-    `release_margin` while its grasp frame is at the tcp (within `reach` and `angle`), and let go
-    when the command opens past that. Input ports: `rg2.opening` (commanded, 1), `body_poses`.
-    Output port: `grasps` (frozenset[Weld]). Updated every `period` seconds."""
-
-    def __init__(
-        self,
-        plant: MultibodyPlant,
-        frames: CellFrames,
-        instances: Mapping[str, object],
-        period: float,
-        release_margin: float = 0.002,
-        reach: float = 0.005,
-        angle: float = 0.1,
-    ):
-        super().__init__()
-        rg2 = instances[GRIPPER]
-        tcp = plant.GetFrameByName("tcp", rg2)
-        self._tcp = (int(tcp.body().index()), tcp.GetFixedPoseInBodyFrame())
-        self._parts = {
-            name: (int(_body(plant, instances[name]).index()), frames.grasps[name])
-            for name in frames.design.instance_names
+    def of(plant: MultibodyPlant, instances: Mapping[str, object], design: CellDesign) -> Bolts:
+        """The bolts of a finalized plant's parts (their floating joints exist then)."""
+        bodies = {name: _body(plant, instances[name]) for name in design.instance_names}
+        bodies[PLATE] = _body(plant, instances[PLATE])
+        joints = {}
+        for index in range(plant.num_joints()):
+            joint = plant.get_joint(JointIndex(index))
+            for name in design.instance_names:
+                if joint.child_body().index() == bodies[name].index():
+                    joints[name] = joint
+        geometries = {
+            name: GeometrySet(plant.GetCollisionGeometriesForBody(body))
+            for name, body in bodies.items()
         }
-        self._widths = dict(frames.widths)
-        self._margin, self._reach, self._angle = release_margin, reach, angle
-        self._command = self.DeclareVectorInputPort("rg2.opening", BasicVector(1))
-        self._poses = self.DeclareAbstractInputPort(
-            "body_poses", AbstractValue.Make([RigidTransform()])
-        )
-        self._held = self.DeclareAbstractState(AbstractValue.Make(frozenset()))
-        self.DeclareStateOutputPort("grasps", self._held)
-        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
+        supports = {p.name: tuple(_supports(design, p.symbol)) for p in design.parts}
+        return Bolts(joints, supports, geometries)
 
-    def _at_tcp(self, poses, part: str) -> bool:
-        body, X_part_grasp = self._parts[part]
-        X_W_tcp = poses[self._tcp[0]] @ self._tcp[1]
-        X_rel = X_W_tcp.InvertAndCompose(poses[body] @ X_part_grasp)
-        turn = X_rel.rotation().ToAngleAxis().angle()
-        # The parts are symmetric under a half turn about the approach axis.
-        aligned = min(turn, abs(turn - math.pi)) <= self._angle
-        return bool(np.linalg.norm(X_rel.translation()) <= self._reach and aligned)
+    def holds(self, weld: Weld) -> bool:
+        """Whether `weld` can hold: the part may be bolted to that support."""
+        return weld.support in self.supports.get(weld.part, ())
 
-    def _update(self, context, state) -> None:
-        command = float(self._command.Eval(context)[0])
-        poses = self._poses.Eval(context)
-        held = {weld.part for weld in context.get_abstract_state(self._held).get_value()}
-        for part, width in self._widths.items():
-            closed = command < width + self._margin
-            if part in held and not closed:
-                held.discard(part)
-            elif part not in held and closed and not held and self._at_tcp(poses, part):
-                held.add(part)
-        state.get_mutable_abstract_state(self._held).set_value(
-            frozenset(Weld("grasp", part) for part in held)
-        )
+    def bolted(self, plant_context) -> set[str]:
+        """The parts bolted (locked) in `plant_context`."""
+        return {part for part, joint in self.joints.items() if joint.is_locked(plant_context)}
+
+    def apply(self, plant_context, welds: Iterable[Weld], filters: CollisionFilterManager) -> None:
+        """Make exactly `welds` hold in `plant_context` (and the SceneGraph context whose
+        collision `filters` these are): a bolt that takes now fixes its part where it sits at
+        this moment; one that holds already stays; the others let go. A bolt to a support the
+        part cannot be bolted to is skipped (the operator cannot bolt a part where it does not
+        fit)."""
+        wanted = {w.part: w.support for w in welds if self.holds(w)}
+        for part, joint in self.joints.items():
+            locked = joint.is_locked(plant_context)
+            if part in wanted and not locked:
+                joint.Lock(plant_context)
+                self._filter(filters, part, [wanted[part]], exclude=True)
+            elif part not in wanted and locked:
+                joint.Unlock(plant_context)
+                self._filter(filters, part, self.supports[part], exclude=False)
+
+    def _filter(self, filters, part: str, supports, exclude: bool) -> None:
+        """Filter out (or allow again) the contact between a part and its supports."""
+        for support in supports:
+            declaration = CollisionFilterDeclaration()
+            if exclude:
+                declaration.ExcludeBetween(self.geometries[part], self.geometries[support])
+            else:
+                declaration.AllowBetween(self.geometries[part], self.geometries[support])
+            filters.Apply(declaration)
 
 
-__all__ = ["GraspWelds", "Weld", "WeldConstraints"]
+__all__ = ["Bolts", "Weld"]

@@ -17,6 +17,8 @@ more YAML merged on top (`--scenario-text "{motion: {hold_time: 0.5}}"`).
       published: ["1", "4", "8", "4", "1", "2", "7", "10"]
       minimum_effort: ["1", "4", "8", "11"]
     motion: {hold_time: 5.0}         # optional: cell, motion, physics, run, safety, body
+    interaction: {mode: wait, interface: touch, delay: {distribution: lognormal, median: 2.5,
+                  sigma: 0.3}}       # optional; the delay defaults to the interface's
 """
 
 import dataclasses
@@ -29,6 +31,18 @@ from hrc_drake.layout import CellLayout
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.resources import models_dir, scenarios_dir
 from hrc_drake.tasks.graph import StateSpace
+from hrc_drake.tasks.interaction import (
+    DEFAULT_DELAYS,
+    DEFAULT_INTERFACE,
+    DEFAULT_MODE,
+    INTERFACES,
+    MODES,
+    DelayedIndications,
+    IndicationDelay,
+    Interaction,
+    InteractionError,
+    make_interaction,
+)
 from hrc_drake.typed_yaml import TypedYamlError, YamlSyntaxError, load_typed
 
 
@@ -97,21 +111,35 @@ class MotionConfig:
 class ContactConfig:
     """The contact material of every collision geometry whose model does not set its own: the
     one place these figures are stated (the station hands them to Drake as SceneGraphConfig's
-    `default_proximity_properties`). A model states only what differs: whether a geometry is
-    rigid or compliant, and the gripper pads' rubber.
+    `default_proximity_properties`, and the friction to every geometry but the gripper's).
+    A model states only what differs: the gripper's rigid housing and fingers and its pads'
+    rubber. The plate, the tray and the table stay compliant although they never move: a part
+    dropped a few mm onto a rigid seat is thrown out of it. The choices are calibrated in
+    benchmarks/reports/contact.md (`benchmarks/bench_contact.py`).
 
     Attributes:
-        hydroelastic_modulus: Pa, of compliant geometry (plate, parts, tray, table).
-        resolution_hint: m, the mesh size of compliant geometry that needs one.
-        hunt_crossley_dissipation: s/m; used by the TAMSI, Similar and Lagged approximations.
-        relaxation_time: s; SAP's dissipation (SAP ignores Hunt & Crossley's).
+        hydroelastic_modulus: Pa, of compliant geometry (the parts, the arm's links). 1e7 is
+            Drake's default, chosen to approximate rigid contact with sub-millimetre
+            penetrations for household-sized objects ("Default Contact Parameters"; the
+            hydroelastic user guide: values of 1e8 and above are seldom used).
+        resolution_hint: m, the mesh size of compliant geometry that needs one (cylinders,
+            capsules; boxes ignore it).
+        margin: m, Drake's hydroelastic margin (its recommended 1e-4): speculative contact
+            constraints a little before touching, so that a part let go on its seat does not
+            fall into it for a step before the contact pushes back.
+        relaxation_time: s, the dissipation of SAP (Drake's linear Kelvin-Voigt model, the one
+            the default `sap` approximation uses): a compliant contact creeps to rest with this
+            time constant, so a short one rests a released part within a few steps.
+        hunt_crossley_dissipation: s/m, the dissipation of the `similar` and `lagged`
+            approximations only (SAP ignores it).
         static_friction, dynamic_friction: Coulomb friction coefficients.
     """
 
-    hydroelastic_modulus: float = 2.0e7
+    hydroelastic_modulus: float = 1.0e7
     resolution_hint: float = 0.01
+    margin: float = 1.0e-4
+    relaxation_time: float = 0.001
     hunt_crossley_dissipation: float = 10.0
-    relaxation_time: float = 0.1
     static_friction: float = 0.6
     dynamic_friction: float = 0.5
 
@@ -120,14 +148,16 @@ class ContactConfig:
 class PhysicsConfig:
     """The MultibodyPlant's settings (the names of Drake's `MultibodyPlantConfig`).
 
-    The defaults are calibrated (benchmarks/reports/cell.md): 5 ms settles the flanges in
-    < 0.5 s at a real-time factor near 1 where 10 ms leaves them moving; `sap` rests the 67 g
-    oval flange in its pocket where `lagged`/`similar` leave it chattering (0.4 N of its 0.66 N
-    weight carried, 9 mm/s left after 2 s), at the same cost. The weld constraints need a
-    SAP-family approximation.
+    The defaults are calibrated (benchmarks/reports/contact.md, cell.md): with the contact
+    material below (a 1 ms relaxation time and Drake's 0.1 mm margin), 10 ms rests parts let go
+    near their seats within 0.12 s and the sensor reads every configuration, at twice the
+    real-time factor of 5 ms (the earlier 10 ms failure was the 0.1 s relaxation time and no
+    margin); `sap` rests the 67 g oval flange in its pocket where `lagged`/`similar` leave it
+    chattering (0.4 N of its 0.66 N weight carried, 9 mm/s left after 2 s, at 5 ms), at the
+    same cost. The bolts' weld constraints need a SAP-family approximation.
     """
 
-    time_step: float = 5e-3
+    time_step: float = 1e-2
     contact_model: str = "hydroelastic_with_fallback"
     discrete_contact_approximation: str = "sap"
     contact_surface_representation: str = "polygon"
@@ -240,13 +270,21 @@ class GripperConfig:
     Attributes:
         initial_opening: opening between the finger insides at the start and between tasks [m]
             (0.8 of the 0.110 m stroke).
-        kp, kd: the simulated finger servo's PD gains [N/m, N·s/m].
+        grip_force: N, the gripping force the controller commands (the RG2 takes 3-40 N); the
+            part is carried by the pads' friction alone. 20 N holds the heaviest part of the
+            flange case (the 0.57 kg square flange, 5.6 N) with a margin of 4.8 at rest
+            (benchmarks/reports/contact.md: the largest carry acceleration without slip).
+        kp, kd: the simulated finger servo's PD gains [N/m, N·s/m]; the servo pushes with at
+            most the commanded force (`hrc_drake.cell.gripper.FingerServo`), and with all of it
+            once a finger stalls `force / kp` short of its target: 40 N (the RG2's most) at the
+            1 mm each finger is commanded past the part (`motion.options.grip_squeeze`, 2 mm).
         grip_tolerance: m; a measured opening farther than this from the width of the part the
             gripper should hold means it holds nothing (or something else).
     """
 
     initial_opening: float = 0.088
-    kp: float = 2000.0
+    grip_force: float = 20.0
+    kp: float = 40000.0
     kd: float = 40.0
     grip_tolerance: float = 0.004
 
@@ -288,6 +326,33 @@ class StationConfig:
 
 
 @dataclass
+class DelayConfig:
+    """The indication delay (`hrc_drake.tasks.interaction.IndicationDelay`): `fixed` at `median`
+    seconds, or `lognormal` with that median and `sigma`, the standard deviation of its log."""
+
+    distribution: str = "lognormal"
+    median: float = DEFAULT_DELAYS[DEFAULT_INTERFACE].median
+    sigma: float = DEFAULT_DELAYS[DEFAULT_INTERFACE].sigma
+
+
+@dataclass
+class InteractionConfig:
+    """How the operator's indication reaches the robot (`hrc_drake.tasks.interaction`).
+
+    Attributes:
+        mode: `anticipate` (the robot may start on its prediction) or `wait` (it waits for the
+            indication). The cell does not anticipate yet: it plays `wait` in both modes.
+        interface: `pointer`, `gesture` or `touch` (the paper's section 5).
+        delay: the indication delay; left out, the interface's default (our assumption, see
+            `DEFAULT_DELAYS`).
+    """
+
+    mode: str = DEFAULT_MODE
+    interface: str = DEFAULT_INTERFACE
+    delay: DelayConfig | None = None
+
+
+@dataclass
 class Scenario:
     """One run of the cell (or of the decision loop): see the module docstring.
 
@@ -309,6 +374,7 @@ class Scenario:
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     body: BodyConfig = field(default_factory=BodyConfig)
     station: StationConfig = field(default_factory=StationConfig)
+    interaction: InteractionConfig = field(default_factory=InteractionConfig)
 
     @property
     def assembly_path(self) -> Path:
@@ -339,15 +405,27 @@ class Scenario:
         return self.operator.override_prob > 0 or self.operator.mistake_prob > 0
 
     def operator_for(self, space: StateSpace):
-        """The operator this scenario describes, for the decision loop or the cell."""
+        """The operator this scenario describes, for the decision loop or the cell; its
+        indications come after the interaction's delay (`DelayedIndications`, seeded with the
+        operator's seed: the simulated station waits `indication_delay(step)`)."""
         op = self.operator
         if op.model:
             from hrc_drake.hri.populations import make_operator_model
 
-            return make_operator_model(op.model, space, seed=op.seed, **op.params)
-        if self.stochastic:
-            return StochasticOperator(space, op.override_prob, op.mistake_prob, op.seed)
-        return ScriptedOperator(self.script)
+            answers = make_operator_model(op.model, space, seed=op.seed, **op.params)
+        elif self.stochastic:
+            answers = StochasticOperator(space, op.override_prob, op.mistake_prob, op.seed)
+        else:
+            answers = ScriptedOperator(self.script)
+        return DelayedIndications(answers, self.interaction_model().delay, op.seed)
+
+    def interaction_model(self) -> Interaction:
+        """The `interaction` section as a checked `Interaction`."""
+        it = self.interaction
+        delay = None
+        if it.delay is not None:
+            delay = IndicationDelay(it.delay.distribution, it.delay.median, it.delay.sigma)
+        return make_interaction(it.mode, it.interface, delay)
 
 
 def check_scenario(scenario: Scenario, source: str) -> Scenario:
@@ -375,8 +453,17 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
     for key in ("hold_time", "tcp_speed_limit", "approach_distance"):
         if getattr(scenario.motion, key) < 0:
             raise fail(f"motion.{key}", "must be >= 0")
+    contact = scenario.physics.contact
+    for key in ("hydroelastic_modulus", "resolution_hint"):
+        if getattr(contact, key) <= 0:
+            raise fail(f"physics.contact.{key}", "must be > 0")
+    for key in ("margin", "relaxation_time", "hunt_crossley_dissipation", "dynamic_friction"):
+        if getattr(contact, key) < 0:
+            raise fail(f"physics.contact.{key}", "must be >= 0")
+    if contact.static_friction < contact.dynamic_friction:
+        raise fail("physics.contact.static_friction", "must be >= dynamic_friction")
     if scenario.physics.time_step <= 0:
-        raise fail("physics.time_step", "the cell is a discrete plant: give a step > 0 (5e-3)")
+        raise fail("physics.time_step", "the cell is a discrete plant: give a step > 0 (1e-2)")
     for key in ("period", "settle_time", "max_sim_time"):
         if getattr(scenario.run, key) <= 0:
             raise fail(f"run.{key}", "must be > 0")
@@ -387,6 +474,8 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
         want = 2 if key == "stance" else 3
         if len(getattr(scenario.body, key)) != want:
             raise fail(f"body.{key}", f"give {want} coordinates in metres")
+    if not 3.0 <= scenario.station.rg2.grip_force <= 40.0:
+        raise fail("station.rg2.grip_force", "the RG2 grips with 3 to 40 N")
     if not 0 < scenario.body.hand_speed <= 2.0:
         raise fail("body.hand_speed", "give a speed in (0, 2] m/s (1.6 m/s: ISO 13855)")
     if scenario.cell is not None:
@@ -394,7 +483,26 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
             scenario.cell.check("cell")
         except ValueError as err:
             raise ScenarioError(f"scenario {source}: {err}") from err
+    _check_interaction(scenario.interaction, fail)
     return scenario
+
+
+def _check_interaction(it: InteractionConfig, fail) -> None:
+    """The `interaction` section: a known mode and interface, a valid delay."""
+    if it.mode not in MODES:
+        raise fail("interaction.mode", f"unknown mode {it.mode!r}; use one of {', '.join(MODES)}")
+    if it.interface not in INTERFACES:
+        raise fail(
+            "interaction.interface",
+            f"unknown interface {it.interface!r}; use one of {', '.join(INTERFACES)}",
+        )
+    if it.delay is not None:
+        delay = IndicationDelay(it.delay.distribution, it.delay.median, it.delay.sigma)
+        try:
+            delay.check("delay")
+        except InteractionError as err:
+            key, _, problem = str(err).partition(": ")
+            raise fail(f"interaction.{key}", problem) from None
 
 
 def scenario_file(name_or_path: str | Path) -> Path:

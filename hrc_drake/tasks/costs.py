@@ -1,4 +1,5 @@
-"""Cost tables: the time of every task edge, (state, task) -> seconds, for time-aware decisions.
+"""Cost tables: the time of every task edge, (state, task) -> seconds, for time-aware decisions,
+and the re-target and swap times of a robot that moves on its prediction.
 
 A task's time is the robot's planned motion (pick, carry, place, release, retreat, home to home)
 plus the operator's part: the part's bolting time for a placement (``bolt_time`` in the spec,
@@ -7,18 +8,33 @@ undo (the operator removes the bolts, then the robot returns the part to the tra
 keyed by the state (its task sequence) because the robot's path depends on what is in place and
 which part is moved: ``undo`` from ``(F1, S23)`` returns the square, from ``(S23, F02)`` a flange.
 
+A placement's entry also gives its carry milestones: ``carry_start``, seconds from the task's
+start until the part is lifted out of the tray, and ``carry_end``, until it reaches the pre-place
+pose above its seat. A *bet* is a placement the robot committed to before the operator's
+indication (`hrc_drake.tasks.interaction`) and the task indicated instead; its ``seconds`` are
+what it adds to the indicated task's time at most (planned by the motion layer):
+
+- the same part to another seat, a *re-target*: carry to the committed seat's pre-place pose,
+  then on to the indicated seat's, against carrying there directly;
+- another part, or undo, a *swap*: pick the committed part, put it back in its tray home and
+  release it, then go to the indicated task's pre-grasp, against going there from home.
+
 A cost table file is JSON (written atomically)::
 
-    {"format": "hrc_drake.costs", "version": 1,
+    {"format": "hrc_drake.costs", "version": 2,
      "spec_name": "flange", "spec_hash": "...", "cell_hash": "...",
-     "entries": [{"state": ["F1"], "task": "S23", "seconds": 12.04,
-                  "robot": 7.04, "operator": 5.0}, ...],   # one per task edge
+     "entries": [{"state": ["F1"], "task": "S23", "seconds": 12.04, "robot": 7.04,
+                  "operator": 5.0, "carry_start": 2.69, "carry_end": 4.4}, ...],  # every edge
+     "bets": [{"state": [], "committed": "F1", "indicated": "F3", "seconds": 0.9}, ...],
      "checksum": sha256 of the canonical JSON of everything above}
 
-``robot`` and ``operator`` are optional; when present they add up to ``seconds``. The spec hash
-ties a table to the assembly it was made for, the cell hash to the robot, cell frames and motion
-options it was planned with (see `hrc_drake.cell.costs.cell_hash`). This module imports no Drake:
-tables are computed by `hrc_drake.cell.costs` and used here by the MDP, the solver and `evaluate`.
+``robot``, ``operator`` and the milestones are optional (``robot`` and ``operator`` add up to
+``seconds``); ``bets`` is optional as a whole, and when given covers every bet of the state graph
+(`bet_pairs`): a table without them serves the ``wait`` interaction only. Version 1 files (no
+milestones, no bets) are refused with the fix: plan a new table. The spec hash ties a table to
+the assembly it was made for, the cell hash to the robot, cell frames and motion options it was
+planned with (see `hrc_drake.cell.costs.cell_hash`). This module imports no Drake: tables are
+computed by `hrc_drake.cell.costs` and used here by the MDP, the solver and `evaluate`.
 """
 
 from __future__ import annotations
@@ -45,9 +61,10 @@ from hrc_drake.tasks.spec import DEFAULT_BOLT_TIME, AssemblySpec
 from hrc_drake.tasks.tokens import UNDO
 
 FORMAT = "hrc_drake.costs"
-VERSION = 1
+VERSION = 2
 
 Edge = tuple[tuple[str, ...], str]  # (state as its task sequence, task token)
+BetKey = tuple[tuple[str, ...], str, str]  # (state, committed placement, indicated task)
 
 
 class CostTableError(ValueError):
@@ -56,11 +73,15 @@ class CostTableError(ValueError):
 
 @dataclass(frozen=True)
 class EdgeCost:
-    """Time of one task edge [s], and its parts when known (robot motion, operator's work)."""
+    """Time of one task edge [s], its parts when known (robot motion, operator's work), and for a
+    placement its carry milestones when known: seconds from the task's start until the part is
+    lifted out of the tray (`carry_start`) and until it is above its seat (`carry_end`)."""
 
     seconds: float
     robot: float | None = None
     operator: float | None = None
+    carry_start: float | None = None
+    carry_end: float | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,6 +97,9 @@ class CostTable:
     cell_hash: str
     entries: Mapping[Edge, EdgeCost]
     spec_name: str = ""
+    bets: Mapping[BetKey, float] | None = None
+    """Seconds a bet adds at most, per (state, committed placement, indicated task); None: the
+    table has no re-target or swap times (``wait`` only)."""
 
     def seconds(self, state: tuple[str, ...] | list[str], task: str) -> float:
         """Seconds of `task` from `state`; KeyError naming the edge if the table has none."""
@@ -107,10 +131,47 @@ class CostTable:
         """Task edges of `space` that the table lacks (every edge the MDP can take)."""
         return [edge for edge in task_edges(space) if edge not in self.entries]
 
+    def bet_seconds(
+        self, state: tuple[str, ...] | list[str], committed: str, indicated: str
+    ) -> float:
+        """The planned seconds of committing to `committed` in `state` when `indicated` comes
+        (a re-target or a swap); KeyError naming the bet if the table has none."""
+        key = (tuple(state), committed, indicated)
+        if self.bets is None or key not in self.bets:
+            raise KeyError(
+                f"cost table has no re-target or swap time for committing to {committed!r} in "
+                f"state {list(key[0])} when {indicated!r} is indicated; make a table with "
+                "`hrc-drake costs --out FILE`"
+            )
+        return self.bets[key]
+
+    def anticipation_problem(self) -> str | None:
+        """What the table lacks for a robot that moves on its prediction (None: nothing):
+        its bets, or a placement's carry milestones."""
+        if self.bets is None:
+            return "this table has none (made by hand, or before they were planned)"
+        for (state, task), cost in self.entries.items():
+            if task != UNDO and (cost.carry_start is None or cost.carry_end is None):
+                return f"the placement {task!r} from {list(state)} has no carry milestones"
+        return None
+
     def sequence_seconds(self, sequence: tuple[str, ...] | list[str]) -> float:
         """Seconds of doing `sequence` from the empty base, task after task."""
         seq = tuple(sequence)
         return sum(self.seconds(seq[:i], seq[i]) for i in range(len(seq)))
+
+
+def bet_pairs(space: StateSpace) -> list[BetKey]:
+    """Every bet of the state graph: in each state that offers a placement, each placement the
+    robot may commit to and each other feasible task the operator may indicate."""
+    pairs = []
+    for s in range(space.n_states):
+        if space.kind[s] == StateKind.TERMINAL:
+            continue
+        tasks = [t for t, _ in space.tasks(s)]
+        state = space.sequence(s)
+        pairs += [(state, c, t) for c in tasks if c != UNDO for t in tasks if t != c]
+    return pairs
 
 
 def task_edges(space: StateSpace) -> list[Edge]:
@@ -144,15 +205,38 @@ def bolt_time(spec: AssemblySpec, symbol: str) -> float:
 
 
 def table_from_seconds(
-    space: StateSpace, seconds: Mapping[Edge, float], cell_hash: str = "by-hand"
+    space: StateSpace,
+    seconds: Mapping[Edge, float],
+    cell_hash: str = "by-hand",
+    carry: tuple[float, float] | None = None,
+    bets: Mapping[BetKey, float] | None = None,
 ) -> CostTable:
-    """A CostTable for `space` from plain seconds per edge (tests, hand-made tables)."""
+    """A CostTable for `space` from plain seconds per edge (tests, hand-made tables); with
+    `carry`, every placement's (carry_start, carry_end), and `bets` their seconds."""
+    start, end = carry if carry is not None else (None, None)
+    entries = {
+        (tuple(s), t): EdgeCost(
+            float(v), carry_start=None if t == UNDO else start, carry_end=None if t == UNDO else end
+        )
+        for (s, t), v in seconds.items()
+    }
     return CostTable(
         spec_hash=space.spec.spec_hash,
         cell_hash=cell_hash,
-        entries={(tuple(s), t): EdgeCost(float(v)) for (s, t), v in seconds.items()},
+        entries=entries,
         spec_name=space.spec.name,
+        bets=None if bets is None else dict(bets),
     )
+
+
+def uniform_bets(space: StateSpace, retarget: float, swap: float) -> dict[BetKey, float]:
+    """Every bet of `space` at one re-target and one swap figure (hand-made tables)."""
+    from hrc_drake.tasks.interaction import Bet, bet_kind
+
+    return {
+        (s, c, t): retarget if bet_kind(space, c, t) == Bet.RETARGET else swap
+        for s, c, t in bet_pairs(space)
+    }
 
 
 def _payload(table: CostTable) -> dict[str, Any]:
@@ -163,8 +247,10 @@ def _payload(table: CostTable) -> dict[str, Any]:
             entry["robot"] = cost.robot
         if cost.operator is not None:
             entry["operator"] = cost.operator
+        if cost.carry_start is not None and cost.carry_end is not None:
+            entry["carry_start"], entry["carry_end"] = cost.carry_start, cost.carry_end
         entries.append(entry)
-    return {
+    payload = {
         "format": FORMAT,
         "version": VERSION,
         "spec_name": table.spec_name,
@@ -172,6 +258,14 @@ def _payload(table: CostTable) -> dict[str, Any]:
         "cell_hash": table.cell_hash,
         "entries": entries,
     }
+    if table.bets is not None:
+        payload["bets"] = [
+            {"state": list(state), "committed": c, "indicated": t, "seconds": seconds}
+            for (state, c, t), seconds in sorted(
+                table.bets.items(), key=lambda kv: (len(kv[0][0]), kv[0])
+            )
+        ]
+    return payload
 
 
 def cost_table_json(table: CostTable) -> dict[str, Any]:
@@ -202,26 +296,21 @@ def load_cost_table(path: str | Path, space: StateSpace, cell_hash: str | None =
     path = Path(path)
     fix = f"make a new one with `hrc-drake costs --out {path}`"
     payload = load_checked_json(
-        path, what="cost table", fmt=FORMAT, version=VERSION, fix=fix, error=CostTableError
+        path,
+        what="cost table",
+        fmt=FORMAT,
+        version=VERSION,
+        fix=fix,
+        error=CostTableError,
+        older={1: "without the re-target and swap times"},
     )
     try:
-        entries = {}
-        for i, e in enumerate(payload["entries"]):
-            key = (tuple(e["state"]), str(e["task"]))
-            if key in entries:
-                raise ValueError(f"entry {i} repeats task {key[1]!r} from {list(key[0])}")
-            entries[key] = EdgeCost(
-                _number(e["seconds"], f"entry {i} seconds"),
-                None if e.get("robot") is None else _number(e["robot"], f"entry {i} robot"),
-                None
-                if e.get("operator") is None
-                else _number(e["operator"], f"entry {i} operator"),
-            )
         table = CostTable(
             spec_hash=str(payload["spec_hash"]),
             cell_hash=str(payload["cell_hash"]),
-            entries=entries,
+            entries=_entries(payload["entries"]),
             spec_name=str(payload.get("spec_name", "")),
+            bets=None if payload.get("bets") is None else _bets(payload["bets"]),
         )
     except (KeyError, TypeError, ValueError) as err:
         raise CostTableError(f"cost table {path} is corrupted (bad entry: {err}); {fix}") from None
@@ -248,7 +337,61 @@ def load_cost_table(path: str | Path, space: StateSpace, cell_hash: str | None =
             f"cost table {path} has no entry for task {task!r} from {list(state)} "
             f"({len(missing)} edges missing); {fix}"
         )
+    if table.bets is not None:
+        _check_bets(path, space, table, fix)
     return table
+
+
+def _optional(entry: Mapping[str, Any], key: str, i: int) -> float | None:
+    return None if entry.get(key) is None else _number(entry[key], f"entry {i} {key}")
+
+
+def _entries(raw: list) -> dict[Edge, EdgeCost]:
+    entries: dict[Edge, EdgeCost] = {}
+    for i, e in enumerate(raw):
+        key = (tuple(e["state"]), str(e["task"]))
+        if key in entries:
+            raise ValueError(f"entry {i} repeats task {key[1]!r} from {list(key[0])}")
+        cost = EdgeCost(
+            _number(e["seconds"], f"entry {i} seconds"),
+            *(_optional(e, k, i) for k in ("robot", "operator", "carry_start", "carry_end")),
+        )
+        if cost.carry_start is not None and not (cost.carry_end or 0.0) >= cost.carry_start:
+            raise ValueError(f"entry {i}: carry_end must follow carry_start")
+        entries[key] = cost
+    return entries
+
+
+def _bets(raw: list) -> dict[BetKey, float]:
+    bets: dict[BetKey, float] = {}
+    for i, b in enumerate(raw):
+        key = (tuple(b["state"]), str(b["committed"]), str(b["indicated"]))
+        if key in bets:
+            raise ValueError(f"bet {i} repeats {key[1]!r} -> {key[2]!r} in {list(key[0])}")
+        bets[key] = _number(b["seconds"], f"bet {i} seconds")
+    return bets
+
+
+def _check_bets(path: Path, space: StateSpace, table: CostTable, fix: str) -> None:
+    """CostTableError unless the bets are exactly the state graph's, with carry milestones."""
+    assert table.bets is not None
+    wanted = set(bet_pairs(space))
+    for state, committed, indicated in table.bets:
+        if (state, committed, indicated) not in wanted:
+            raise CostTableError(
+                f"cost table {path} has a bet on {committed!r} -> {indicated!r} in "
+                f"{list(state)}, which is not a bet of {space.spec.name!r}; {fix}"
+            )
+    missing = [key for key in wanted if key not in table.bets]
+    if missing:
+        state, committed, indicated = min(missing)
+        raise CostTableError(
+            f"cost table {path} has no bet on {committed!r} -> {indicated!r} in {list(state)} "
+            f"({len(missing)} bets missing); {fix}"
+        )
+    problem = table.anticipation_problem()
+    if problem:
+        raise CostTableError(f"cost table {path}: {problem}; {fix}")
 
 
 def shortest_sequences(space: StateSpace) -> list[tuple[str, ...]]:

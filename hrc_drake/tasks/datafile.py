@@ -37,12 +37,20 @@ def save_checked_json(path: str | Path, payload: Mapping[str, Any]) -> None:
 
 
 def load_checked_json(
-    path: str | Path, *, what: str, fmt: str, version: int, fix: str, error: type[Exception]
+    path: str | Path,
+    *,
+    what: str,
+    fmt: str,
+    version: int,
+    fix: str,
+    error: type[Exception],
+    older: Mapping[int, str] | None = None,
 ) -> dict[str, Any]:
     """The payload of a file written by `save_checked_json` (without its checksum).
 
     `what` names the kind of file in messages ("policy file"), `fix` says how to make a good
-    one; problems raise `error`.
+    one; problems raise `error`. `older` says, per older version, what it lacks (the message of
+    a file of that version says it).
     """
     path = Path(path)
     if path.is_dir():
@@ -61,9 +69,11 @@ def load_checked_json(
     if not isinstance(payload, dict) or payload.get("format") != fmt:
         raise error(f"{path} is not an hrc_drake {what}; {fix}")
     if payload.get("version") != version:
+        lacks = (older or {}).get(payload.get("version"))
+        lacks = f" ({lacks})" if lacks else ""
         raise error(
-            f"{what} {path} has format version {payload.get('version')!r}; this hrc_drake "
-            f"reads version {version}; {fix}"
+            f"{what} {path} has format version {payload.get('version')!r}{lacks}; this "
+            f"hrc_drake reads version {version}; {fix}"
         )
     stored = payload.pop("checksum", None)
     if stored != checksum(payload):

@@ -1,8 +1,12 @@
-"""Deciders: what the robot proposes at each task boundary, and what it learns from the answer.
+"""Deciders: what the robot proposes at each task boundary, whether it starts on a prediction,
+and what it learns from the answer.
 
-A decider offers ``propose(state) -> task``, ``observe(state, proposed, performed)`` and
-``reset()`` (forget what one run taught it, so that runs are independent and the same seeds give
-the same report however runs are spread over processes). States are task sequences. Built-in:
+A decider offers ``propose(state) -> task``, ``commit(state, proposal) -> task or None`` (the
+placement the robot starts on before the operator's indication, or None to wait for it; see
+`hrc_drake.tasks.interaction`), ``observe(state, proposed, performed)``, ``reset()`` (forget what
+one run taught it, so that runs are independent and the same seeds give the same report however
+runs are spread over processes) and ``start_run()`` (a new assembly by the same operator: forget
+the run, keep the operator model). States are task sequences. Built-in:
 
 - ``paper-q``: the greedy policy of tabular Q-learning with the paper's schedule (`PaperSchedule`,
   seeded), unit rewards; fixed during a run.
@@ -22,14 +26,19 @@ the same report however runs are spread over processes). States are task sequenc
   it makes at most `mistakes` misplacements per run (for the same reason: it could misplace the
   same part after every undo).
 
-Every answer other than the proposal costs `deviation_seconds` on top of the task's time in the
-models of `mpc` and `worst-case` (and in `hrc_drake.evaluate`): the robot, already moving toward
-the proposed task, stops and returns. 1 s is our figure; nothing is published.
+The interaction (`Interaction`: mode, interface, indication delay) prices each boundary: in
+``wait`` mode the delay; in ``anticipate`` mode the bet's expected seconds (`InteractionCosts`).
+A bet is on the proposal (the robot does not move toward another task than the interface
+shows). `paper-q` and `exact` always commit to their proposal (a placement; they wait for an
+undo). `time`, `mpc` and `worst-case` weigh the bet by expected seconds under their operator
+model — `time` the MDP's 5 % mistakes, `mpc` its online model, `worst-case` the worst answer —
+commit or wait, whichever is cheaper, and include that price in choosing what to propose.
 """
 
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import Protocol
 
 import numpy as np
@@ -37,13 +46,13 @@ import numpy as np
 from hrc_drake.paths import UsageError
 from hrc_drake.tasks.costs import CostTable
 from hrc_drake.tasks.graph import StateKind, StateSpace
+from hrc_drake.tasks.interaction import Interaction, InteractionCosts
 from hrc_drake.tasks.learn import PaperSchedule, train
 from hrc_drake.tasks.mdp import UNDO_INDEX, MdpConfig, SequenceMDP, build_mdp
 from hrc_drake.tasks.operator_model import OnlineOperatorModel
 from hrc_drake.tasks.policy import Policy, policy_from_choices
 from hrc_drake.tasks.solve import exact_policy, solve_exact, timed_config
-
-DEVIATION_SECONDS = 1.0
+from hrc_drake.tasks.tokens import UNDO
 
 
 class Decider(Protocol):
@@ -55,6 +64,10 @@ class Decider(Protocol):
         """The task to propose in `state` (not terminal)."""
         ...
 
+    def commit(self, state: tuple[str, ...], proposal: str) -> str | None:
+        """The placement the robot starts on before the indication; None: it waits."""
+        ...
+
     def observe(self, state: tuple[str, ...], proposed: str, performed: str) -> None:
         """What happened after proposing `proposed` in `state`."""
         ...
@@ -63,23 +76,100 @@ class Decider(Protocol):
         """Forget what the current run taught."""
         ...
 
+    def start_run(self) -> None:
+        """A new assembly by the same operator: forget the run, keep the operator model."""
+        ...
+
+
+def commit_to_proposal(interaction: Interaction | None, proposal: str) -> str | None:
+    """The bet of a decider without an operator model: its proposal when the robot may
+    anticipate and the proposal is a placement; else None (wait)."""
+    if interaction is not None and not interaction.anticipates:
+        return None
+    return None if proposal == UNDO else proposal
+
 
 class PolicyDecider:
-    """Looks a fixed policy up; learns nothing."""
+    """Looks a fixed policy up and commits to its proposal (in ``anticipate`` mode); learns
+    nothing."""
 
-    def __init__(self, name: str, policy: Policy):
+    def __init__(self, name: str, policy: Policy, interaction: Interaction | None = None):
         self.name = name
         self.policy = policy
+        self.interaction = interaction or Interaction()
 
     def propose(self, state: tuple[str, ...]) -> str:
         """The policy's task in `state`."""
         return self.policy.next_task(state)
+
+    def commit(self, state: tuple[str, ...], proposal: str) -> str | None:
+        """The proposal, when it is a placement and the robot may anticipate."""
+        return commit_to_proposal(self.interaction, proposal)
 
     def observe(self, state: tuple[str, ...], proposed: str, performed: str) -> None:
         """Nothing to learn."""
 
     def reset(self) -> None:
         """Nothing to forget."""
+
+    def start_run(self) -> None:
+        """Nothing to forget."""
+
+
+def outcome_probabilities(mdp: SequenceMDP, edge: int) -> dict[str, float]:
+    """The MDP's probability of each task performed when the edge's task is proposed."""
+    out: dict[str, float] = {}
+    dst = {int(d): t for t, d in mdp.space.tasks(int(mdp.edge_src[edge]))}
+    for o in range(int(mdp.out_start[edge]), int(mdp.out_start[edge + 1])):
+        task = dst[int(mdp.out_dst[o])]
+        out[task] = out.get(task, 0.0) + float(mdp.out_prob[o])
+    return out
+
+
+def priced_mdp(mdp: SequenceMDP, bets: InteractionCosts) -> tuple[SequenceMDP, np.ndarray]:
+    """`mdp` with each edge's reward lowered by its best bet's expected seconds under the MDP's
+    own answer probabilities; and those seconds per edge."""
+    price = np.zeros(mdp.n_edges)
+    for e in range(mdp.n_edges):
+        state = mdp.space.sequence(int(mdp.edge_src[e]))
+        price[e] = bets.best_bet(state, outcome_probabilities(mdp, e), mdp.task_name(e))[1]
+    out_edge = np.repeat(np.arange(mdp.n_edges), np.diff(mdp.out_start))
+    return replace(mdp, out_reward=mdp.out_reward - price[out_edge]), price
+
+
+class TimeDecider(PolicyDecider):
+    """The exact policy in expected seconds, the interaction priced in, under the MDP's model of
+    the operator (`mistake_prob` misplacements, 5 % for `time`); it commits to the best bet
+    under that model. `solution` holds the MDP's values (expected seconds to finish)."""
+
+    def __init__(
+        self,
+        space: StateSpace,
+        costs: CostTable,
+        interaction: Interaction | None = None,
+        mistake_prob: float = 0.05,
+        name: str = "time",
+    ):
+        self.bets = InteractionCosts(space, costs, interaction or Interaction())
+        mdp, _ = priced_mdp(_unit_mdp(space, costs, mistake_prob), self.bets)
+        self.mdp = mdp
+        self.solution = solve_exact(mdp)
+        meta = {
+            "gamma": 1.0,
+            "mistake_prob": mistake_prob,
+            "interaction": self.bets.interaction.mode,
+        }
+        policy = policy_from_choices(mdp, self.solution.choice, "exact/time", meta)
+        super().__init__(name, policy)
+        self.interaction = self.bets.interaction
+
+    def commit(self, state: tuple[str, ...], proposal: str) -> str | None:
+        """The best bet on the proposal's answers under the MDP's model."""
+        s = self.mdp.space.index(tuple(state))
+        names = [t for t, _ in self.mdp.space.tasks(s)]
+        edge = self.mdp.edges_of(s)[names.index(proposal)]
+        probabilities = outcome_probabilities(self.mdp, edge)
+        return self.bets.best_bet(tuple(state), probabilities, proposal)[0]
 
 
 def _ranges(start: np.ndarray, count: np.ndarray) -> np.ndarray:
@@ -112,14 +202,19 @@ class MpcDecider:
         self,
         space: StateSpace,
         costs: CostTable,
-        deviation_seconds: float = DEVIATION_SECONDS,
+        interaction: Interaction | None = None,
         follow_prior: float = 4.0,
         other_prior: float = 0.05,
         tolerance: float = 1e-7,
+        model: OnlineOperatorModel | None = None,
     ):
         self.space = space
-        self.deviation = float(deviation_seconds)
+        self.bets = InteractionCosts(space, costs, interaction or Interaction())
+        self.interaction = self.bets.interaction
+        if model is not None:
+            follow_prior, other_prior = model.follow_prior, model.other_prior
         self.follow_prior, self.other_prior = follow_prior, other_prior
+        self.profile = None if model is None else model.copy()
         self.tolerance = tolerance
         mdp = _unit_mdp(space, costs, 0.0)
         self.mdp = mdp
@@ -131,25 +226,57 @@ class MpcDecider:
         self.is_undo = (mdp.edge_task == UNDO_INDEX).astype(float)
         self.child = np.where(self.is_undo > 0, n, mdp.edge_dst)  # slot n: 0 + 0 * V
         self.initial = -solve_exact(_unit_mdp(space, costs, 0.05)).values
+        self.prior_price = self._prior_prices()
         self.solve_seconds: list[float] = []
         self._layouts: dict[int, tuple] = {}
         self.reset()
 
+    def _prior_prices(self) -> np.ndarray:
+        """Per edge, the expected seconds of its best bet under the prior (a state not
+        observed yet): the proposal followed with the follow weight, any other task with the
+        other weight."""
+        space, mdp, bets = self.space, self.mdp, self.bets
+        price = np.full(mdp.n_edges, bets.wait_seconds)
+        for s in np.flatnonzero((space.kind != StateKind.TERMINAL) & (space.n_children > 0)):
+            names = [t for t, _ in space.tasks(int(s))]
+            state = space.sequence(int(s))
+            total = self.follow_prior + self.other_prior * (len(names) - 1)
+            for e, proposed in zip(mdp.edges_of(int(s)), names, strict=True):
+                probabilities = {
+                    t: (self.follow_prior if t == proposed else self.other_prior) / total
+                    for t in names
+                }
+                price[e] = bets.best_bet(state, probabilities, proposed)[1]
+        return price
+
     def reset(self) -> None:
-        """A fresh operator model and the initial values."""
-        self.model = OnlineOperatorModel(self.space, self.follow_prior, self.other_prior)
+        """The operator model it started with (a fresh one, or the profile's) and the initial
+        values."""
+        if self.profile is not None:
+            self.model = self.profile.copy()
+        else:
+            self.model = OnlineOperatorModel(self.space, self.follow_prior, self.other_prior)
         n = self.space.n_states
         self.values = np.append(self.initial, 0.0)
         self.alpha = np.append(
             np.where(self.space.kind == StateKind.TERMINAL, 0.0, self.initial), 0.0
         )
         self.beta = np.zeros(n + 1)
-        self.alpha[:n][self.only_undo] = self.cost[self.mdp.edge_start[:-1][self.only_undo]]
+        first = self.mdp.edge_start[:-1][self.only_undo]
+        self.alpha[:n][self.only_undo] = self.cost[first] + self.prior_price[first]
         self.beta[:n][self.only_undo] = 1.0
+
+    def start_run(self) -> None:
+        """A new assembly by the same operator: the model and the values are kept."""
 
     def observe(self, state: tuple[str, ...], proposed: str, performed: str) -> None:
         """Update the operator model."""
         self.model.update(state, proposed, performed)
+
+    def commit(self, state: tuple[str, ...], proposal: str) -> str | None:
+        """The best bet on the proposal's answers under the current operator model."""
+        probabilities = self.model.outcome_probabilities(tuple(state), proposal)
+        return self.bets.best_bet(tuple(state), probabilities, proposal)[0]
 
     def q_values(self, state: int) -> tuple[np.ndarray, np.ndarray]:
         """Re-solve below `state`; returns its edge ids and their expected seconds.
@@ -171,7 +298,9 @@ class MpcDecider:
             if len(self._layouts) >= 4096:
                 self._layouts.clear()
             layout = self._layouts[state] = self._layout(state)
-        levels, states, k, edges, seg, rep, cost, child, up, parent, follow, other, wrong = layout
+        levels, states, k, edges, seg, rep, cost, child, up, parent, follow, other, wrong, prior = (
+            layout
+        )
         fix_pos, fix_col, fix_prob, fix_seg, fix_pen = self._corrections(states, seg)
 
         def mix(x, lseg, lrep, es, fix):
@@ -199,7 +328,7 @@ class MpcDecider:
                     fix_seg[f0:f1] - c0,
                     fix_pen[f0:f1],
                 )
-                pen = self.deviation * (1.0 - follow[es])
+                pen = prior[es].copy()
                 if len(fix[0]):
                     pen[fix[0]] = fix[4]
                 c = mix(up[es], lseg, lrep, es, fix)
@@ -255,13 +384,29 @@ class MpcDecider:
         z = (pf + po * (k - 1))[rep]
         wrong = [lv[self.only_undo[lv]] for lv in every[1:]]
         wrong = np.concatenate(wrong) if wrong else np.zeros(0, dtype=np.int64)
-        return levels, states, k, edges, seg, rep, cost, child, up, parent, pf / z, po / z, wrong
+        prior = self.prior_price[edges]
+        return (
+            levels,
+            states,
+            k,
+            edges,
+            seg,
+            rep,
+            cost,
+            child,
+            up,
+            parent,
+            pf / z,
+            po / z,
+            wrong,
+            prior,
+        )
 
     def _corrections(self, states: np.ndarray, seg: np.ndarray):
         """The proposals of the observed states in the subtree (`states`, ascending), as flat
         arrays: each proposal's edge position (ascending), the positions of the answers and
-        their probabilities (proposal i's answers from ``start[i]``), and the expected
-        deviation cost."""
+        their probabilities (proposal i's answers from ``start[i]``), and the price of its best
+        bet."""
         pos, col, prob, start, pen = [], [], [], [], []
         n = 0
         for s in sorted(self.model.observed_states()):
@@ -277,7 +422,7 @@ class MpcDecider:
                 col.extend(range(lo, lo + len(names)))
                 prob.extend(p)
                 start.append(n)
-                pen.append(self.deviation * (1.0 - p[a]))
+                pen.append(self.bets.best_bet(self.space.sequence(s), probs, proposed)[1])
                 n += len(names)
         return (
             np.array(pos, dtype=np.int64),
@@ -295,7 +440,11 @@ class MpcDecider:
 
 
 class WorstCaseDecider:
-    """Min-max over following and at most `mistakes` misplacements per run (see module doc)."""
+    """Min-max over following and at most `mistakes` misplacements per run (see module doc).
+
+    In ``anticipate`` mode each proposal is priced twice, committing to it (a misplacement then
+    costs the re-target's expected seconds) and waiting (the expected delay), and the cheaper
+    worst case counts; the delay is taken at its expectation (it is not the adversary's)."""
 
     name = "worst-case"
 
@@ -303,18 +452,52 @@ class WorstCaseDecider:
         self,
         space: StateSpace,
         costs: CostTable,
-        deviation_seconds: float = DEVIATION_SECONDS,
+        interaction: Interaction | None = None,
         mistakes: int = 2,
     ):
         self.space = space
         self.budget = int(mistakes)
+        self.bets = InteractionCosts(space, costs, interaction or Interaction())
+        self.interaction = self.bets.interaction
         mdp = _unit_mdp(space, costs, 0.5)  # outcomes = the proposal and its mistake seats
         self.mdp = mdp
         out_edge = np.repeat(np.arange(mdp.n_edges), np.diff(mdp.out_start))
         self.deviates = mdp.out_dst != mdp.edge_dst[out_edge]
-        self.out_cost = -mdp.out_reward + float(deviation_seconds) * self.deviates
+        base = -mdp.out_reward
+        self.out_cost = (base + self.bets.wait_seconds, base + self._commit_prices(out_edge))
         self.levels = self._solve()
         self.reset()
+
+    def _commit_prices(self, out_edge: np.ndarray) -> np.ndarray:
+        """Per outcome, the expected seconds of having committed to the edge's task (inf where
+        the robot cannot commit: an undo, or the ``wait`` mode)."""
+        mdp, space = self.mdp, self.space
+        price = np.full(len(mdp.out_dst), np.inf)
+        for e in np.flatnonzero(mdp.edge_task != UNDO_INDEX):
+            src = int(mdp.edge_src[e])
+            committed = mdp.task_name(int(e))
+            if committed not in self.bets.bets(space.sequence(src)):
+                continue
+            task_of = {int(d): t for t, d in space.tasks(src)}
+            for o in range(int(mdp.out_start[e]), int(mdp.out_start[e + 1])):
+                indicated = task_of[int(mdp.out_dst[o])]
+                price[o] = self.bets.expected(space.sequence(src), committed, indicated)
+        return price
+
+    def _worst(self, w: np.ndarray, below: np.ndarray | None) -> np.ndarray:
+        """Per edge, the worst completion seconds of its cheaper bet, with `w` the values with
+        the same mistakes left and `below` with one fewer (None: no mistake left)."""
+        mdp = self.mdp
+        nxt = w[mdp.out_dst]
+        q = np.full(mdp.n_edges, np.inf)
+        for cost in self.out_cost:
+            if below is None:
+                # No mistake left: the operator follows.
+                val = np.where(self.deviates, -np.inf, cost + nxt)
+            else:
+                val = cost + np.where(self.deviates, below[mdp.out_dst], nxt)
+            q = np.minimum(q, np.maximum.reduceat(val, mdp.out_start[:-1]))
+        return q
 
     def _solve(self) -> list[np.ndarray]:
         mdp = self.mdp
@@ -326,15 +509,8 @@ class WorstCaseDecider:
         for _ in range(self.budget + 1):
             w = np.zeros(n) if below is None else below.copy()
             for _sweep in range(10 * n + 10):
-                nxt = w[mdp.out_dst]
-                if below is None:
-                    # No mistake left: the operator follows.
-                    val = np.where(self.deviates, -np.inf, self.out_cost + nxt)
-                else:
-                    val = self.out_cost + np.where(self.deviates, below[mdp.out_dst], nxt)
-                q = np.maximum.reduceat(val, mdp.out_start[:-1])
                 new = np.zeros(n)
-                new[has] = np.minimum.reduceat(q, seg_e)
+                new[has] = np.minimum.reduceat(self._worst(w, below), seg_e)
                 if np.array_equal(new, w):
                     break
                 w = new
@@ -346,29 +522,40 @@ class WorstCaseDecider:
         """A full budget of mistakes."""
         self.left = self.budget
 
+    def start_run(self) -> None:
+        """A new assembly: a full budget of mistakes again."""
+        self.reset()
+
     def q_values(self, state: int, left: int) -> tuple[range, np.ndarray]:
         """Edges of `state` and their worst completion seconds with `left` mistakes to come."""
-        mdp = self.mdp
-        edges = mdp.edges_of(state)
-        w = self.levels[left]
         below = self.levels[left - 1] if left > 0 else None
-        q = []
-        for e in edges:
-            lo, hi = int(mdp.out_start[e]), int(mdp.out_start[e + 1])
-            vals = [
-                self.out_cost[o]
-                + (below[mdp.out_dst[o]] if self.deviates[o] else w[mdp.out_dst[o]])
-                for o in range(lo, hi)
-                if below is not None or not self.deviates[o]
-            ]
-            q.append(max(vals))
-        return edges, np.array(q)
+        edges = self.mdp.edges_of(state)
+        return edges, self._worst(self.levels[left], below)[edges.start : edges.stop]
 
     def propose(self, state: tuple[str, ...]) -> str:
         """The task of least worst-case completion seconds."""
         edges, q = self.q_values(self.space.index(state), self.left)
         best = int(np.flatnonzero(q <= q.min() + 1e-9)[0])
         return self.mdp.task_name(edges[best])
+
+    def commit(self, state: tuple[str, ...], proposal: str) -> str | None:
+        """The proposal when committing to it has the smaller worst case; else None (wait)."""
+        s = self.space.index(tuple(state))
+        names = [t for t, _ in self.space.tasks(s)]
+        e = self.mdp.edges_of(s)[names.index(proposal)]
+        lo, hi = int(self.mdp.out_start[e]), int(self.mdp.out_start[e + 1])
+        w = self.levels[self.left]
+        below = self.levels[self.left - 1] if self.left > 0 else None
+        worst = []
+        for cost in self.out_cost:
+            vals = [
+                cost[o]
+                + (below[self.mdp.out_dst[o]] if self.deviates[o] else w[self.mdp.out_dst[o]])
+                for o in range(lo, hi)
+                if below is not None or not self.deviates[o]
+            ]
+            worst.append(max(vals))
+        return proposal if worst[1] <= worst[0] + 1e-9 and np.isfinite(worst[1]) else None
 
     def observe(self, state: tuple[str, ...], proposed: str, performed: str) -> None:
         """A misplacement uses one mistake of the budget."""
@@ -396,18 +583,21 @@ def make_decider(
     space: StateSpace,
     costs: CostTable,
     seed: int = 0,
-    deviation_seconds: float = DEVIATION_SECONDS,
+    interaction: Interaction | None = None,
+    model: OnlineOperatorModel | None = None,
 ):
-    """The decider `name` for `space` with the cost table `costs`; UsageError naming the known
-    deciders if `name` is unknown."""
+    """The decider `name` for `space` with the cost table `costs` under `interaction` (default:
+    anticipate, pointer); `mpc` starts from the operator model `model` (an operator profile)
+    when given. UsageError naming the known deciders if `name` is unknown."""
+    if name not in DECIDERS:
+        raise UsageError(f"unknown decider {name!r}; known deciders: {', '.join(DECIDERS)}")
+    interaction = interaction or Interaction()
     if name == "paper-q":
-        return PolicyDecider(name, paper_q_policy(space, seed))
+        return PolicyDecider(name, paper_q_policy(space, seed), interaction)
     if name == "exact":
-        return PolicyDecider(name, exact_policy(space))
+        return PolicyDecider(name, exact_policy(space), interaction)
     if name == "time":
-        return PolicyDecider(name, exact_policy(space, costs=costs))
+        return TimeDecider(space, costs, interaction)
     if name == "mpc":
-        return MpcDecider(space, costs, deviation_seconds)
-    if name == "worst-case":
-        return WorstCaseDecider(space, costs, deviation_seconds)
-    raise UsageError(f"unknown decider {name!r}; known deciders: {', '.join(DECIDERS)}")
+        return MpcDecider(space, costs, interaction, model=model)
+    return WorstCaseDecider(space, costs, interaction)

@@ -1,0 +1,422 @@
+"""Contact settings of the cell: settling, friction grasps and real-time factor, side by side.
+
+    python benchmarks/bench_contact.py [--repeats 2] [--out PATH]
+
+Run on demand (not part of pytest); the machine is shared, so real-time factors are the best of
+`--repeats` and measured in CPU time of this process. Three experiments:
+
+1. Settling, per contact setting: parts let go near their seats as the configuration tests do
+   (1 mm off, 1° tilt, 3 mm above a plate seat, 6 mm above a host's row) in three
+   configurations (F1; F3 S12 F01; F1 S23 F03), workpieces only: real-time factor, the time
+   until every part is slower than 1 mm/s, whether the configuration sensor reads the
+   configuration, and the largest horizontal distance of a part to its nominal seat at the end.
+   Beside it the station at rest (arm, gripper, body, parts in the tray): the ratio base of the
+   closed-loop benchmarks.
+2. Friction grasps, default settings: the square flange (0.57 kg, the heaviest part of the
+   flange case) held in the air at a grip force, the arm then accelerating the tcp at a steady
+   rate for 50 ms and braking it as hard: the largest rate at which the part does not slip
+   (moves less than 1 mm relative to the tcp), up, along the pads and across them.
+3. What the carry asks: the largest tcp acceleration along row 1's plans (the
+   collaborative-speed plans every Table 2 row uses), from the plans' trajectories.
+
+Writes benchmarks/reports/contact.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import dataclasses
+import importlib.metadata
+import math
+import os
+import platform
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.multibody.tree import JacobianWrtVariable
+from pydrake.systems.analysis import Simulator
+
+import hrc_drake.cell_models as cell_models
+from hrc_drake.atomic import atomic_write_text
+from hrc_drake.cell import make_cell_station, station_scenario
+from hrc_drake.cell.run import shared_planner
+from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
+from hrc_drake.hri.scenario import Scenario
+from hrc_drake.motion.plan import Stage
+from hrc_drake.motion.poses import default_layout
+from hrc_drake.robot_models import GRIPPER, UR3, UR3_JOINTS
+from hrc_drake.tasks.spec import load_spec
+
+REPORT = Path(__file__).resolve().parent / "reports" / "contact.md"
+DROPS = (
+    (frozenset({"F1"}), 1),
+    (frozenset({"F3", "S12", "F01"}), 11),
+    (frozenset({"F1", "S23", "F03"}), 7),
+)
+REST_SPEED = 0.001  # m/s
+SLIP = 0.001  # m
+RATES = (2.0, 5.0, 10.0, 20.0, 30.0, 40.0, 60.0)  # m/s², tried in turn
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One contact setting: scenario text on top of the defaults; `rigid`: the plate and the
+    tray rigid hydroelastic (an experiment: the models say compliant)."""
+
+    name: str
+    text: str = "{}"
+    rigid: bool = False
+
+
+SETTINGS = (
+    Setting(
+        "before: 5 ms, E 2e7 Pa, τ 0.1 s, no margin",
+        "{physics: {time_step: 0.005, contact: {hydroelastic_modulus: 2.0e7, "
+        "relaxation_time: 0.1, margin: 0.0}}}",
+    ),
+    Setting("5 ms, E 1e7 Pa, τ 1 ms, margin 0.1 mm", "{physics: {time_step: 0.005}}"),
+    Setting("default: 10 ms, E 1e7 Pa, τ 1 ms, margin 0.1 mm"),
+    Setting("10 ms, τ 10 ms", "{physics: {contact: {relaxation_time: 0.01}}}"),
+    Setting("10 ms, τ 0.1 s", "{physics: {contact: {relaxation_time: 0.1}}}"),
+    Setting("10 ms, no margin", "{physics: {contact: {margin: 0.0}}}"),
+    Setting("10 ms, E 1e6 Pa", "{physics: {contact: {hydroelastic_modulus: 1.0e6}}}"),
+    Setting("10 ms, rigid plate and tray", rigid=True),
+    Setting("5 ms, rigid plate and tray", "{physics: {time_step: 0.005}}", rigid=True),
+)
+
+
+def _rigid(sdf: str) -> str:
+    return sdf.replace(
+        "</geometry>\n      </collision>",
+        "</geometry>\n        <drake:proximity_properties>\n          <drake:rigid_hydroelastic/>"
+        "\n        </drake:proximity_properties>\n      </collision>",
+    )
+
+
+@contextlib.contextmanager
+def _models(rigid: bool) -> Iterator[None]:
+    """The cell's generated plate and tray, made rigid hydroelastic if asked."""
+    if not rigid:
+        yield
+        return
+    plate, tray = cell_models.CellDesign.plate_sdf, cell_models.CellDesign.tray_sdf
+    cell_models.CellDesign.plate_sdf = lambda self: _rigid(plate(self))
+    cell_models.CellDesign.tray_sdf = lambda self: _rigid(tray(self))
+    try:
+        yield
+    finally:
+        cell_models.CellDesign.plate_sdf, cell_models.CellDesign.tray_sdf = plate, tray
+
+
+def _drop(station, configuration: frozenset[str], seed: int) -> dict:
+    """One settling run (see the module docstring)."""
+    plant = station.plant
+    context = station.create_default_context()
+    plant_context = plant.GetMyContextFromRoot(context)
+    placements = default_layout(station.frames, configuration)
+    seated = station.placement_poses(placements)
+    rng = np.random.default_rng(seed)
+    for part, X in seated.items():
+        dx, dy = rng.uniform(-0.0008, 0.0008, size=2)
+        roll, pitch, yaw = rng.uniform(-math.radians(1), math.radians(1), size=3)
+        lift = 0.006 if station.design.spec.placement(placements[part]).host else 0.003
+        X_lift = RigidTransform(RollPitchYaw(roll, pitch, yaw), [dx, dy, lift])
+        plant.SetFreeBodyPose(plant_context, station.part_body(part), X @ X_lift)
+    simulator = Simulator(station.diagram, context)
+    rest, step = None, 0.01
+    cpu = time.process_time()
+    while context.get_time() < 1.0 - 1e-9:
+        simulator.AdvanceTo(context.get_time() + step)
+        speed = max(
+            np.linalg.norm(
+                plant.EvalBodySpatialVelocityInWorld(
+                    plant_context, station.part_body(p)
+                ).translational()
+            )
+            for p in seated
+        )
+        rest = None if speed >= REST_SPEED else (rest or context.get_time())
+    cpu = time.process_time() - cpu
+    off = max(
+        np.linalg.norm(
+            seated[p]
+            .InvertAndCompose(plant.EvalBodyPoseInWorld(plant_context, station.part_body(p)))
+            .translation()[:2]
+        )
+        for p in seated
+    )
+    read = station.configuration(context).tokens() == configuration
+    return {"rtf": 1.0 / cpu, "rest": rest, "read": read, "off": off}
+
+
+def _at_rest_rtf(scenario: Scenario, repeats: int) -> float:
+    """The whole station (arm, gripper, body, parts in the tray) holding still: its RTF."""
+    station = make_cell_station(scenario)
+    context = station.create_default_context()
+    simulator = Simulator(station.diagram, context)
+    simulator.AdvanceTo(0.2)
+    best = 0.0
+    for _ in range(repeats):
+        cpu = time.process_time()
+        simulator.AdvanceTo(context.get_time() + 2.0)
+        best = max(best, 2.0 / (time.process_time() - cpu))
+    return best
+
+
+def settling(setting: Setting, repeats: int) -> dict:
+    """Experiment 1 for one setting: the three drops (best RTF of `repeats`) and the station at
+    rest."""
+    scenario = load_cell_scenario(None, setting.text)
+    with _models(setting.rigid):
+        workpieces = make_cell_station(station_scenario(scenario, robot=False))
+        runs = [[_drop(workpieces, c, seed) for c, seed in DROPS] for _ in range(repeats)]
+        at_rest = _at_rest_rtf(scenario, repeats)
+    drops = runs[0]
+    rests = [d["rest"] for d in drops]
+    return {
+        "rtf": max(np.mean([d["rtf"] for d in run]) for run in runs),
+        "rest": None if None in rests else max(rests),
+        "read": sum(d["read"] for d in drops),
+        "off": max(d["off"] for d in drops),
+        "at_rest": at_rest,
+    }
+
+
+# A first task of the flange case that takes each part from the tray.
+_FIRST_TASKS = {"F1": "oval_flange_1", "S23": "square_flange"}
+
+
+@dataclass
+class _Grip:
+    """A station holding `part` in the air, ready to be accelerated."""
+
+    station: object
+    part: str
+    q0: np.ndarray
+    X_W_part: RigidTransform
+    width: float
+
+    @staticmethod
+    def make(scenario: Scenario, part: str) -> _Grip:
+        scenario = dataclasses.replace(
+            scenario, body=dataclasses.replace(scenario.body, enabled=False)
+        )
+        station = make_cell_station(scenario)
+        # Where the carry starts: the arm's posture at the end of the lift of a plan that takes
+        # the part from the tray, and the part where the tcp then holds it.
+        design = cell_design(scenario, load_spec(scenario.assembly_path))
+        planner = shared_planner(motion_options(scenario), design)
+        task = next(t for t, p in _FIRST_TASKS.items() if p == part)
+        plan = planner.plan_task(frozenset(), task)
+        lift = next(m for m in plan.motions if m.name == "lift")
+        q0 = plan.positions(lift.start + lift.duration)
+        plant = station.plant
+        plant_context = plant.CreateDefaultContext()
+        plant.SetPositions(plant_context, station.instances[UR3], q0)
+        X_W_tcp = plant.GetFrameByName("tcp").CalcPoseInWorld(plant_context)
+        X_W_part = X_W_tcp @ station.frames.grasps[part].inverse()
+        return _Grip(station, part, q0, X_W_part, float(station.frames.widths[part]))
+
+    def slip(self, force: float, direction: np.ndarray, rate: float) -> tuple[float, float]:
+        """(slip of the part relative to the tcp [m], the tcp's largest measured acceleration
+        [m/s²]) when the tcp accelerates at `rate` along `direction` for 50 ms, then brakes."""
+        station, plant = self.station, self.station.plant
+        context = station.create_default_context()
+        plant_context = plant.GetMyMutableContextFromRoot(context)
+        ur3, rg2 = station.instances[UR3], station.instances[GRIPPER]
+        plant.SetPositions(plant_context, ur3, self.q0)
+        plant.SetPositions(plant_context, rg2, [self.width / 2] * 2)
+        plant.SetFreeBodyPose(plant_context, station.part_body(self.part), self.X_W_part)
+        squeeze = motion_options(station.scenario).grip_squeeze
+        station.hold_robot(context, opening=self.width - squeeze, force=force)
+        simulator = Simulator(station.diagram, context)
+        simulator.AdvanceTo(0.3)
+        tcp = plant.GetFrameByName("tcp", rg2)
+
+        def relative() -> RigidTransform:
+            X_W_tcp = tcp.CalcPoseInWorld(plant_context)
+            X_W_part = plant.EvalBodyPoseInWorld(plant_context, station.part_body(self.part))
+            return X_W_tcp.InvertAndCompose(X_W_part)
+
+        start = relative()
+        J = plant.CalcJacobianSpatialVelocity(
+            plant_context,
+            JacobianWrtVariable.kV,
+            tcp,
+            np.zeros(3),
+            plant.world_frame(),
+            plant.world_frame(),
+        )
+        columns = [plant.GetJointByName(n).velocity_start() for n in UR3_JOINTS]
+        qdd = np.linalg.solve(J[:, columns], np.r_[np.zeros(3), rate * direction])
+        h, T = plant.time_step(), 0.05
+        t0, v_prev, peak = context.get_time(), None, 0.0
+        for k in range(1, round(4 * T / h) + 1):
+            t = k * h
+            # +rate for T, -rate for T, then still.
+            if t <= T:
+                q, v = self.q0 + 0.5 * qdd * t**2, qdd * t
+            elif t <= 2 * T:
+                s = t - T
+                q = self.q0 + 0.5 * qdd * T**2 + qdd * T * s - 0.5 * qdd * s**2
+                v = qdd * (T - s)
+            else:
+                q, v = self.q0 + qdd * T**2, np.zeros(6)
+            station.diagram.GetInputPort("ur3.position").FixValue(
+                station.diagram.GetMyMutableContextFromRoot(context), q
+            )
+            station.diagram.GetInputPort("ur3.velocity").FixValue(
+                station.diagram.GetMyMutableContextFromRoot(context), v
+            )
+            simulator.AdvanceTo(t0 + t)
+            v_tcp = tcp.CalcSpatialVelocityInWorld(plant_context).translational()
+            if v_prev is not None:
+                peak = max(peak, float(np.linalg.norm(v_tcp - v_prev) / h))
+            v_prev = v_tcp
+        moved = start.InvertAndCompose(relative())
+        return float(np.linalg.norm(moved.translation())), peak
+
+
+def grip_limits(grip: _Grip, force: float) -> dict[str, tuple[float | None, float]]:
+    """Experiment 2: per direction, (the largest rate without slip, None if even the smallest
+    slips; the tcp's measured peak acceleration at that rate)."""
+    X_W_grasp = grip.X_W_part @ grip.station.frames.grasps[grip.part]
+    directions = {
+        "up": np.array([0.0, 0.0, 1.0]),
+        # The tcp's x runs along the part (the pads' plane), its y across the pads.
+        "along the pads": X_W_grasp.rotation().col(0),
+        "across the pads": X_W_grasp.rotation().col(1),
+    }
+    limits = {}
+    for name, direction in directions.items():
+        best, peak = None, 0.0
+        for rate in RATES:
+            moved, measured = grip.slip(force, direction, rate)
+            if moved >= SLIP:
+                break
+            best, peak = rate, measured
+        limits[name] = (best, peak)
+    return limits
+
+
+def carry_accelerations() -> dict[str, float]:
+    """Experiment 3: the largest tcp acceleration [m/s²] (and the largest upward one) while the
+    part is held, along row 1's three plans."""
+    scenario = load_cell_scenario("row1-optimal")
+    design = cell_design(scenario, load_spec(scenario.assembly_path))
+    planner = shared_planner(motion_options(scenario), design)
+    station = make_cell_station(scenario)
+    plant = station.plant
+    plant_context = plant.CreateDefaultContext()
+    tcp = plant.GetFrameByName("tcp", station.instances[GRIPPER])
+    largest = upward = 0.0
+    done: list[str] = []
+    for task in ("F1", "S23", "F03"):
+        plan = planner.plan_task(frozenset(done), task)
+        done.append(task)
+        start, end = plan.segment(Stage.GRASP).end, plan.t_release
+        times = np.arange(start, end, 0.005)
+        points = []
+        for t in times:
+            plant.SetPositions(plant_context, station.instances[UR3], plan.positions(t))
+            points.append(tcp.CalcPoseInWorld(plant_context).translation())
+        points = np.array(points)
+        acc = np.diff(points, n=2, axis=0) / 0.005**2
+        largest = max(largest, float(np.linalg.norm(acc, axis=1).max()))
+        upward = max(upward, float(acc[:, 2].max()))
+    return {"largest": largest, "upward": upward}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the three experiments and write the report."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--out", type=Path, default=REPORT)
+    args = parser.parse_args(argv)
+    rows = []
+    for setting in SETTINGS:
+        result = settling(setting, args.repeats)
+        rows.append((setting, result))
+        print(setting.name, result, flush=True)
+    grip = _Grip.make(Scenario(), "square_flange")
+    default_force = Scenario().station.rg2.grip_force
+    grips = {force: grip_limits(grip, force) for force in (default_force, 10.0, 5.0, 3.0)}
+    for force, limits in grips.items():
+        print(f"grip {force} N", limits, flush=True)
+    carry = carry_accelerations()
+    print("carry", carry, flush=True)
+    atomic_write_text(args.out, _report(args, rows, grips, carry, grip))
+    return 0
+
+
+def _fmt(x: float | None, unit: str = "") -> str:
+    return "—" if x is None else f"{x:g}{unit}"
+
+
+def _report(args, rows, grips, carry, grip) -> str:
+    lines = [
+        "# Contact settings: settling, friction grasps, real-time factor",
+        "",
+        f"`python benchmarks/bench_contact.py --repeats {args.repeats}` — drake "
+        f"{importlib.metadata.version('drake')}, {platform.machine()}, {os.cpu_count()} cores "
+        f"(shared with other work while it ran), Python {platform.python_version()}. Real-time "
+        "factors are simulated time over this process's CPU time, best of the repeats.",
+        "",
+        "## 1. Settling",
+        "",
+        "Parts let go near their seats (1 mm off, 1° tilt, 3 mm above a plate seat, 6 mm above "
+        "a host's row) in three configurations (F1; F3 S12 F01; F1 S23 F03), workpieces only, "
+        "1 s. *rest*: when every part is slower than 1 mm/s for good (the slowest of the three "
+        "runs; — : not by 1 s); *read*: runs whose configuration the sensor reads; *off*: the "
+        "largest horizontal distance of a part to its nominal seat at the end (the pocket's "
+        "clearance is 1.5 mm); *at rest*: RTF of the whole station holding still (arm, gripper, "
+        "operator's body, parts in the tray), the ratio base of the closed-loop figures.",
+        "",
+        "| setting | RTF (drops) | rest [s] | read | off [mm] | RTF at rest |",
+        "|---|---|---|---|---|---|",
+    ]
+    for setting, r in rows:
+        lines.append(
+            f"| {setting.name} | {r['rtf']:.2f} | {_fmt(r['rest'] and round(r['rest'], 2))} | "
+            f"{r['read']}/3 | {r['off'] * 1000:.2f} | {r['at_rest']:.2f} |"
+        )
+    mass = grip.station.part_body("square_flange").default_mass()
+    lines += [
+        "",
+        "## 2. Friction grasps",
+        "",
+        f"The square flange ({mass:.2f} kg) held in the air by the pads' friction at a grip "
+        "force, default contact settings; the tcp accelerates at a steady rate for 50 ms and "
+        f"brakes as hard (rates tried: {', '.join(f'{r:g}' for r in RATES)} m/s²). Each cell: "
+        "the largest rate at which the part moves less than 1 mm relative to the tcp (— : it "
+        "slips at the smallest), and in brackets the tcp's largest measured acceleration at that "
+        "rate [m/s²].",
+        "",
+        "| grip force [N] | up | along the pads | across the pads |",
+        "|---|---|---|---|",
+    ]
+    for force, limits in grips.items():
+        cells = [
+            f"{_fmt(limits[d][0])} ({limits[d][1]:.0f})"
+            for d in ("up", "along the pads", "across the pads")
+        ]
+        lines.append(f"| {force:g} | " + " | ".join(cells) + " |")
+    lines += [
+        "",
+        "## 3. What the carry asks",
+        "",
+        f"Along row 1's three plans, while a part is held: the largest tcp acceleration "
+        f"{carry['largest']:.2f} m/s², the largest upward one {carry['upward']:.2f} m/s² (plans "
+        "sampled at 200 Hz).",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
