@@ -260,10 +260,10 @@ def main(argv: list[str] | None = None) -> int:
         f"`python benchmarks/bench_friction_rtf.py --weld-tree DIR --repeats {args.repeats} "
         f"--scenario {args.scenario}` (DIR: `git archive {args.weld_commit}`) — drake "
         f"{importlib.metadata.version('drake')}, {platform.machine()}, {os.cpu_count()} cores, "
-        f"Python {platform.python_version()}; the machine was shared with other work while it "
-        "ran, so the figures are ranges over the repeats, and the CPU time of the controller's "
-        "process (which excludes the planning worker and waiting for a core) is given beside the "
-        "wall time.",
+        f"Python {platform.python_version()}. The figures are ranges over the repeats, and the "
+        "CPU time of the controller's process (which excludes the planning worker and waiting "
+        "for a core) is given beside the wall time: where the two agree, nothing else took the "
+        "cores.",
         "",
         f"Each configuration: `{args.scenario}`, full settings (5 s bolting holds, TCP <= "
         "0.25 m/s), the operator's body and the separation monitor on, every plan cached (a "

@@ -59,6 +59,10 @@ class FakeStation(LeafSystem):
             "rg2.state_measured", 2, self._gripper, prerequisites_of_calc=state
         )
         self.DeclareVectorOutputPort("rg2.grip_detected", 1, self._grip)
+        # A protective stop now and then, to carry both values through the interface.
+        self.DeclareVectorOutputPort(
+            "safety.stop", 1, lambda c, o: o.SetFromVector([float(c.get_time() % 0.5 > 0.4)])
+        )
         self.DeclareAbstractOutputPort(
             "configuration", lambda: AbstractValue.Make(CellConfiguration()), self._configuration
         )
@@ -124,6 +128,7 @@ class FakeController(LeafSystem):
         self._arm = self.DeclareVectorInputPort("ur3.state_estimated", 12)
         self._gripper = self.DeclareVectorInputPort("rg2.state_measured", 2)
         self._grip = self.DeclareVectorInputPort("rg2.grip_detected", 1)
+        self._stop = self.DeclareVectorInputPort("safety.stop", 1)
         self._config = self.DeclareAbstractInputPort(
             "configuration", AbstractValue.Make(CellConfiguration())
         )
@@ -160,6 +165,7 @@ class FakeController(LeafSystem):
                 tuple(self._arm.Eval(context)),
                 tuple(self._gripper.Eval(context)),
                 float(self._grip.Eval(context)[0]),
+                float(self._stop.Eval(context)[0]),
                 self._config.Eval(context),
                 tuple(body.centres.ravel()),
                 indication,

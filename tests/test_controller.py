@@ -16,7 +16,6 @@ from hrc_drake.cell.slot_monitor import CellConfiguration, PartPlacement, PartSt
 from hrc_drake.cell.supervisor import Mode
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
 from hrc_drake.motion.service import InlinePlanService, planner_function
-from hrc_drake.robot_models import UR3_JOINTS
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.solve import exact_policy
 
@@ -38,6 +37,7 @@ class _BareCell(LeafSystem):
         self.DeclareVectorOutputPort("ur3.state_estimated", 12, self._arm)
         self.DeclareVectorOutputPort("rg2.state_measured", 2, self._gripper)
         self.DeclareVectorOutputPort("rg2.grip_detected", 1, lambda c, o: o.SetFromVector([0]))
+        self.DeclareVectorOutputPort("safety.stop", 1, lambda c, o: o.SetFromVector([0]))
         self.DeclareAbstractOutputPort(
             "configuration", lambda: AbstractValue.Make(tray), lambda c, o: o.set_value(tray)
         )
@@ -111,15 +111,11 @@ def _loop(scenario_name: str = "row1-optimal"):
 
 @pytest.mark.slow
 def test_an_arm_pushed_off_its_path_stops_the_task_with_the_reason():
-    loop = _loop()
+    # 150 N·m on the shoulder pan from 2 s into the first task, well past the UR3's 56 N·m
+    # shoulder servo.
+    push = "{faults: [{kind: pushed, task: 1, after: 2.0, torque: 150}]}"
+    loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, NO_DELAY, push]))
     assert loop.advance_to(2.0) == Mode.EXECUTE  # on its way to the first part
-    plant = loop.station.plant
-    push = np.zeros(plant.num_velocities())
-    pan = plant.GetJointByName(UR3_JOINTS[0])
-    push[pan.velocity_start()] = 150.0  # N·m, well past the UR3's 56 N·m shoulder servo
-    loop.simulator.get_system().GetInputPort("sim.applied_generalized_force").FixValue(
-        loop.root_context, push
-    )
     assert loop.advance_to(4.0) == Mode.FAILED
     status = loop.status
     assert "rad from its command" in status.error and "pushed or blocked" in status.error

@@ -104,7 +104,7 @@ def _examples() -> dict[str, tuple]:
         "UR3_COMMAND": (np.linspace(-1, 1, 6) / 3, np.linspace(2, 3, 6) / 7),
         "RG2_COMMAND": (np.array([0.0451]), np.array([17.5])),
         "HRI_PROMPT": (Prompt(3, PromptKind.BOLT, ("F1", "S12"), "F3", "oval_flange_2"),),
-        "UR3_STATUS": (np.linspace(-3, 3, 12) / 11,),
+        "UR3_STATUS": (np.linspace(-3, 3, 12) / 11, np.array([1.0])),
         "RG2_STATUS": (np.array([0.0449, -0.0021]), np.array([1.0])),
         "CELL_CONFIGURATION": (CONFIGURATION,),
         "OPERATOR_BODY": (body,),
@@ -157,9 +157,14 @@ def test_defaults_and_session_round_trip():
 
 
 def test_ur3_status_leaves_what_a_simulation_does_not_measure_unknown():
-    status = lm.ur3_status(1, np.arange(12.0))
+    status = lm.ur3_status(1, np.arange(12.0), [0.0])
     assert all(math.isnan(x) for x in status.joint_torque + status.joint_position_desired)
     assert status.num_joints == 6 and status.joint_velocity == list(np.arange(6.0, 12.0))
+    assert lm.ur3_status_values(status)[1][0] == 0.0
+    # A protective stop is the robot mode a stopped arm reports, and back.
+    stopped = lm.lcmt_panda_status.decode(lm.ur3_status(1, np.arange(12.0), [1.0]).encode())
+    assert stopped.robot_mode == lm.lcmt_panda_status.kReflex
+    assert lm.ur3_status_values(stopped)[1][0] == 1.0
 
 
 def test_decode_errors_name_the_type():

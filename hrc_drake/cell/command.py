@@ -10,6 +10,7 @@ from pathlib import Path
 
 from hrc_drake.cell.run import run_scenario, scenario_policy
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+from hrc_drake.hri.faults import FaultError, check_faults
 from hrc_drake.hri.operator import ScriptedOperator
 from hrc_drake.hri.scenario import Scenario, with_operator_script
 from hrc_drake.paths import UsageError, check_output_path
@@ -84,6 +85,26 @@ def _check_still_time(still_time: float, scenario: Scenario, space, policy, live
     )
 
 
+def _check_faults_within_run(scenario: Scenario, space, policy, live: bool) -> None:
+    """Before the run: a fault's task must be within the run when its tasks are known in
+    advance (a scripted or following operator, not live); otherwise say at once that a fault
+    past the end is reported as never injected."""
+    if not scenario.faults:
+        return
+    if live or scenario.stochastic or scenario.operator.model:
+        print(
+            "note: faults: this run's length is known only when it ends; a fault whose task "
+            "it does not reach is reported as not injected",
+            file=sys.stderr,
+        )
+        return
+    _, decisions = run_decisions(space, policy, ScriptedOperator(scenario.script))
+    try:
+        check_faults(scenario.faults, scenario.name or "--scenario-text", len(decisions))
+    except FaultError as err:
+        raise UsageError(str(err)) from None
+
+
 def _check_port(port: int) -> None:
     """UsageError unless Meshcat can serve `port`: 0 (any free port) or 1024-65535 (Drake's
     Meshcat refuses the privileged ones), and free now."""
@@ -153,6 +174,7 @@ def _checked_run(args, live: bool, still):
     if scenario.script and not live:
         _, decisions = run_decisions(space, policy, ScriptedOperator(scenario.script))
         check_script_within_run(scenario.script, decisions)
+    _check_faults_within_run(scenario, space, policy, live)
     if still is not None:
         _check_still_time(args.still_time, scenario, space, policy, live)
     return scenario, policy

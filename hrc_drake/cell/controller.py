@@ -31,6 +31,7 @@ MEASURED = (
     "ur3.state_estimated",
     "rg2.state_measured",
     "rg2.grip_detected",
+    "safety.stop",
     "configuration",
     "operator.body",
     "hri.indication",
@@ -66,6 +67,7 @@ def supervisor_limits(scenario: Scenario, options: MotionOptions) -> SupervisorL
         grip_tolerance=station.rg2.grip_tolerance,
         grip_force=station.rg2.grip_force,
         plan_ahead=run.plan_ahead,
+        indication_timeout=run.indication_timeout,
     )
 
 

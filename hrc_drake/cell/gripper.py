@@ -77,16 +77,24 @@ class FingerServo(LeafSystem):
         output.SetFromVector([desired[0], desired[1], 0.0, 0.0])
 
 
-def add_gripper_ports(builder: DiagramBuilder, plant: MultibodyPlant, rg2, kp: float) -> None:
+def add_gripper_ports(
+    builder: DiagramBuilder, plant: MultibodyPlant, rg2, kp: float, faults=None
+) -> None:
     """Export `rg2.opening` (commanded opening between the finger insides [m], clipped to the
     stroke), `rg2.force` (commanded gripping force [N], clipped to the RG2's range),
     `rg2.state_measured` (opening [m], rate [m/s]) and `rg2.grip_detected`; the fingers'
-    servo has the plant's finger gain `kp` [N/m]."""
+    servo has the plant's finger gain `kp` [N/m]. With `faults` (the station's
+    `hrc_drake.cell.faults.FaultInjector`) the command reaches the servo through it."""
     clip = builder.AddNamedSystem("rg2_clip", Saturation([0.0], [RG2_MAX_OPENING]))
     force = builder.AddNamedSystem("rg2_force_clip", Saturation([RG2_MIN_FORCE], [RG2_MAX_FORCE]))
     servo = builder.AddNamedSystem("rg2_servo", FingerServo(kp, plant.time_step()))
-    builder.Connect(clip.get_output_port(), servo.GetInputPort("opening"))
-    builder.Connect(force.get_output_port(), servo.GetInputPort("force"))
+    commanded = (clip.get_output_port(), force.get_output_port())
+    if faults is not None:
+        builder.Connect(clip.get_output_port(), faults.GetInputPort("opening"))
+        builder.Connect(force.get_output_port(), faults.GetInputPort("force"))
+        commanded = (faults.GetOutputPort("opening"), faults.GetOutputPort("force"))
+    builder.Connect(commanded[0], servo.GetInputPort("opening"))
+    builder.Connect(commanded[1], servo.GetInputPort("force"))
     builder.Connect(plant.get_state_output_port(rg2), servo.GetInputPort("finger_state"))
     builder.Connect(servo.GetOutputPort("desired_state"), plant.get_desired_state_input_port(rg2))
     builder.ExportInput(clip.get_input_port(), "rg2.opening")
@@ -95,6 +103,8 @@ def add_gripper_ports(builder: DiagramBuilder, plant: MultibodyPlant, rg2, kp: f
         "rg2_measure", MatrixGain(np.array([[1.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 1.0]]))
     )
     builder.Connect(plant.get_state_output_port(rg2), measure.get_input_port())
+    if faults is not None:
+        builder.Connect(measure.get_output_port(), faults.GetInputPort("measured"))
     builder.ExportOutput(measure.get_output_port(), "rg2.state_measured")
     grip = builder.AddNamedSystem("rg2_grip", GripSensor())
     builder.Connect(clip.get_output_port(), grip.GetInputPort("commanded"))

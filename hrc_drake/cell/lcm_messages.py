@@ -399,11 +399,13 @@ _UR3_STATUS_NOT_SIMULATED = (
 )
 
 
-def ur3_status(stamp: int, state) -> lcmt_panda_status:
-    """`ur3.state_estimated` (positions, then velocities) as a UR3 status. The simulated
-    station measures no torques and reports no targets: those members are NaN (a real driver
-    fills them from RTDE, see docs/hardware.md)."""
+def ur3_status(stamp: int, state, stop) -> lcmt_panda_status:
+    """`ur3.state_estimated` (positions, then velocities) and `safety.stop` as a UR3 status:
+    a protective stop is the robot mode `kReflex` (the arm stopped by its safety system),
+    otherwise `kMove`. The simulated station measures no torques and reports no targets: those
+    members are NaN (a real driver fills them from RTDE, see docs/hardware.md)."""
     state = _count(state, 2 * N_JOINTS, "ur3.state_estimated")
+    (stopped,) = _count(stop, 1, "safety.stop")
     unknown = [math.nan] * N_JOINTS
     message = lcmt_panda_status()
     message.utime = message.robot_utime = stamp
@@ -412,18 +414,19 @@ def ur3_status(stamp: int, state) -> lcmt_panda_status:
     for name in _UR3_STATUS_NOT_SIMULATED:
         setattr(message, name, unknown)
     message.control_command_success_rate = math.nan
-    message.robot_mode = lcmt_panda_status.kMove
+    message.robot_mode = lcmt_panda_status.kReflex if stopped > 0.5 else lcmt_panda_status.kMove
     message.control_mode = (
         lcmt_panda_status.CONTROL_MODE_POSITION | lcmt_panda_status.CONTROL_MODE_VELOCITY
     )
     return message
 
 
-def ur3_status_values(message: lcmt_panda_status) -> tuple[np.ndarray]:
-    """(`ur3.state_estimated`,) of a UR3 status."""
+def ur3_status_values(message: lcmt_panda_status) -> tuple[np.ndarray, np.ndarray]:
+    """(`ur3.state_estimated`, `safety.stop`) of a UR3 status."""
     position = _count(message.joint_position, N_JOINTS, "UR3 status positions")
     velocity = _count(message.joint_velocity, N_JOINTS, "UR3 status velocities")
-    return (np.array(position + velocity),)
+    stopped = 1.0 if message.robot_mode == lcmt_panda_status.kReflex else 0.0
+    return np.array(position + velocity), np.array([stopped])
 
 
 def rg2_command(stamp: int, opening, force) -> lcmt_rg2_command:
@@ -643,7 +646,7 @@ MEASUREMENTS: tuple[StationChannel, ...] = (
     StationChannel(
         "UR3_STATUS",
         lcmt_panda_status,
-        (Port("ur3.state_estimated", 2 * N_JOINTS),),
+        (Port("ur3.state_estimated", 2 * N_JOINTS), Port("safety.stop", 1)),
         ur3_status,
         ur3_status_values,
     ),

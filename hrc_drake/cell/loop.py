@@ -32,12 +32,14 @@ from pydrake.systems.framework import Diagram, DiagramBuilder, EventStatus
 from hrc_drake.atomic import atomic_write_bytes, atomic_write_text
 from hrc_drake.cell.contacts import Owner, geometry_owners, owner_pairs
 from hrc_drake.cell.controller import Controller, connect_controller
+from hrc_drake.cell.fault_report import fault_records
 from hrc_drake.cell.separation import SafetyLog
 from hrc_drake.cell.slot_monitor import CellConfiguration
 from hrc_drake.cell.station import CellStation
 from hrc_drake.cell.supervisor import Mode, SupervisorStatus, TaskRecord
 from hrc_drake.cell.view import frame_cell
 from hrc_drake.cell_models import CellDesign
+from hrc_drake.hri.faults import FaultRecord
 from hrc_drake.hri.scenario import Scenario
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.service import PlanService
@@ -71,6 +73,8 @@ class RunResult:
     changes (with the operator body)."""
     interrupted: bool = False
     """The run was ended by Ctrl-C before it finished."""
+    faults: tuple[FaultRecord, ...] = ()
+    """The scenario's faults: when injected, detected, and what came of them."""
 
     @property
     def idle(self) -> tuple[float, ...]:
@@ -108,6 +112,7 @@ class RunResult:
             "real_time_factor": None if rtf is None else round(rtf, 3),
             "recording": str(self.recording) if self.recording else None,
             "safety": self.safety.to_json() if self.safety is not None else None,
+            "faults": [f.to_json() for f in self.faults],
         }
 
 
@@ -153,6 +158,10 @@ class CellSide(Protocol):
     def apply_welds(self, root) -> frozenset:
         """Apply the wanted welds; returns them."""
 
+    def injected(self, root) -> tuple:
+        """The faults the station has injected (`hrc_drake.cell.faults.Injection`, one per
+        scenario fault; a station that does not say: none injected)."""
+
     def configuration(self, root) -> CellConfiguration:
         """The configuration the station measures now."""
 
@@ -183,6 +192,11 @@ class LocalCell:
     def apply_welds(self, root) -> frozenset:
         """See `CellStation.apply_welds`."""
         return self.station.apply_welds(root)
+
+    def injected(self, root) -> tuple:
+        """The station's fault injector's record (its `sim.faults` output)."""
+        context = self.diagram.GetMyContextFromRoot(root)
+        return self.diagram.GetOutputPort("sim.faults").Eval(context)
 
     def configuration(self, root) -> CellConfiguration:
         """The configuration sensor's reading."""
@@ -473,6 +487,11 @@ def _result(loop: ClosedLoop, wall: float, path, interrupted: bool) -> RunResult
         safety=loop.controller.safety_log(root),
         speed_changes=tuple(watch.lights.changes) if watch.lights is not None else (),
         interrupted=interrupted,
+        faults=tuple(
+            fault_records(
+                setup.scenario.faults, loop.cell.injected(root), status.detections, root.get_time()
+            )
+        ),
     )
 
 

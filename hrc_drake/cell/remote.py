@@ -97,6 +97,11 @@ class RemoteCell:
         """Nothing to apply here."""
         return frozenset()
 
+    def injected(self, root) -> tuple:
+        """The station keeps its fault record to itself over LCM: none reads as injected (the
+        controller's detections are still in the run's events)."""
+        return ()
+
     def configuration(self, root):
         """The configuration the station measured last."""
         return self.diagram.GetOutputPort("configuration").Eval(self._context(root))

@@ -58,6 +58,7 @@ from pydrake.systems.sensors import CameraConfig, RgbdSensor
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.arm_servo import GravityCompensation
 from hrc_drake.cell.contacts import contact_pairs, geometry_owners
+from hrc_drake.cell.faults import FaultInjector, SilentOperator
 from hrc_drake.cell.gripper import add_gripper_ports
 from hrc_drake.cell.operator_body import BodyScript, BodySpheres, OperatorBody
 from hrc_drake.cell.scenario import cell_design, plant_config, scene_graph_config
@@ -65,6 +66,7 @@ from hrc_drake.cell.sim_operator import SimulatedOperator
 from hrc_drake.cell.slot_monitor import CellConfiguration, SlotMonitor
 from hrc_drake.cell.welds import Bolts, Weld
 from hrc_drake.cell_models import CellDesign, add_cell_models
+from hrc_drake.hri.faults import FaultKind
 from hrc_drake.hri.messages import Prompt
 from hrc_drake.hri.scenario import CameraSettings, Scenario
 from hrc_drake.motion.poses import IN_TRAY, CellFrames, layout_poses
@@ -288,6 +290,9 @@ def _add_operator(builder, plant, scene_graph, parts, scenario: Scenario, operat
         "operator", SimulatedOperator(operator, scenario.motion.hold_time, run.period)
     )
     builder.ExportInput(person.GetInputPort("hri.prompt"), "hri.prompt")
+    if builder.HasSubsystemNamed("fault_injector"):
+        faults = builder.GetSubsystemByName("fault_injector")
+        builder.ConnectInput("hri.prompt", faults.GetInputPort("hri.prompt"))
     builder.ExportOutput(person.GetOutputPort("hri.indication"), "hri.indication")
     if not scenario.body.enabled:
         nobody = BodySpheres(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
@@ -390,11 +395,28 @@ def _add_camera(builder: DiagramBuilder, scene_graph, settings: CameraSettings) 
     builder.ExportOutput(sensor.color_image_output_port(), "sim.camera.rgb_image")
 
 
-def _export_sim_ports(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph) -> None:
-    # A disturbance on the plant's joints (a push on the arm); unconnected, none.
+def _add_faults(builder: DiagramBuilder, plant: MultibodyPlant, scenario: Scenario):
+    """The fault injector (it passes everything through when the scenario has no faults):
+    `safety.stop` out, the pushes on the plant's joints, `sim.faults` (what it injected)."""
+    faults = builder.AddNamedSystem(
+        "fault_injector", FaultInjector(plant, scenario.faults, scenario.run.period)
+    )
+    builder.ExportOutput(faults.GetOutputPort("safety.stop"), "safety.stop")
+    builder.ExportOutput(faults.GetOutputPort("injected"), "sim.faults")
+    builder.Connect(
+        faults.GetOutputPort("torque"), plant.get_applied_generalized_force_input_port()
+    )
+    return faults
+
+
+def _export_disturbance(builder: DiagramBuilder, plant: MultibodyPlant) -> None:
+    # A station without the robot: a disturbance on the plant's joints; unconnected, none.
     builder.ExportInput(
         plant.get_applied_generalized_force_input_port(), "sim.applied_generalized_force"
     )
+
+
+def _export_sim_ports(builder: DiagramBuilder, plant: MultibodyPlant, scene_graph) -> None:
     builder.ExportOutput(plant.get_state_output_port(), "sim.plant_state")
     builder.ExportOutput(plant.get_contact_results_output_port(), "sim.contact_results")
     builder.ExportOutput(plant.get_body_poses_output_port(), "sim.body_poses")
@@ -440,11 +462,16 @@ def make_cell_station(
     check_station_scenario(scenario, design)
     if operator is None:
         operator = scenario.operator_for(generate_states(design.spec))
+    if any(f.fault_kind == FaultKind.OPERATOR_SILENT for f in scenario.faults):
+        operator = SilentOperator(operator, scenario.faults)
     builder = DiagramBuilder()
     plant, scene_graph, instances, bolts, frames = _add_plant(builder, scenario, design)
     if scenario.station.robot:
         _add_arm(builder, plant, instances[UR3])
-        add_gripper_ports(builder, plant, instances[GRIPPER], scenario.station.rg2.kp)
+        faults = _add_faults(builder, plant, scenario)
+        add_gripper_ports(builder, plant, instances[GRIPPER], scenario.station.rg2.kp, faults)
+    else:
+        _export_disturbance(builder, plant)
     parts = {name: instances[name] for name in design.instance_names}
     person = _add_operator(builder, plant, scene_graph, parts, scenario, operator, body_script)
     _add_part_sensors(builder, plant, scene_graph, frames, parts, person)

@@ -15,8 +15,12 @@ It is the controller's task level and sees the cell only through what a real cel
    sit in another seat than planned — and only then moves the MDP state on.
 
 It checks what it commands against what it measures: a joint farther from its command than
-`station.ur3.tracking_tolerance`, or fingers that do not stand at the width of the part they
-should hold (and have not stalled on it), stop the task with the reason.
+`station.ur3.tracking_tolerance`, fingers that do not stand at the width of the part they
+should hold (and have not stalled on it), or that have not left it after the release, stop the
+task with the reason (handed over to the operator). A protective stop on the `safety.stop`
+input stops the robot on its path until it clears; an operator silent for
+`run.indication_timeout` is asked again. Each is recorded as a `Detection` (what the run
+reports of the scenario's faults, `hrc_drake.cell.fault_report`).
 
 The robot follows its plan in plan time `tau`, which advances at the speed scale s ∈ [0, 1] that
 the separation monitor allows on the optional `speed_limit` input: the robot slows down by
@@ -82,6 +86,28 @@ class TaskRecord:
 
 
 @dataclass(frozen=True)
+class Detection:
+    """Something the Supervisor found wrong from its measurements, and what came of it.
+
+    `cause`: `stop` (the protective-stop input), `silence` (no indication within the timeout),
+    `tracking` (a joint off its command), `grip` (the fingers do not hold the part), `release`
+    (the fingers do not open), `plan` (no plan), `configuration` (the cell shows what no task
+    explains). `recovery`: `resume`, `ask` (the cell went on by itself), or `operator` (the
+    task is handed over)."""
+
+    cause: str
+    step: int
+    at: float
+    resolved_at: float | None = None
+    recovery: str = ""
+
+    @property
+    def recovered(self) -> bool:
+        """The cell itself recovered and went on."""
+        return self.resolved_at is not None and self.recovery != "operator"
+
+
+@dataclass(frozen=True)
 class SupervisorStatus:
     """The Supervisor's abstract state (one value, replaced at every update)."""
 
@@ -109,7 +135,10 @@ class SupervisorStatus:
     rate: float = 1.0  # d tau / dt from `tau_time` on
     speed: float = 1.0  # the speed scale s the robot runs at (1: the plan's own speed)
     idle: float = 0.0  # wall seconds waited on the planner for the current task
-    grip_lost_at: float | None = None  # when the grasp last started to look lost
+    grip_lost_at: float | None = None  # when the grasp (or the release) started to look wrong
+    asked_at: float = 0.0  # when the operator was last asked to choose
+    stopped: bool = False  # the protective-stop input is on
+    detections: tuple[Detection, ...] = ()
 
     def __deepcopy__(self, memo) -> SupervisorStatus:
         # Drake copies abstract values at every update and output evaluation; this value is
@@ -150,7 +179,11 @@ class SupervisorStatus:
 
 
 class SupervisorError(RuntimeError):
-    """The supervisor cannot go on."""
+    """The supervisor cannot go on; `cause` is the Detection cause it reports."""
+
+    def __init__(self, message: str, cause: str = "configuration"):
+        super().__init__(message)
+        self.cause = cause
 
 
 @dataclass(frozen=True)
@@ -165,6 +198,7 @@ class SupervisorLimits:
     grip_tolerance: float = 0.004
     grip_force: float = 20.0
     plan_ahead: bool = True
+    indication_timeout: float = 10.0
 
 
 class Supervisor(LeafSystem):
@@ -172,7 +206,8 @@ class Supervisor(LeafSystem):
 
     Input ports: `configuration` (CellConfiguration), `hri.indication` (Indication),
     `ur3.state_estimated` (12), `rg2.state_measured` (2: opening, rate), `rg2.grip_detected`
-    (1), `speed_limit` (1: the speed scale the separation monitor allows; unconnected, 1).
+    (1), `speed_limit` (1: the speed scale the separation monitor allows; unconnected, 1),
+    `safety.stop` (1: the robot's protective-stop input; unconnected, none).
     Output ports: `command` (14: the arm's joint positions and velocities, then the gripper's
     opening and grip force; the controller splits it into `ur3.position`, `ur3.velocity`,
     `rg2.opening`, `rg2.force`),
@@ -217,6 +252,7 @@ class Supervisor(LeafSystem):
         self._gripper_port = self.DeclareVectorInputPort("rg2.state_measured", 2)
         self._grip_port = self.DeclareVectorInputPort("rg2.grip_detected", 1)
         self._speed_port = self.DeclareVectorInputPort("speed_limit", BasicVector(1))
+        self._stop_port = self.DeclareVectorInputPort("safety.stop", BasicVector(1))
 
     def _declare_outputs(self) -> None:
         # Outputs depend on the state and time only (no feedthrough): the separation monitor
@@ -277,6 +313,10 @@ class Supervisor(LeafSystem):
         status = self._status(context)
         now = context.get_time()
         limit = self._speed_port.Eval(context)[0] if self._speed_port.HasValue(context) else 1.0
+        stop = self._stop_port.HasValue(context) and self._stop_port.Eval(context)[0] > 0.5
+        status = self._note_stop(status, stop, now)
+        if stop:
+            limit = 0.0  # decelerate along the path, as for the separation monitor's stop
         try:
             self._check_tracking(status, context, now)
             status = self._advance(status, float(np.clip(limit, 0.0, 1.0)), now)
@@ -290,10 +330,12 @@ class Supervisor(LeafSystem):
         (a part in it stays held)."""
         q = self._arm_port.Eval(context)[:N_JOINTS]
         opening = s.command(now)[2]
+        found = Detection(err.cause, s.step, now, now, "operator")
         return replace(
             s,
             mode=Mode.FAILED,
             error=str(err),
+            detections=(*s.detections, found),
             plan=None,
             q_hold=tuple(float(x) for x in q),
             opening_hold=float(opening),
@@ -326,7 +368,8 @@ class Supervisor(LeafSystem):
             raise SupervisorError(
                 f"step {s.step}: {UR3_JOINTS[worst]} is {error[worst]:.3f} rad from its command "
                 f"(tolerance {self._limits.tracking_tolerance} rad): the arm is pushed or "
-                "blocked; the task is stopped and the arm holds where it is"
+                "blocked; the task is stopped and the arm holds where it is",
+                cause="tracking",
             )
 
     def _advance(self, s: SupervisorStatus, limit: float, now: float) -> SupervisorStatus:
@@ -363,13 +406,16 @@ class Supervisor(LeafSystem):
             self._plan_ahead(s.state, config.layout())
         proposal = self._policy.next_task(s.state)
         prompt = Prompt(s.step + 1, PromptKind.CHOOSE, s.state, proposal)
-        return replace(s, mode=Mode.ASK, step=s.step + 1, prompt=prompt, tokens_before=tokens)
+        return replace(
+            s, mode=Mode.ASK, step=s.step + 1, prompt=prompt, tokens_before=tokens, asked_at=now
+        )
 
     def _take_indication(self, s: SupervisorStatus, context, now: float):
         """Once the operator indicates a task: check it, then ask the planner for it."""
         indication: Indication = self._indication_port.Eval(context)
         if not indication.answers(s.prompt):
-            return s
+            return self._note_silence(s, now)
+        s = self._resolve(s, "silence", now, "ask")
         space, step, indicated = self._space, s.step, indication.task
         feasible = {t for t, _ in space.tasks(space.index(s.state))}
         if indicated not in feasible:
@@ -402,7 +448,7 @@ class Supervisor(LeafSystem):
             return s
         step, (proposed, indicated, _) = s.step, s.pending
         if isinstance(result, PlanFailure):
-            raise SupervisorError(f"step {step}: {result}")
+            raise SupervisorError(f"step {step}: {result}", cause="plan")
         plan: Plan = result
         placement = config.placement(plan.instance)
         expected = PartStatus.SEATED if indicated == UNDO else PartStatus.TRAY
@@ -465,22 +511,77 @@ class Supervisor(LeafSystem):
 
     def _check_grip(self, s: SupervisorStatus, context, now: float) -> SupervisorStatus:
         """Between the grasp and the release the fingers must stand at the part's width,
-        stalled on it: closed past it, the gripper holds nothing."""
+        stalled on it (closed past it, the gripper holds nothing); after the release they must
+        have left it (standing at it, the gripper does not open)."""
         plan, tau = s.plan, s.plan_time(now)
-        if not plan.segment(Stage.GRASP).end + GRIP_SETTLE <= tau < plan.t_release:
-            return replace(s, grip_lost_at=None)
         opening = float(self._gripper_port.Eval(context)[0])
-        gripped = self._grip_port.Eval(context)[0] > 0.5
         width = plan.grip_width
-        if gripped and abs(opening - width) <= self._limits.grip_tolerance:
+        if plan.segment(Stage.GRASP).end + GRIP_SETTLE <= tau < plan.t_release:
+            gripped = self._grip_port.Eval(context)[0] > 0.5
+            ok = gripped and abs(opening - width) <= self._limits.grip_tolerance
+            cause, what = (
+                "grip",
+                (
+                    f"({'stalled' if gripped else 'no grip detected'}) where {plan.instance} is "
+                    f"{width * 1000:.1f} mm wide: it does not hold the part"
+                ),
+            )
+        elif plan.segment(Stage.RELEASE).end + GRIP_SETTLE <= tau < plan.duration:
+            ok = opening > width + 2 * self._limits.grip_tolerance
+            cause, what = (
+                "release",
+                (
+                    f"after the release, on {plan.instance} ({width * 1000:.1f} mm): the gripper "
+                    "does not open and may still hold the part"
+                ),
+            )
+        else:
+            return replace(s, grip_lost_at=None)
+        if ok:
             return replace(s, grip_lost_at=None)
         if s.grip_lost_at is None or now - s.grip_lost_at < GRIP_SETTLE:
             return replace(s, grip_lost_at=now if s.grip_lost_at is None else s.grip_lost_at)
         raise SupervisorError(
-            f"step {s.step}: the gripper stands at {opening * 1000:.1f} mm "
-            f"({'stalled' if gripped else 'no grip detected'}) where {plan.instance} is "
-            f"{width * 1000:.1f} mm wide: it does not hold the part; the task is stopped"
+            f"step {s.step}: the gripper stands at {opening * 1000:.1f} mm {what}; the task is "
+            "stopped",
+            cause=cause,
         )
+
+    def _note_stop(self, s: SupervisorStatus, stop: bool, now: float) -> SupervisorStatus:
+        """Note the protective-stop input turning on (the robot stops on its path) and off
+        (it resumes where it stopped, the task state untouched)."""
+        if stop == s.stopped or s.mode in (Mode.DONE, Mode.FAILED):
+            return s
+        if stop:
+            event = f"{now:.2f}: protective stop: the robot stops on its path"
+            found = Detection("stop", s.step, now)
+            return replace(
+                s, stopped=True, detections=(*s.detections, found), events=(*s.events, event)
+            )
+        s = replace(s, stopped=False, events=(*s.events, f"{now:.2f}: stop cleared: resumes"))
+        return self._resolve(s, "stop", now, "resume")
+
+    def _note_silence(self, s: SupervisorStatus, now: float) -> SupervisorStatus:
+        """No answer within the timeout: the robot holds still where it is and asks again
+        (the prompt stays up; the wait starts over)."""
+        timeout = self._limits.indication_timeout
+        if now - s.asked_at < timeout:
+            return s
+        event = f"{now:.2f}: no indication for step {s.step} in {timeout:g} s: asks again"
+        open_ = any(d.cause == "silence" and d.resolved_at is None for d in s.detections)
+        detections = s.detections if open_ else (*s.detections, Detection("silence", s.step, now))
+        return replace(s, asked_at=now, detections=detections, events=(*s.events, event))
+
+    @staticmethod
+    def _resolve(s: SupervisorStatus, cause: str, now: float, recovery: str):
+        """Mark the open detections of `cause` recovered by `recovery` at `now`."""
+        detections = tuple(
+            replace(d, resolved_at=now, recovery=recovery)
+            if d.cause == cause and d.resolved_at is None
+            else d
+            for d in s.detections
+        )
+        return replace(s, detections=detections)
 
     def _plan_ahead_after(self, s: SupervisorStatus, config: CellConfiguration) -> None:
         """While the operator bolts: plan what the policy will propose once this task is done
@@ -571,6 +672,7 @@ class Supervisor(LeafSystem):
 
 
 __all__ = [
+    "Detection",
     "Mode",
     "Supervisor",
     "SupervisorError",

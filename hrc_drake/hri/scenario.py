@@ -26,6 +26,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from hrc_drake.hri.faults import FaultConfig, FaultError, check_faults
 from hrc_drake.hri.operator import ScriptedOperator, StochasticOperator, parse_operator_script
 from hrc_drake.layout import CellLayout
 from hrc_drake.motion.options import MotionOptions
@@ -178,6 +179,8 @@ class RunConfig:
         wait_for_planner: simulated time stands still while the planner works, so that a run
             does not depend on the machine's speed (same seed, same result); False: time runs
             on and the robot holds still meanwhile, as on a real cell (live runs always).
+        indication_timeout: seconds the robot waits for the operator's indication before it
+            notes the silence and asks again (holding still meanwhile).
     """
 
     period: float = 0.02
@@ -186,6 +189,7 @@ class RunConfig:
     max_steps: int = 30
     plan_ahead: bool = True
     wait_for_planner: bool = True
+    indication_timeout: float = 10.0
 
 
 @dataclass
@@ -375,6 +379,7 @@ class Scenario:
     body: BodyConfig = field(default_factory=BodyConfig)
     station: StationConfig = field(default_factory=StationConfig)
     interaction: InteractionConfig = field(default_factory=InteractionConfig)
+    faults: list[FaultConfig] = field(default_factory=list)
 
     @property
     def assembly_path(self) -> Path:
@@ -484,6 +489,10 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
         except ValueError as err:
             raise ScenarioError(f"scenario {source}: {err}") from err
     _check_interaction(scenario.interaction, fail)
+    try:
+        check_faults(scenario.faults, source)
+    except FaultError as err:
+        raise ScenarioError(str(err)) from err
     return scenario
 
 

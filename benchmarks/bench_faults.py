@@ -1,0 +1,236 @@
+"""Faults injected into the cell, found and survived -> benchmarks/reports/faults.md.
+
+Every fault kind the cell simulates x `--seeds` seeds (default 10), on the flange case and on
+the 4-slot cell, full settings (5 s bolting holds, TCP <= 0.25 m/s; `--lean` for a quick look),
+the operator's body and the separation monitor on. A seed draws the task the fault strikes (any
+task of the run), when it strikes, and the kind's other parameter (a stop's length, how long
+the operator stays silent, whether the gripper sticks closed or open). Per cell and kind:
+detection rate (of the faults injected, those the controller found from its measurements),
+recovery rate (the cell went on by itself and finished the assembly), the simulated time lost,
+robot collisions and separation violations.
+
+Usage: ``python benchmarks/bench_faults.py [--seeds 10] [--workers 2] [--lean]`` (with
+``--lean`` the report is printed, not written).
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from hrc_drake.atomic import atomic_write_text
+from hrc_drake.hri.faults import SIMULATED, FaultKind
+
+CELLS = {"flange": "row1-optimal", "four-slot": None}
+# What the cell should do with each kind: recover and go on, or hand the task over.
+RECOVERS = {
+    FaultKind.PROTECTIVE_STOP: True,
+    FaultKind.OPERATOR_SILENT: True,
+    FaultKind.PUSHED: False,
+    FaultKind.GRIPPER_STUCK: False,
+    FaultKind.GRIP_LOST: False,
+}
+REPORT = Path(__file__).parent / "reports" / "faults.md"
+
+
+def fault_entry(kind: FaultKind, seed: int, tasks: int) -> str:
+    """The `faults:` entry of one seeded run (YAML flow text)."""
+    rng = np.random.default_rng([seed, list(FaultKind).index(kind)])
+    task = int(rng.integers(1, tasks + 1))
+    extra = {
+        FaultKind.PROTECTIVE_STOP: f"after: {rng.uniform(3.0, 6.0):.2f}, "
+        f"duration: {rng.uniform(0.5, 3.0):.2f}",
+        FaultKind.OPERATOR_SILENT: f"duration: {rng.uniform(11.0, 20.0):.2f}",
+        FaultKind.PUSHED: f"after: {rng.uniform(3.0, 6.0):.2f}",
+        FaultKind.GRIPPER_STUCK: f"stuck: {'close' if seed % 2 == 0 else 'open'}",
+        FaultKind.GRIP_LOST: f"after: {rng.uniform(0.3, 1.5):.2f}",
+    }[kind]
+    return f"{{kind: {kind.value}, task: {task}, {extra}}}"
+
+
+def _texts(cell: str, lean: bool) -> list[str]:
+    texts = [] if CELLS[cell] else [f"{{assembly: {cell}, name: {cell}}}"]
+    if lean:
+        from hrc_drake.cell.scenario import LEAN
+
+        texts.append(LEAN)
+    return texts
+
+
+def run_tasks(cell: str, lean: bool) -> int:
+    """How many tasks the cell's run has (its operator follows the robot)."""
+    from hrc_drake.cell.run import scenario_policy
+    from hrc_drake.cell.scenario import load_cell_scenario
+    from hrc_drake.hri.operator import ScriptedOperator
+    from hrc_drake.tasks.decide import run_decisions
+    from hrc_drake.tasks.graph import generate_states
+    from hrc_drake.tasks.spec import load_spec
+
+    scenario = load_cell_scenario(CELLS[cell], _texts(cell, lean))
+    space = generate_states(load_spec(scenario.assembly_path))
+    _, decisions = run_decisions(space, scenario_policy(scenario, space), ScriptedOperator({}))
+    return len(decisions)
+
+
+_PLANNERS: dict = {}
+
+
+def one_run(job: tuple[str, str, int, str, bool]) -> dict:
+    """One faulted run; its fault record and the run's figures. (A pool's worker cannot start
+    a planning worker of its own: it plans in-process, one planner per cell, its plans
+    cached.)"""
+    from hrc_drake.cell.run import build_closed_loop, shared_planner
+    from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
+    from hrc_drake.tasks.spec import load_spec
+
+    cell, kind, seed, entry, lean = job
+    texts = [*_texts(cell, lean), f"{{faults: [{entry}]}}"]
+    scenario = load_cell_scenario(CELLS[cell], texts)
+    if cell not in _PLANNERS:
+        design = cell_design(scenario, load_spec(scenario.assembly_path))
+        _PLANNERS[cell] = shared_planner(motion_options(scenario), design)
+    loop = build_closed_loop(scenario, motion_planner=_PLANNERS[cell])
+    result = loop.run()
+    (record,) = result.faults
+    safety = result.safety
+    return {
+        "cell": cell,
+        "kind": kind,
+        "seed": seed,
+        "entry": entry,
+        "record": record.to_json(),
+        "terminal": result.done,
+        "collisions": len(result.collisions),
+        "violations": safety.violations if safety is not None else 0,
+        "sim_time": result.sim_time,
+    }
+
+
+def summary_rows(runs: list[dict]) -> list[str]:
+    """The report's table rows, one per cell and kind."""
+    rows = []
+    for cell in CELLS:
+        for kind in SIMULATED:
+            mine = [r for r in runs if r["cell"] == cell and r["kind"] == kind.value]
+            injected = [r for r in mine if r["record"]["injected_at"] is not None]
+            detected = [r for r in injected if r["record"]["detected_at"] is not None]
+            recovered = [r for r in detected if r["record"]["recovered"] and r["terminal"]]
+            lost = [r["record"]["seconds_lost"] for r in detected]
+            expected = "recover" if RECOVERS[kind] else "hand over"
+            rows.append(
+                f"| {cell} | {kind.value} | {expected} | {len(mine)} | {len(injected)} | "
+                f"{len(detected)}/{len(injected)} | {len(recovered)}/{len(detected)} | "
+                f"{np.mean(lost) if lost else 0:.2f} | {max(lost) if lost else 0:.2f} | "
+                f"{sum(r['collisions'] for r in mine)} | {sum(r['violations'] for r in mine)} |"
+            )
+    return rows
+
+
+def violations_note(runs: list[dict]) -> list[str]:
+    """A paragraph on the kinds whose runs counted separation violations, if any."""
+    kinds = sorted({r["kind"] for r in runs if r["violations"]})
+    if not kinds:
+        return ["No run counted a separation violation.", ""]
+    text = (
+        f"Separation violations (monitor steps with the arm moving closer to the body than S_p) "
+        f"were counted only in {', '.join(kinds)} runs."
+    )
+    if kinds == [FaultKind.PUSHED.value]:
+        text += (
+            " They fall in the push itself: 80 N·m on the shoulder pan is more than its servo's "
+            "56 N·m, so for the push's 0.3 s the arm moves faster than commanded and S_p, which "
+            "grows with the measured joint speed, passes the separation for a step or two. The "
+            "controller detects the push 0.05–0.07 s after it begins and commands a hold, but "
+            "cannot brake an arm pushed harder than its motors: on a real UR3 the safety "
+            "system's protective stop (brakes) would act there."
+        )
+    return [text, ""]
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the benchmark and write the report."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=10)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--lean", action="store_true", help="0.5 s holds: a quick look")
+    args = parser.parse_args(argv)
+    jobs = []
+    for cell in CELLS:
+        tasks = run_tasks(cell, args.lean)
+        for kind in SIMULATED:
+            for seed in range(args.seeds):
+                jobs.append((cell, kind.value, seed, fault_entry(kind, seed, tasks), args.lean))
+    start = time.perf_counter()
+    runs = []
+    context = multiprocessing.get_context("spawn")
+    with context.Pool(min(args.workers, len(jobs))) as pool:
+        for k, run in enumerate(pool.imap(one_run, jobs), 1):
+            runs.append(run)
+            print(
+                f"\r{k}/{len(jobs)} runs ({time.perf_counter() - start:.0f} s)",
+                end="",
+                file=sys.stderr,
+                flush=True,
+            )
+    print(file=sys.stderr)
+    wall = time.perf_counter() - start
+    text = report(runs, args, wall)
+    if args.lean:
+        print(text)  # a quick look: the report keeps the full settings' figures
+    else:
+        atomic_write_text(REPORT, text)
+        print(f"{text}\nwritten to {REPORT}")
+    return 0
+
+
+def report(runs: list[dict], args, wall: float) -> str:
+    """The report's Markdown."""
+    from importlib.metadata import version
+
+    settings = "lean (0.5 s holds)" if args.lean else "full (5 s holds, TCP <= 0.25 m/s)"
+    lines = [
+        "# Faults: detected and survived",
+        "",
+        f"`python benchmarks/bench_faults.py --seeds {args.seeds} --workers {args.workers}"
+        f"{' --lean' if args.lean else ''}` — drake {version('drake')}, {platform.machine()}, "
+        f"{multiprocessing.cpu_count()} cores, Python {platform.python_version()}; "
+        f"{len(runs)} runs in {wall / 60:.1f} min of wall time. Settings: {settings}; the "
+        "operator's body and the separation monitor on; the operator follows the robot.",
+        "",
+        "A seed draws the task struck (any of the run's), when (stop and push: 3–6 s into the "
+        "task; lost grip: 0.3–1.5 s into the carry), a stop's length (0.5–3 s), the silence "
+        "(11–20 s, past the 10 s timeout) and whether the gripper sticks closed (even seeds) or "
+        "open (odd). *detected*: of the faults injected, those the controller found from its "
+        "measurements (in the struck task, from the injection on); *recovered*: of those, the "
+        "ones after which the cell went on by itself and finished the assembly; *lost*: "
+        "simulated seconds from the injection to the recovery, or to the end of a run handed "
+        "over (which ends when the task stops).",
+        "",
+        "| cell | kind | the cell should | runs | injected | detected | recovered | lost, mean "
+        "[s] | lost, max [s] | collisions | separation violations |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+        *summary_rows(runs),
+        "",
+        *violations_note(runs),
+        "## Runs",
+        "",
+        "| cell | seed | fault | detected at [s] | recovery | terminal |",
+        "|---|---|---|---|---|---|",
+        *(
+            f"| {r['cell']} | {r['seed']} | `{r['entry']}` | {r['record']['detected_at']} | "
+            f"{r['record']['recovery'] or '—'} | {'yes' if r['terminal'] else 'no'} |"
+            for r in runs
+        ),
+        "",
+    ]
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

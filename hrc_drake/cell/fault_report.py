@@ -1,0 +1,76 @@
+"""What a run reports of its faults: the scenario's entries, as the station carried them out and
+as the controller found them (`simulate --json` `faults`).
+
+The two sides never talk about faults: the station's injector says when each took effect
+(`hrc_drake.cell.faults.Injection`, simulator only) and the Supervisor what it detected from its
+measurements (`hrc_drake.cell.supervisor.Detection`). A fault counts as detected by the first
+detection of a cause it can produce, in its task, from its injection on.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from hrc_drake.cell.faults import Injection
+from hrc_drake.cell.supervisor import Detection
+from hrc_drake.hri.faults import FaultConfig, FaultKind, FaultRecord
+
+# What each kind of fault shows as, in the controller's measurements.
+CAUSES = {
+    FaultKind.PROTECTIVE_STOP: {"stop"},
+    FaultKind.OPERATOR_SILENT: {"silence"},
+    FaultKind.PUSHED: {"tracking"},
+    FaultKind.GRIPPER_STUCK: {"grip", "release"},
+    FaultKind.GRIP_LOST: {"grip"},
+    FaultKind.NO_PATH: {"plan"},
+    FaultKind.NO_SEAT: {"configuration"},
+}
+# A detection in the same Supervisor update as the injection may carry a time a period earlier.
+SLACK = 0.05  # s
+
+
+def fault_records(
+    faults: Sequence[FaultConfig],
+    injections: Sequence[Injection],
+    detections: Sequence[Detection],
+    end_time: float,
+) -> list[FaultRecord]:
+    """One record per scenario fault. `seconds_lost` runs from the injection to the recovery,
+    or to the end of the run for a fault handed over (0 for one never injected)."""
+    records = []
+    if not injections:  # a station that does not say
+        injections = [Injection(f.kind, f.task) for f in faults]
+    for fault, injection in zip(faults, injections, strict=True):
+        injected = injection.injected_at
+        found = next(
+            (
+                d
+                for d in detections
+                if d.cause in CAUSES[fault.fault_kind]
+                and d.step == fault.task
+                and injected is not None
+                and d.at >= injected - SLACK
+            ),
+            None,
+        )
+        if injected is None:
+            lost = 0.0
+        elif found is not None and found.recovered:
+            lost = found.resolved_at - injected
+        else:
+            lost = end_time - injected
+        records.append(
+            FaultRecord(
+                kind=fault.kind,
+                task=fault.task,
+                injected_at=injected,
+                detected_at=None if found is None else found.at,
+                recovered=found is not None and found.recovered,
+                recovery=found.recovery if found is not None and found.resolved_at else "",
+                seconds_lost=max(lost, 0.0),
+            )
+        )
+    return records
+
+
+__all__ = ["fault_records"]

@@ -1,0 +1,200 @@
+"""The simulated station's fault injector (simulator only): what goes wrong, and when.
+
+The scenario's `faults:` list (`hrc_drake.hri.faults`) says which task each fault strikes; the
+injector counts tasks from the prompts the station shows (the N-th task is decision step N,
+from the moment its `CHOOSE` prompt appears) and acts only on what a real cell's failure would
+act on: the gripper's command as the gripper carries it out, the arm's joints (a push), the
+robot's protective-stop input, the operator's answer (`SilentOperator`). The controller never
+sees the injector: it detects each fault from its measurements.
+
+Kinds acted on here: `grip-lost` (the grip force drops to `force` `after` s into the carry: the
+fingers stalled on the part), `gripper-stuck` (the fingers do not close, or do not open again,
+in the task), `protective-stop` (`safety.stop` is 1 from `after` s into the task for
+`duration` s), `pushed` (a torque on `joint` from `after` s into the task for `duration` s).
+`operator-silent` is the simulated operator's (`SilentOperator`); the injector notes when its
+task's prompt appears.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+from hrc_drake.cell.gripper import STALL_GAP
+from hrc_drake.hri.faults import FaultConfig, FaultKind
+from hrc_drake.hri.messages import Prompt, PromptKind
+
+# The fingers count as standing still below this rate (they close at about 0.5 m/s).
+STILL_RATE = 0.005  # m/s
+
+
+@dataclass(frozen=True)
+class Injection:
+    """One fault as the injector carried it out (times in simulated seconds; None: not yet)."""
+
+    kind: str
+    task: int
+    task_start: float | None = None  # when the task's CHOOSE prompt appeared
+    injected_at: float | None = None
+    since: float | None = None  # grip-lost: the carry began; stuck open: the fingers stalled
+
+    def __deepcopy__(self, memo) -> Injection:
+        return self
+
+
+def _window(fault: FaultConfig, injection: Injection, now: float) -> bool:
+    """Whether a timed fault (stop, push) acts at `now`."""
+    if injection.task_start is None:
+        return False
+    start = injection.task_start + fault.after_seconds
+    return start <= now < start + fault.duration_seconds
+
+
+class FaultInjector(LeafSystem):
+    """Carries out `faults` (see the module docstring).
+
+    Input ports: `hri.prompt` (Prompt), `opening` and `force` (the gripper's command after its
+    range clip, 1 each), `measured` (the gripper's opening and rate, 2). Output ports: `opening`,
+    `force` (the command the fingers' servo obeys), `safety.stop` (1), `torque` (the plant's
+    generalized forces), `injected` (tuple of Injection). Updated every `period` seconds."""
+
+    def __init__(self, plant: MultibodyPlant, faults: Sequence[FaultConfig], period: float):
+        super().__init__()
+        self._faults = tuple(faults)
+        self._nv = plant.num_velocities()
+        self._dof = {}
+        for fault in self._faults:
+            if fault.fault_kind == FaultKind.PUSHED:
+                self._dof[fault.joint] = plant.GetJointByName(fault.joint).velocity_start()
+        self._prompt = self.DeclareAbstractInputPort("hri.prompt", AbstractValue.Make(Prompt()))
+        self._opening = self.DeclareVectorInputPort("opening", BasicVector(1))
+        self._force = self.DeclareVectorInputPort("force", BasicVector(1))
+        self._measured = self.DeclareVectorInputPort("measured", BasicVector(2))
+        initial = tuple(Injection(f.kind, f.task) for f in self._faults)
+        self._state = self.DeclareAbstractState(AbstractValue.Make(initial))
+        self.DeclareVectorOutputPort("opening", BasicVector(1), self._calc_opening)
+        self.DeclareVectorOutputPort("force", BasicVector(1), self._calc_force)
+        self.DeclareVectorOutputPort("safety.stop", BasicVector(1), self._calc_stop)
+        self.DeclareVectorOutputPort("torque", BasicVector(self._nv), self._calc_torque)
+        self.DeclareStateOutputPort("injected", self._state)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
+
+    def _injections(self, context) -> tuple[Injection, ...]:
+        return context.get_abstract_state(self._state).get_value()
+
+    def _active(self, context, kind: FaultKind):
+        """(fault, injection) pairs of `kind` whose task has begun."""
+        for fault, injection in zip(self._faults, self._injections(context), strict=True):
+            if fault.fault_kind == kind and injection.task_start is not None:
+                yield fault, injection
+
+    def _in_task(self, context, injection: Injection) -> bool:
+        prompt: Prompt = self._prompt.Eval(context)
+        return injection.task_start is not None and prompt.step == injection.task
+
+    # --- outputs -------------------------------------------------------------------------
+    def _calc_opening(self, context, output) -> None:
+        opening = float(self._opening.Eval(context)[0])
+        measured = float(self._measured.Eval(context)[0])
+        for fault, injection in self._active(context, FaultKind.GRIPPER_STUCK):
+            if not self._in_task(context, injection):
+                continue
+            if fault.stuck == "close":
+                opening = max(opening, measured)  # the fingers can open, never close
+            elif injection.since is not None:
+                opening = min(opening, measured)  # closed on the part, they never open
+        output.SetFromVector([opening])
+
+    def _calc_force(self, context, output) -> None:
+        force = float(self._force.Eval(context)[0])
+        for fault, injection in self._active(context, FaultKind.GRIP_LOST):
+            if injection.injected_at is not None and self._in_task(context, injection):
+                force = min(force, fault.force)
+        output.SetFromVector([force])
+
+    def _calc_stop(self, context, output) -> None:
+        now = context.get_time()
+        stop = any(_window(f, i, now) for f, i in self._active(context, FaultKind.PROTECTIVE_STOP))
+        output.SetFromVector([1.0 if stop else 0.0])
+
+    def _calc_torque(self, context, output) -> None:
+        now = context.get_time()
+        torque = np.zeros(self._nv)
+        for fault, injection in self._active(context, FaultKind.PUSHED):
+            if _window(fault, injection, now):
+                torque[self._dof[fault.joint]] += fault.torque
+        output.SetFromVector(torque)
+
+    # --- what happened -------------------------------------------------------------------
+    def _update(self, context, state) -> None:
+        now = context.get_time()
+        prompt: Prompt = self._prompt.Eval(context)
+        updated = []
+        for fault, injection in zip(self._faults, self._injections(context), strict=True):
+            if injection.task_start is None:
+                if prompt.kind == PromptKind.CHOOSE and prompt.step == fault.task:
+                    injection = replace(injection, task_start=now)
+                    if fault.fault_kind == FaultKind.OPERATOR_SILENT:
+                        injection = replace(injection, injected_at=now)
+            elif injection.injected_at is None and prompt.step == fault.task:
+                injection = self._inject(context, fault, injection, now)
+            updated.append(injection)
+        state.get_mutable_abstract_state(self._state).set_value(tuple(updated))
+
+    def _inject(self, context, fault: FaultConfig, injection: Injection, now: float):
+        """The moment a fault of the running task takes effect, if it is now."""
+        kind = fault.fault_kind
+        if kind in (FaultKind.PROTECTIVE_STOP, FaultKind.PUSHED):
+            if now >= injection.task_start + fault.after_seconds:
+                return replace(injection, injected_at=now)
+            return injection
+        command = float(self._opening.Eval(context)[0])
+        opening, rate = self._measured.Eval(context)
+        # The fingers stand still short of their target: on a part (or stuck).
+        stalled = opening - command > STALL_GAP and abs(rate) < STILL_RATE
+        if kind == FaultKind.GRIP_LOST:
+            if not stalled:
+                return replace(injection, since=None)
+            since = now if injection.since is None else injection.since
+            if now - since >= fault.after_seconds:
+                return replace(injection, injected_at=now, since=since)
+            return replace(injection, since=since)
+        if kind == FaultKind.GRIPPER_STUCK and fault.stuck == "close" and stalled:
+            return replace(injection, injected_at=now)  # a close the fingers do not obey
+        if kind == FaultKind.GRIPPER_STUCK and fault.stuck == "open":
+            if injection.since is None:
+                return replace(injection, since=now) if stalled else injection
+            if command - opening > STALL_GAP:
+                return replace(injection, injected_at=now)  # an open they do not obey
+        return injection
+
+
+class SilentOperator:
+    """The simulated operator with the `operator-silent` faults: the answer to each silent
+    task's choice comes `duration` s later than the operator would give it (its own
+    `indication_delay`, if it has one, plus the silence)."""
+
+    def __init__(self, operator, faults: Sequence[FaultConfig]):
+        self._operator = operator
+        self._silence = {
+            f.task: f.duration_seconds for f in faults if f.fault_kind == FaultKind.OPERATOR_SILENT
+        }
+
+    def __call__(self, step, state, proposal):
+        return self._operator(step, state, proposal)
+
+    def __getattr__(self, name):
+        return getattr(self._operator, name)
+
+    def indication_delay(self, step: int) -> float:
+        """Seconds from the prompt of `step` to the answer."""
+        own = getattr(self._operator, "indication_delay", None)
+        return (0.0 if own is None else float(own(step))) + self._silence.get(step, 0.0)
+
+
+__all__ = ["FaultInjector", "Injection", "SilentOperator"]

@@ -1,0 +1,152 @@
+"""Faults from the scenario: the station injects them, the controller finds each from its
+measurements and recovers or hands the task over, and the run reports them."""
+
+import json
+
+import numpy as np
+import pytest
+
+from hrc_drake.cell.run import build_closed_loop
+from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+from hrc_drake.cell.supervisor import Mode
+from hrc_drake.hri.faults import FaultConfig, FaultError, check_faults
+from hrc_drake.robot_models import UR3
+
+ROW1_STATES = [(), ("F1",), ("F1", "S23"), ("F1", "S23", "F03")]
+
+
+def _run(text: str, scenario: str = "row1-optimal", until: float = 120.0):
+    loop = build_closed_loop(load_cell_scenario(scenario, [LEAN, text]))
+    loop.advance_to(until)
+    return loop
+
+
+def _result(text: str, scenario: str = "row1-optimal"):
+    return build_closed_loop(load_cell_scenario(scenario, [LEAN, text])).run()
+
+
+def test_a_protective_stop_halts_the_arm_on_its_path_and_the_task_resumes():
+    # Task 2's motion starts about 2.6 s after its prompt; the stop comes 4 s after it.
+    text = "{faults: [{kind: protective-stop, task: 2, duration: 1.5}]}"
+    loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, text]))
+    plant, station = loop.station.plant, loop.station
+    speeds = []
+    t = 0.0
+    while loop.advance_to(t) not in (Mode.DONE, Mode.FAILED) and t < 120:
+        t += 0.05
+        context = plant.GetMyContextFromRoot(loop.root_context)
+        speeds.append((t, np.abs(plant.GetVelocities(context, station.instances[UR3])).max()))
+    status = loop.status
+    assert status.mode == Mode.DONE and status.visited == ROW1_STATES
+    (stop,) = status.detections
+    assert stop.cause == "stop" and stop.step == 2 and stop.recovery == "resume"
+    assert stop.resolved_at - stop.at == pytest.approx(1.5, abs=0.05)
+    # Moving before the stop, still from a few tenths of a second after it until it clears.
+    before = [v for t, v in speeds if stop.at - 0.3 <= t < stop.at]
+    held = [v for t, v in speeds if stop.at + 0.4 <= t < stop.resolved_at]
+    assert max(before) > 0.05
+    assert max(held) < 1e-3
+
+
+def test_a_silent_operator_is_asked_again_and_the_assembly_goes_on():
+    result = _result("{faults: [{kind: operator-silent, task: 2, duration: 12}]}")
+    assert result.done and result.states == ROW1_STATES
+    (record,) = result.faults
+    assert record.kind == "operator-silent" and record.recovered and record.recovery == "ask"
+    # The timeout (run.indication_timeout, 10 s) after the prompt, before the answer.
+    assert record.detected_at - record.injected_at == pytest.approx(10.0, abs=0.05)
+    assert any("asks again" in e for e in result.events)
+    assert not result.collisions
+
+
+@pytest.mark.parametrize(
+    ("fault", "task", "cause"),
+    [
+        ("kind: pushed", 2, "tracking"),
+        ("kind: gripper-stuck", 1, "grip"),
+        ("kind: gripper-stuck, stuck: open", 2, "release"),
+        ("kind: grip-lost", 2, "grip"),
+    ],
+)
+def test_faults_the_cell_cannot_fix_stop_the_task_and_hand_it_over(fault, task, cause):
+    loop = build_closed_loop(
+        load_cell_scenario("row1-optimal", [LEAN, f"{{faults: [{{{fault}, task: {task}}}]}}"])
+    )
+    result = loop.run()
+    (found,) = loop.status.detections
+    assert found.cause == cause and found.step == task
+    assert not result.done and result.error
+    (record,) = result.faults
+    assert record.injected_at is not None and record.detected_at >= record.injected_at - 0.05
+    assert not record.recovered and record.recovery == "operator"
+    assert not result.collisions
+    # The state the run reached stays: the tasks before the fault are all there.
+    assert result.states == ROW1_STATES[:task]
+
+
+def test_a_lost_grip_lets_the_part_fall():
+    loop = _run("{faults: [{kind: grip-lost, task: 1, after: 0.5}]}")
+    assert loop.status.mode == Mode.FAILED and "does not hold the part" in loop.status.error
+    loop.advance_to(loop.root_context.get_time() + 1.0)
+    plant = loop.station.plant
+    context = plant.GetMyContextFromRoot(loop.root_context)
+    part = plant.EvalBodyPoseInWorld(context, loop.station.part_body("oval_flange_1"))
+    tcp = plant.EvalBodyPoseInWorld(
+        context, plant.GetBodyByName("rg2_base", loop.station.instances["rg2"])
+    )
+    # It lies below the gripper, out of the fingers.
+    assert tcp.translation()[2] - part.translation()[2] > 0.08
+
+
+def test_a_grip_too_weak_for_the_part_slips_and_is_detected():
+    # The square flange (0.57 kg) slips at 3 N, the RG2's least force.
+    loop = _run("{station: {rg2: {grip_force: 3}}}")
+    assert loop.status.mode == Mode.FAILED
+    (found,) = loop.status.detections
+    assert found.cause == "grip" and found.step == 2
+
+
+def test_without_faults_nothing_is_injected_or_detected():
+    loop = build_closed_loop(load_cell_scenario("row1-optimal", LEAN))
+    result = loop.run()
+    assert result.done and result.faults == () and loop.status.detections == ()
+
+
+@pytest.mark.parametrize(
+    ("entry", "message"),
+    [
+        (FaultConfig(kind="slip", task=1), "unknown kind 'slip'"),
+        (FaultConfig(kind="pushed", task=0), "tasks count from 1"),
+        (FaultConfig(kind="pushed", task=4), "past the run, which has 3 task"),
+        (FaultConfig(kind="pushed", task=1, after=-2.0), "after -2.0 must be >= 0"),
+        (FaultConfig(kind="grip-lost", task=1, force=-1.0), "force -1.0 must be >= 0"),
+        (FaultConfig(kind="no-seat", task=1, offset=-0.01), "does not simulate no-seat"),
+    ],
+)
+def test_bad_fault_entries_are_named(entry, message):
+    with pytest.raises(FaultError, match=message) as err:
+        check_faults([FaultConfig(kind="pushed", task=1), entry], "test", max_tasks=3)
+    assert "faults[1]" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_run_ended_by_a_fault_writes_its_json_and_recording(tmp_path):
+    import subprocess
+    import sys
+
+    record = tmp_path / "pushed.html"
+    text = "{faults: [{kind: pushed, task: 1}]}"
+    cmd = [sys.executable, "-m", "hrc_drake.cli", "simulate", "--lean", "--json"]
+    done = subprocess.run(
+        [*cmd, "--scenario-text", text, "--record", str(record)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 1, done.stderr
+    report = json.loads(done.stdout)
+    assert report["terminal"] is False and "pushed or blocked" in report["error"]
+    (fault,) = report["faults"]
+    assert fault["kind"] == "pushed" and fault["task"] == 1
+    assert fault["recovered"] is False and fault["recovery"] == "operator"
+    assert fault["detected_at"] >= fault["injected_at"] - 0.05
+    assert record.stat().st_size > 100_000
