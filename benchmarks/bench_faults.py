@@ -34,7 +34,8 @@ RECOVERS = {
     FaultKind.OPERATOR_SILENT: True,
     FaultKind.PUSHED: False,
     FaultKind.GRIPPER_STUCK: False,
-    FaultKind.GRIP_LOST: False,
+    FaultKind.GRIP_LOST: True,
+    FaultKind.NO_SEAT: True,
 }
 REPORT = Path(__file__).parent / "reports" / "faults.md"
 
@@ -50,6 +51,7 @@ def fault_entry(kind: FaultKind, seed: int, tasks: int) -> str:
         FaultKind.PUSHED: f"after: {rng.uniform(3.0, 6.0):.2f}",
         FaultKind.GRIPPER_STUCK: f"stuck: {'close' if seed % 2 == 0 else 'open'}",
         FaultKind.GRIP_LOST: f"after: {rng.uniform(0.3, 1.5):.2f}",
+        FaultKind.NO_SEAT: f"offset: {rng.uniform(0.008, 0.012):.4f}",
     }[kind]
     return f"{{kind: {kind.value}, task: {task}, {extra}}}"
 
@@ -205,9 +207,11 @@ def report(runs: list[dict], args, wall: float) -> str:
         "",
         "A seed draws the task struck (any of the run's), when (stop and push: 3–6 s into the "
         "task; lost grip: 0.3–1.5 s into the carry), a stop's length (0.5–3 s), the silence "
-        "(11–20 s, past the 10 s timeout) and whether the gripper sticks closed (even seeds) or "
-        "open (odd). *detected*: of the faults injected, those the controller found from its "
-        "measurements (in the struck task, from the injection on); *recovered*: of those, the "
+        "(11–20 s, past the 10 s timeout), whether the gripper sticks closed (even seeds) or "
+        "open (odd), and how far a part slides in the fingers (no-seat: 8–12 mm; at 5 mm a "
+        "part may still find its seat). *detected*: "
+        "of the faults injected, those the controller found from its measurements (in the "
+        "struck task, from the injection on); *recovered*: of those, the "
         "ones after which the cell went on by itself and finished the assembly; *lost*: "
         "simulated seconds from the injection to the recovery, or to the end of a run handed "
         "over (which ends when the task stops).",
@@ -220,11 +224,13 @@ def report(runs: list[dict], args, wall: float) -> str:
         *violations_note(runs),
         "## Runs",
         "",
-        "| cell | seed | fault | detected at [s] | recovery | terminal |",
-        "|---|---|---|---|---|---|",
+        "| cell | seed | fault | detected at [s] | recovery | terminal | collisions | "
+        "separation violations |",
+        "|---|---|---|---|---|---|---|---|",
         *(
             f"| {r['cell']} | {r['seed']} | `{r['entry']}` | {r['record']['detected_at']} | "
-            f"{r['record']['recovery'] or '—'} | {'yes' if r['terminal'] else 'no'} |"
+            f"{r['record']['recovery'] or '—'} | {'yes' if r['terminal'] else 'no'} | "
+            f"{r['collisions']} | {r['violations']} |"
             for r in runs
         ),
         "",

@@ -16,21 +16,37 @@ import sys
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.lcm import DrakeLcm
+from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.systems.framework import BasicVector, Diagram, DiagramBuilder, LeafSystem
 
 from hrc_drake.cell.interface import CellStationServer, LockstepTimeouts
 from hrc_drake.cell.operator_body import BodySpheres
-from hrc_drake.cell.slot_monitor import CellConfiguration, PartPlacement, PartStatus
+from hrc_drake.cell.slot_monitor import (
+    CellConfiguration,
+    PartPlacement,
+    PartStatus,
+    pose_tuple,
+)
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
 from hrc_drake.hri.scenario import Scenario
 
 STEP = Scenario().physics.time_step  # the plant's time step: the lockstep's exchange period
 CONTROL_PERIOD = 0.02  # the default scenario's run.period
+# Measured poses carry every bit of a double (a pose read from a plant); the tray part has none,
+# as the operator's confirmation would send.
+SEATED_POSE = pose_tuple(RigidTransform(RollPitchYaw(0.001, -0.002, 1.5712), [0.3, 0.03, 0.0164]))
+HOSTED_POSE = pose_tuple(RigidTransform(RollPitchYaw(0.0, 0.003, -1.57), [0.33, 0.0, 0.0327]))
 CONFIGURATION = CellConfiguration(
     (
-        ("oval_flange_1", PartPlacement(PartStatus.SEATED, ("slot_1",), (1,), None, "F1")),
+        (
+            "oval_flange_1",
+            PartPlacement(PartStatus.SEATED, ("slot_1",), (1,), None, "F1", SEATED_POSE),
+        ),
         ("square_flange", PartPlacement(PartStatus.TRAY)),
-        ("oval_flange_2", PartPlacement(PartStatus.SEATED, ("row_1",), (), "square_flange", "F01")),
+        (
+            "oval_flange_2",
+            PartPlacement(PartStatus.SEATED, ("row_1",), (), "square_flange", "F01", HOSTED_POSE),
+        ),
     )
 )
 

@@ -65,7 +65,6 @@ def test_a_silent_operator_is_asked_again_and_the_assembly_goes_on():
         ("kind: pushed", 2, "tracking"),
         ("kind: gripper-stuck", 1, "grip"),
         ("kind: gripper-stuck, stuck: open", 2, "release"),
-        ("kind: grip-lost", 2, "grip"),
     ],
 )
 def test_faults_the_cell_cannot_fix_stop_the_task_and_hand_it_over(fault, task, cause):
@@ -84,26 +83,79 @@ def test_faults_the_cell_cannot_fix_stop_the_task_and_hand_it_over(fault, task, 
     assert result.states == ROW1_STATES[:task]
 
 
-def test_a_lost_grip_lets_the_part_fall():
-    loop = _run("{faults: [{kind: grip-lost, task: 1, after: 0.5}]}")
-    assert loop.status.mode == Mode.FAILED and "does not hold the part" in loop.status.error
-    loop.advance_to(loop.root_context.get_time() + 1.0)
-    plant = loop.station.plant
-    context = plant.GetMyContextFromRoot(loop.root_context)
-    part = plant.EvalBodyPoseInWorld(context, loop.station.part_body("oval_flange_1"))
-    tcp = plant.EvalBodyPoseInWorld(
-        context, plant.GetBodyByName("rg2_base", loop.station.instances["rg2"])
+def test_a_lost_grip_lets_the_part_fall_and_the_robot_picks_it_up_from_where_it_lies():
+    loop = build_closed_loop(
+        load_cell_scenario(
+            "row1-optimal", [LEAN, "{faults: [{kind: grip-lost, task: 1, after: 1.0}]}"]
+        )
     )
-    # It lies below the gripper, out of the fingers.
-    assert tcp.translation()[2] - part.translation()[2] > 0.08
+    plant, station = loop.station.plant, loop.station
+    fell = None
+    t = 0.0
+    while loop.advance_to(t) not in (Mode.DONE, Mode.FAILED) and t < 120:
+        t += 0.25
+        if loop.status.mode == Mode.RECOVER and fell is None:
+            loop.advance_to(loop.status.settle_until)
+            context = plant.GetMyContextFromRoot(loop.root_context)
+            fell = plant.EvalBodyPoseInWorld(context, station.part_body("oval_flange_1"))
+            tcp = plant.GetFrameByName("tcp", station.instances["rg2"])
+            # It lies below the gripper, out of the fingers, before the robot goes for it.
+            assert tcp.CalcPoseInWorld(context).translation()[2] - fell.translation()[2] > 0.05
+    status = loop.status
+    assert fell is not None, status.events
+    assert status.mode == Mode.DONE and status.visited == ROW1_STATES, status.events
+    (found,) = status.detections
+    assert found.cause == "grip" and found.step == 1 and found.recovery == "regrasp"
+    # It fell on the plate, off any seat, and was picked from there.
+    assert any(
+        "plans to pick oval_flange_1 from where it lies (misplaced)" in e for e in status.events
+    )
+
+
+def test_a_part_that_fell_tilted_is_handed_over():
+    # Lost a little later in the carry, the flange lands tilted against the plate's edge: the
+    # gripper cannot take it from above, and the task goes to the operator.
+    text = "{faults: [{kind: grip-lost, task: 1, after: 0.6}]}"
+    loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, text]))
+    result = loop.run()
+    assert not result.done and "cannot pick oval_flange_1 from where it lies" in result.error
+    assert "tilted" in result.error
+    (record,) = result.faults
+    assert record.detected_at is not None and not record.recovered
+    assert record.recovery == "operator"
+
+
+def test_a_part_let_go_off_its_seat_is_picked_again_and_replaced():
+    loop = build_closed_loop(
+        load_cell_scenario("row1-optimal", [LEAN, "{faults: [{kind: no-seat, task: 1}]}"])
+    )
+    result = loop.run()
+    assert result.done and result.states == ROW1_STATES, result.error
+    (found,) = loop.status.detections
+    assert found.cause == "seat" and found.step == 1 and found.recovery == "replace"
+    (record,) = result.faults
+    assert record.kind == "no-seat" and record.recovered and record.recovery == "replace"
+    assert not result.collisions
+
+
+def test_a_part_that_cannot_be_replaced_in_time_is_handed_over():
+    # No second try: the first re-placement is the last; with none, the task is handed over.
+    text = "{run: {recover_tries: 0}, faults: [{kind: no-seat, task: 1}]}"
+    loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, text]))
+    result = loop.run()
+    assert not result.done and "not in a seat" in result.error
+    (record,) = result.faults
+    assert record.detected_at is not None and not record.recovered
 
 
 def test_a_grip_too_weak_for_the_part_slips_and_is_detected():
     # The square flange (0.57 kg) slips at 3 N, the RG2's least force.
     loop = _run("{station: {rg2: {grip_force: 3}}}")
     assert loop.status.mode == Mode.FAILED
-    (found,) = loop.status.detections
-    assert found.cause == "grip" and found.step == 2
+    # Each time it is picked up again it slips again, until the task is handed over.
+    detections = loop.status.detections
+    assert detections and all(d.cause == "grip" and d.step == 2 for d in detections)
+    assert detections[-1].recovery == "operator"
 
 
 def test_without_faults_nothing_is_injected_or_detected():
@@ -120,7 +172,9 @@ def test_without_faults_nothing_is_injected_or_detected():
         (FaultConfig(kind="pushed", task=4), "past the run, which has 3 task"),
         (FaultConfig(kind="pushed", task=1, after=-2.0), "after -2.0 must be >= 0"),
         (FaultConfig(kind="grip-lost", task=1, force=-1.0), "force -1.0 must be >= 0"),
-        (FaultConfig(kind="no-seat", task=1, offset=-0.01), "does not simulate no-seat"),
+        (FaultConfig(kind="no-seat", task=1, offset=-0.01), "offset -0.01 must be >= 0"),
+        (FaultConfig(kind="no-seat", task=1, obstacle=True), "obstacle: true is not simulated"),
+        (FaultConfig(kind="no-path", task=1), "does not simulate no-path"),
     ],
 )
 def test_bad_fault_entries_are_named(entry, message):

@@ -9,6 +9,7 @@ import json
 import math
 import re
 import socket
+import struct
 import subprocess
 import sys
 import time
@@ -18,6 +19,7 @@ import drake
 import numpy as np
 import pytest
 from pydrake.lcm import DrakeLcm
+from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, EventStatus
 
@@ -38,6 +40,13 @@ from hrc_drake.cell.operator_body import BodySpheres
 from hrc_drake.cell.remote import RemoteCell, run_over_lcm, station_of
 from hrc_drake.cell.run import build_closed_loop, controller_of, run_scenario
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+from hrc_drake.cell.slot_monitor import (
+    CellConfiguration,
+    PartPlacement,
+    PartStatus,
+    placement_transform,
+    pose_tuple,
+)
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
 from hrc_drake.hri.scenario import Scenario, ScenarioError
 
@@ -92,6 +101,21 @@ def test_struct_hash_is_lcm_gens_for_every_drake_type():
         assert lm.struct_hash(_drake_fields(getattr(drake, name))) == written, name
 
 
+# The fake station's configuration and a part that fell on the table, tilted: every pose bit.
+DROPPED = CellConfiguration(
+    (
+        *CONFIGURATION.placements,
+        (
+            "oval_flange_3",
+            PartPlacement(
+                PartStatus.TRANSIT,
+                pose=pose_tuple(RigidTransform(RollPitchYaw(0.4, -1.1, 2.9), [0.61, 0.37, 0.0089])),
+            ),
+        ),
+    )
+)
+
+
 def _examples() -> dict[str, tuple]:
     """Port values for every channel, unlike the defaults."""
     body = BodySpheres(
@@ -106,7 +130,7 @@ def _examples() -> dict[str, tuple]:
         "HRI_PROMPT": (Prompt(3, PromptKind.BOLT, ("F1", "S12"), "F3", "oval_flange_2"),),
         "UR3_STATUS": (np.linspace(-3, 3, 12) / 11, np.array([1.0])),
         "RG2_STATUS": (np.array([0.0449, -0.0021]), np.array([1.0])),
-        "CELL_CONFIGURATION": (CONFIGURATION,),
+        "CELL_CONFIGURATION": (DROPPED,),
         "OPERATOR_BODY": (body,),
         "HRI_INDICATION": (Indication(2, "S12", True, 7.125),),
         "SIM_CONTACTS": (
@@ -140,6 +164,34 @@ def test_every_message_round_trips(channel):
     back = channel.decode(decoded)
     assert len(back) == len(values)
     assert all(_same(a, b) for a, b in zip(values, back, strict=True)), (values, back)
+
+
+def test_configuration_poses_arrive_bit_for_bit():
+    """A measured pose arrives as the very doubles sent; a placement without one (the
+    operator's confirmation) says so with `has_pose` and arrives without one."""
+    message = lm.configuration_message(0, DROPPED)
+    flags = {p.instance: p.has_pose for p in message.placements}
+    assert flags == {
+        "oval_flange_1": True,
+        "square_flange": False,
+        "oval_flange_2": True,
+        "oval_flange_3": True,
+    }
+    (back,) = lm.configuration_value(lm.lcmt_cell_configuration.decode(message.encode()))
+    for (name, sent), (_, got) in zip(DROPPED.placements, back.placements, strict=True):
+        assert struct.pack(f">{len(sent.pose)}d", *sent.pose) == struct.pack(
+            f">{len(got.pose)}d", *got.pose
+        ), name
+    assert back.placement("square_flange").pose == ()
+    X = placement_transform(back.placement("oval_flange_3"))
+    assert X.IsNearlyEqualTo(
+        RigidTransform(RollPitchYaw(0.4, -1.1, 2.9), [0.61, 0.37, 0.0089]), 1e-15
+    )
+    bad = CellConfiguration(
+        (("oval_flange_1", PartPlacement(PartStatus.TRANSIT, pose=(1.0,) * 3)),)
+    )
+    with pytest.raises(ValueError, match="oval_flange_1 has a pose of 3 values; a pose is 7"):
+        lm.configuration_message(0, bad)
 
 
 def test_defaults_and_session_round_trip():

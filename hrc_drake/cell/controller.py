@@ -68,6 +68,7 @@ def supervisor_limits(scenario: Scenario, options: MotionOptions) -> SupervisorL
         grip_force=station.rg2.grip_force,
         plan_ahead=run.plan_ahead,
         indication_timeout=run.indication_timeout,
+        recover_tries=run.recover_tries,
     )
 
 

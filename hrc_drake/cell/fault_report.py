@@ -23,7 +23,9 @@ CAUSES = {
     FaultKind.GRIPPER_STUCK: {"grip", "release"},
     FaultKind.GRIP_LOST: {"grip"},
     FaultKind.NO_PATH: {"plan"},
-    FaultKind.NO_SEAT: {"configuration"},
+    # Let go off its seat; pushed out of the fingers on the pocket's rim; or the arm blocked by
+    # the part landing on the rim.
+    FaultKind.NO_SEAT: {"seat", "grip", "tracking"},
 }
 # A detection in the same Supervisor update as the injection may carry a time a period earlier.
 SLACK = 0.05  # s

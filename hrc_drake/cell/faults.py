@@ -8,8 +8,10 @@ robot's protective-stop input, the operator's answer (`SilentOperator`). The con
 sees the injector: it detects each fault from its measurements.
 
 Kinds acted on here: `grip-lost` (the grip force drops to `force` `after` s into the carry: the
-fingers stalled on the part), `gripper-stuck` (the fingers do not close, or do not open again,
-in the task), `protective-stop` (`safety.stop` is 1 from `after` s into the task for
+fingers stalled on the part; until they open again), `gripper-stuck` (the fingers do not close,
+or do not open again, in the task), `no-seat` (the part slides `offset` along the pads `after`
+s into the carry: the station moves it, `CellStation.apply_welds`, so the robot places it
+that far off its seat), `protective-stop` (`safety.stop` is 1 from `after` s into the task for
 `duration` s), `pushed` (a torque on `joint` from `after` s into the task for `duration` s).
 `operator-silent` is the simulated operator's (`SilentOperator`); the injector notes when its
 task's prompt appears.
@@ -42,6 +44,8 @@ class Injection:
     task_start: float | None = None  # when the task's CHOOSE prompt appeared
     injected_at: float | None = None
     since: float | None = None  # grip-lost: the carry began; stuck open: the fingers stalled
+    ended_at: float | None = None  # grip-lost: the fingers opened again (the fault is over)
+    shifted: bool = False  # no-seat: the station has moved the part in the fingers
 
     def __deepcopy__(self, memo) -> Injection:
         return self
@@ -113,7 +117,8 @@ class FaultInjector(LeafSystem):
     def _calc_force(self, context, output) -> None:
         force = float(self._force.Eval(context)[0])
         for fault, injection in self._active(context, FaultKind.GRIP_LOST):
-            if injection.injected_at is not None and self._in_task(context, injection):
+            lost = injection.injected_at is not None and injection.ended_at is None
+            if lost and self._in_task(context, injection):
                 force = min(force, fault.force)
         output.SetFromVector([force])
 
@@ -143,6 +148,8 @@ class FaultInjector(LeafSystem):
                         injection = replace(injection, injected_at=now)
             elif injection.injected_at is None and prompt.step == fault.task:
                 injection = self._inject(context, fault, injection, now)
+            elif injection.ended_at is None and fault.fault_kind == FaultKind.GRIP_LOST:
+                injection = self._end_grip_loss(context, injection, now)
             updated.append(injection)
         state.get_mutable_abstract_state(self._state).set_value(tuple(updated))
 
@@ -157,13 +164,8 @@ class FaultInjector(LeafSystem):
         opening, rate = self._measured.Eval(context)
         # The fingers stand still short of their target: on a part (or stuck).
         stalled = opening - command > STALL_GAP and abs(rate) < STILL_RATE
-        if kind == FaultKind.GRIP_LOST:
-            if not stalled:
-                return replace(injection, since=None)
-            since = now if injection.since is None else injection.since
-            if now - since >= fault.after_seconds:
-                return replace(injection, injected_at=now, since=since)
-            return replace(injection, since=since)
+        if kind in (FaultKind.NO_SEAT, FaultKind.GRIP_LOST):
+            return self._in_carry(fault, injection, stalled, now)
         if kind == FaultKind.GRIPPER_STUCK and fault.stuck == "close" and stalled:
             return replace(injection, injected_at=now)  # a close the fingers do not obey
         if kind == FaultKind.GRIPPER_STUCK and fault.stuck == "open":
@@ -172,6 +174,43 @@ class FaultInjector(LeafSystem):
             if command - opening > STALL_GAP:
                 return replace(injection, injected_at=now)  # an open they do not obey
         return injection
+
+    @staticmethod
+    def _in_carry(fault: FaultConfig, injection: Injection, stalled: bool, now: float):
+        """Faults of the carry strike `after` s after the fingers stalled on the part (the
+        part lifted clear of the tray: sliding it in the fingers there would push it into the
+        tray's pocket)."""
+        if not stalled:
+            return replace(injection, since=None)
+        since = now if injection.since is None else injection.since
+        if now - since >= fault.after_seconds:
+            return replace(injection, injected_at=now, since=since)
+        return replace(injection, since=since)
+
+    def _end_grip_loss(self, context, injection: Injection, now: float) -> Injection:
+        """A lost grip lasts until the fingers are told to open again (a new grasp grips)."""
+        command = float(self._opening.Eval(context)[0])
+        opening = float(self._measured.Eval(context)[0])
+        return replace(injection, ended_at=now) if command - opening > STALL_GAP else injection
+
+    def pending_shifts(self, context) -> list[tuple[int, FaultConfig]]:
+        """(index, fault) of the no-seat faults injected whose part the station has not moved
+        in the fingers yet (`context`: this system's)."""
+        return [
+            (k, fault)
+            for k, (fault, injection) in enumerate(
+                zip(self._faults, self._injections(context), strict=True)
+            )
+            if fault.fault_kind == FaultKind.NO_SEAT
+            and injection.injected_at is not None
+            and not injection.shifted
+        ]
+
+    def mark_shifted(self, context, index: int) -> None:
+        """Record in `context` (this system's) that the part of fault `index` was moved."""
+        injections = list(self._injections(context))
+        injections[index] = replace(injections[index], shifted=True)
+        context.get_mutable_abstract_state(self._state).set_value(tuple(injections))
 
 
 class SilentOperator:

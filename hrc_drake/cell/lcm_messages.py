@@ -86,10 +86,13 @@ struct lcmt_part_placement {
     int32_t slots[num_slots]; // the plate's slots under it
     string host;            // model instance of the host part ("" for none)
     string token;           // task token, e.g. "F3" ("" unless seated in place)
+    boolean has_pose;       // false: no pose measured (pose is all zeros)
+    double pose[7];         // the part's world pose: x, y, z [m], then the unit quaternion
+                            // w, x, y, z (whatever the status: seated, held, on the table...)
 }
 
-// The configuration sensor: which part sits where (a camera or the operator's confirmation on
-// a real cell).
+// The configuration sensor: which part sits where, and where each part lies (a camera, or the
+// operator's confirmation with no poses, on a real cell).
 struct lcmt_cell_configuration {
     int64_t utime;
     int32_t num_parts;
@@ -497,7 +500,14 @@ def indication_value(message) -> tuple[Indication]:
 
 
 def configuration_message(stamp: int, configuration: CellConfiguration):
-    """`configuration` as a message ("" stands for a missing host or token)."""
+    """`configuration` as a message ("" stands for a missing host or token; `has_pose` false
+    and seven zeros for a placement without a pose)."""
+    for name, p in configuration.placements:
+        if len(p.pose) not in (0, 7):
+            raise ValueError(
+                f"configuration: {name} has a pose of {len(p.pose)} values; a pose is 7 (x, y, "
+                "z, qw, qx, qy, qz) or none"
+            )
     placements = [
         lcmt_part_placement(
             instance=name,
@@ -508,6 +518,8 @@ def configuration_message(stamp: int, configuration: CellConfiguration):
             slots=list(p.slots),
             host=p.host or "",
             token=p.token or "",
+            has_pose=bool(p.pose),
+            pose=list(p.pose) if p.pose else [0.0] * 7,
         )
         for name, p in configuration.placements
     ]
@@ -526,6 +538,7 @@ def configuration_value(message) -> tuple[CellConfiguration]:
                     tuple(p.slots),
                     p.host or None,
                     p.token or None,
+                    tuple(float(x) for x in p.pose) if p.has_pose else (),
                 ),
             )
             for p in message.placements

@@ -129,6 +129,9 @@ class SimulatedOperator(LeafSystem):
                 pending = pending | {activity.part}
                 indication = replace(indication, bolted=True, time=now)
                 activity = replace(activity, kind=ActivityKind.REST)
+        elif activity.kind == ActivityKind.BOLT and not indication.bolted:
+            # The robot withdrew its prompt (it lost the part): hands off, back to rest.
+            activity = replace(activity, kind=ActivityKind.REST)
         bolts, pending = self._seat_bolts(context, bolts, pending)
         state.get_mutable_abstract_state(self._indication).set_value(indication)
         state.get_mutable_abstract_state(self._activity).set_value(activity)

@@ -5,18 +5,22 @@ A part is in a seat iff it touches that seat's floor geometry (`slot_k_seat` on 
 counts: not the script that placed it, not a commanded pose. Touching is contact; for a pair
 whose contact the simulation skips (a bolted part and what it is bolted to,
 `hrc_drake.cell.welds`), it is the pair's signed distance within `SlotTolerances.touch`.
+
+Every placement also carries the part's measured world pose, whatever its status: a part that
+fell on the table, lies askew on the plate or rests in the gripper is found where it is.
 """
 
 from __future__ import annotations
 
 import enum
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+from pydrake.common.eigen_geometry import Quaternion
 from pydrake.common.value import AbstractValue
 from pydrake.geometry import GeometryId, QueryObject, SceneGraph
-from pydrake.math import RigidTransform
+from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.plant import ContactResults, MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex
 from pydrake.systems.framework import LeafSystem
@@ -40,18 +44,59 @@ class PartStatus(enum.Enum):
 
 @dataclass(frozen=True)
 class PartPlacement:
-    """One part's placement. `slots` are the base slots under it (empty unless seated)."""
+    """One part's placement. `slots` are the base slots under it (empty unless seated).
+
+    `pose` is the part body's measured world pose `(x, y, z, qw, qx, qy, qz)` (m, then the unit
+    quaternion), filled by the SlotMonitor for every part in every status; empty for a
+    placement built without one. It is read to the last bit, so it jitters between steps while
+    the status and token stand still: to tell whether the cell changed, compare
+    `CellConfiguration.tokens()` or the statuses, not whole configurations. Use
+    `placement_transform` for it as a RigidTransform.
+    """
 
     status: PartStatus
     seats: tuple[str, ...] = ()  # seat frames it sits in, e.g. ("slot_1", "slot_2") or ("row_2",)
     slots: tuple[int, ...] = ()
     host: str | None = None  # model instance of the host part, for a part on another part
     token: str | None = None  # task token, e.g. "F3", "S12", "F01"; None unless seated in place
+    pose: tuple[float, ...] = ()  # world pose: x, y, z [m], qw, qx, qy, qz; () if not measured
+
+
+def pose_tuple(X: RigidTransform) -> tuple[float, ...]:
+    """`X` as `PartPlacement.pose`: (x, y, z, qw, qx, qy, qz), the translation and
+    `RotationMatrix.ToQuaternion()`."""
+    q = X.rotation().ToQuaternion()
+    x, y, z = (float(v) for v in X.translation())
+    return (x, y, z, float(q.w()), float(q.x()), float(q.y()), float(q.z()))
+
+
+def placement_transform(placement: PartPlacement) -> RigidTransform:
+    """The world pose of a placement as a RigidTransform; ValueError if it has none (or not a
+    7-float pose with a non-zero finite quaternion)."""
+    pose = placement.pose
+    if not pose:
+        raise ValueError(
+            f"a {placement.status.value} placement without a pose: only the SlotMonitor's "
+            "placements (or a configuration message with has_pose) carry one"
+        )
+    if len(pose) != 7:
+        raise ValueError(
+            f"a placement pose of {len(pose)} values; it must be 7: x, y, z, qw, qx, qy, qz"
+        )
+    q = np.asarray(pose[3:], dtype=float)
+    norm = float(np.linalg.norm(q))
+    if not (math.isfinite(norm) and norm > 0.0) or not np.all(np.isfinite(pose[:3])):
+        raise ValueError(f"a placement pose {pose} that is not finite, or has a zero quaternion")
+    # Quaternion() refuses what is not unit length to within its tolerance: a pose read from
+    # elsewhere (a camera) may be off by more than that.
+    return RigidTransform(RotationMatrix(Quaternion(q / norm)), np.asarray(pose[:3], dtype=float))
 
 
 @dataclass(frozen=True)
 class CellConfiguration:
-    """The placement of every part, sorted by model instance name."""
+    """The placement of every part, sorted by model instance name. Two readings are equal only
+    if every pose is, to the bit: to see whether the cell changed, compare `tokens()` (or the
+    statuses)."""
 
     placements: tuple[tuple[str, PartPlacement], ...] = ()
 
@@ -174,7 +219,8 @@ class SlotMonitor(LeafSystem):
     Input ports: `contact_results` (ContactResults), `body_poses` (list of RigidTransform, by
     BodyIndex), both from the MultibodyPlant; `query_object` (the SceneGraph's, optional: with
     it, a part's boss and a seat floor whose contact is filtered out touch when they are within
-    `touch` of each other). Output port: `slot_configuration` (CellConfiguration).
+    `touch` of each other). Output port: `slot_configuration` (CellConfiguration: every part's
+    status and its body's world pose, read from `body_poses`).
 
     Args:
         plant: the finalized cell plant.
@@ -416,4 +462,20 @@ class SlotMonitor(LeafSystem):
                 placements[part] = PartPlacement(PartStatus.TRAY)
             else:
                 placements[part] = PartPlacement(PartStatus.TRANSIT)
-        output.set_value(CellConfiguration(tuple(sorted(placements.items()))))
+        # Wherever a part is, the sensor reports where: the body pose, whatever the status.
+        measured = {
+            part: replace(placement, pose=pose_tuple(poses[int(self._parts[part].index())]))
+            for part, placement in placements.items()
+        }
+        output.set_value(CellConfiguration(tuple(sorted(measured.items()))))
+
+
+__all__ = [
+    "CellConfiguration",
+    "PartPlacement",
+    "PartStatus",
+    "SlotMonitor",
+    "SlotTolerances",
+    "placement_transform",
+    "pose_tuple",
+]

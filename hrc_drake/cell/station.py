@@ -123,20 +123,60 @@ class CellStation:
         return frozenset(self.diagram.GetOutputPort("sim.welds").Eval(station_context))
 
     def welds_changed(self, context: Context, applied: frozenset[Weld]) -> bool:
-        """Whether the wanted welds differ from `applied` (what `apply_welds` returned last):
-        a `Simulator` monitor returns ReachedTermination then, and the runner applies them."""
-        return self.wanted_welds(context) != applied
+        """Whether the wanted welds differ from `applied` (what `apply_welds` returned last),
+        or a fault wants a part moved: a `Simulator` monitor returns ReachedTermination then,
+        and the runner applies them."""
+        return self.wanted_welds(context) != applied or bool(self._pending_shifts(context))
 
     def apply_welds(self, context: Context) -> frozenset[Weld]:
         """Make the wanted bolts the ones that hold in the root `context` (a new one fixes its
-        part where it sits now); returns them."""
+        part where it sits now), and move the parts the no-seat faults slide in the fingers;
+        returns the bolts."""
         plant_context = self.plant.GetMyMutableContextFromRoot(context)
         wanted = self.wanted_welds(context)
         filters = self.scene_graph.collision_filter_manager(
             self.scene_graph.GetMyMutableContextFromRoot(context)
         )
         self.bolts.apply(plant_context, wanted, filters)
+        for index, fault in self._pending_shifts(context):
+            self._slide_in_fingers(plant_context, fault.offset)
+            injector = self.diagram.GetSubsystemByName("fault_injector")
+            injector.mark_shifted(injector.GetMyMutableContextFromRoot(context), index)
         return wanted
+
+    def _pending_shifts(self, context: Context) -> list:
+        if not self.scenario.faults or not self.diagram.HasSubsystemNamed("fault_injector"):
+            return []
+        injector = self.diagram.GetSubsystemByName("fault_injector")
+        return injector.pending_shifts(injector.GetMyContextFromRoot(context))
+
+    def _slide_in_fingers(self, plant_context, offset: float) -> None:
+        """Move the part between the fingers `offset` along the pads (across the fingers'
+        closing axis and the approach axis), as a part that slid as the fingers closed."""
+        plant, rg2 = self.plant, self.instances[GRIPPER]
+        tcp = plant.GetFrameByName("tcp", rg2).CalcPoseInWorld(plant_context)
+        fingers = [
+            plant.EvalBodyPoseInWorld(plant_context, plant.get_body(index)).translation()
+            for index in plant.GetBodyIndices(rg2)
+            if plant.get_body(index).name().endswith("finger")
+        ]
+        closing = (fingers[1] - fingers[0]) / np.linalg.norm(fingers[1] - fingers[0])
+        along = np.cross(tcp.rotation().col(2), closing)
+        held = min(
+            self.design.instance_names,
+            key=lambda name: np.linalg.norm(
+                (
+                    plant.EvalBodyPoseInWorld(plant_context, self.part_body(name))
+                    @ self.frames.grasps[name]
+                ).translation()
+                - tcp.translation()
+            ),
+        )
+        body = self.part_body(held)
+        X = plant.EvalBodyPoseInWorld(plant_context, body)
+        plant.SetFreeBodyPose(
+            plant_context, body, RigidTransform(X.rotation(), X.translation() + offset * along)
+        )
 
     def create_default_context(self) -> Context:
         """A root context with the bolts as wanted (none at the start), nothing on the

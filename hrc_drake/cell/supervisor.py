@@ -54,6 +54,8 @@ N_JOINTS = len(UR3_JOINTS)
 # After the fingers close, this long for them to stall on the part before the grasp is checked;
 # and a grasp that looks lost must stay so this long (a jolt of the carry is not a loss).
 GRIP_SETTLE = 0.1  # s
+# A part that slips out of the fingers falls at most about 0.3 m (0.25 s) and rattles to rest.
+PART_FALL_TIME = 1.0  # s
 
 
 class Mode(enum.Enum):
@@ -64,6 +66,7 @@ class Mode(enum.Enum):
     PLAN = "plan"  # waiting for the planner (the arm holds still)
     EXECUTE = "execute"  # following a plan (holding the part while the operator bolts it)
     SETTLE = "settle"  # plan done; let the parts come to rest before reading the cell
+    RECOVER = "recover"  # a part lost or not seated: it comes to rest, then is picked again
     DONE = "done"  # a terminal state is reached
     FAILED = "failed"  # cannot go on (the reason is in `error`)
 
@@ -91,9 +94,10 @@ class Detection:
 
     `cause`: `stop` (the protective-stop input), `silence` (no indication within the timeout),
     `tracking` (a joint off its command), `grip` (the fingers do not hold the part), `release`
-    (the fingers do not open), `plan` (no plan), `configuration` (the cell shows what no task
-    explains). `recovery`: `resume`, `ask` (the cell went on by itself), or `operator` (the
-    task is handed over)."""
+    (the fingers do not open), `seat` (a part let go does not sit in its seat), `plan` (no
+    plan), `configuration` (the cell shows what no task explains). `recovery`: `resume`, `ask`,
+    `regrasp`, `replace` (the cell went on by itself), or `operator` (the task is handed
+    over)."""
 
     cause: str
     step: int
@@ -137,6 +141,8 @@ class SupervisorStatus:
     idle: float = 0.0  # wall seconds waited on the planner for the current task
     grip_lost_at: float | None = None  # when the grasp (or the release) started to look wrong
     asked_at: float = 0.0  # when the operator was last asked to choose
+    recovering: str = ""  # "regrasp" or "replace" while the task's part is picked again
+    recoveries: int = 0  # how often the task's part was picked again
     stopped: bool = False  # the protective-stop input is on
     detections: tuple[Detection, ...] = ()
 
@@ -199,6 +205,7 @@ class SupervisorLimits:
     grip_force: float = 20.0
     plan_ahead: bool = True
     indication_timeout: float = 10.0
+    recover_tries: int = 2
 
 
 class Supervisor(LeafSystem):
@@ -330,12 +337,13 @@ class Supervisor(LeafSystem):
         (a part in it stays held)."""
         q = self._arm_port.Eval(context)[:N_JOINTS]
         opening = s.command(now)[2]
-        found = Detection(err.cause, s.step, now, now, "operator")
+        if not any(d.resolved_at is None for d in s.detections):
+            s = replace(s, detections=(*s.detections, Detection(err.cause, s.step, now)))
+        s = self._resolve(s, None, now, "operator")
         return replace(
             s,
             mode=Mode.FAILED,
             error=str(err),
-            detections=(*s.detections, found),
             plan=None,
             q_hold=tuple(float(x) for x in q),
             opening_hold=float(opening),
@@ -353,7 +361,9 @@ class Supervisor(LeafSystem):
         if mode == Mode.EXECUTE:
             return self._execute(status, context, now)
         if mode == Mode.SETTLE and now >= status.settle_until:
-            return self._observe(status, self._config_port.Eval(context), now)
+            return self._observe(status, context, now)
+        if mode == Mode.RECOVER and now >= status.settle_until:
+            return self._pick_again(status, self._config_port.Eval(context), now)
         return status
 
     def _check_tracking(self, s: SupervisorStatus, context, now: float) -> None:
@@ -447,12 +457,18 @@ class Supervisor(LeafSystem):
         if result is None:
             return s
         step, (proposed, indicated, _) = s.step, s.pending
+        if isinstance(result, PlanFailure) and s.recovering:
+            raise SupervisorError(
+                f"step {step}: the robot cannot pick {s.pending[2]} from where it lies "
+                f"({result.reason}); the task is handed over",
+                cause="plan",
+            )
         if isinstance(result, PlanFailure):
             raise SupervisorError(f"step {step}: {result}", cause="plan")
         plan: Plan = result
         placement = config.placement(plan.instance)
         expected = PartStatus.SEATED if indicated == UNDO else PartStatus.TRAY
-        if placement.status != expected:
+        if placement.status != expected and not s.recovering:
             raise SupervisorError(
                 f"step {step}: {plan.instance} should be {expected.value} for {indicated}, the "
                 f"cell shows it {placement.status.value}"
@@ -477,6 +493,8 @@ class Supervisor(LeafSystem):
         plan = s.plan
         tau = s.plan_time(now)
         s = self._check_grip(s, context, now)
+        if s.mode != Mode.EXECUTE:
+            return s  # the part was lost: it is picked again once it rests
         if tau >= plan.t_in_place and not s.planned_ahead:
             s = replace(s, planned_ahead=True)
             self._plan_ahead_after(s, self._config_port.Eval(context))
@@ -541,10 +559,75 @@ class Supervisor(LeafSystem):
             return replace(s, grip_lost_at=None)
         if s.grip_lost_at is None or now - s.grip_lost_at < GRIP_SETTLE:
             return replace(s, grip_lost_at=now if s.grip_lost_at is None else s.grip_lost_at)
+        # Closed past the part's width (to the command's squeeze): nothing between the fingers.
+        slipped = cause == "grip" and opening < width
+        if slipped and s.recoveries < self._limits.recover_tries:
+            return self._lose_part(s, context, now, "grip", "regrasp")
         raise SupervisorError(
             f"step {s.step}: the gripper stands at {opening * 1000:.1f} mm {what}; the task is "
             "stopped",
             cause=cause,
+        )
+
+    def _lose_part(self, s: SupervisorStatus, context, now: float, cause: str, recovery: str):
+        """The task's part is out of the gripper where it should not be (slipped during the
+        carry, or let go out of its seat): hold the arm where it is measured (a part wedged
+        against it must not be pushed into), open the fingers a little (to let go of anything
+        caught between them), withdraw any prompt (nobody should reach
+        in to bolt now), and let the part come to rest before it is picked again from where it
+        lies."""
+        part = s.pending[2]
+        q = self._arm_port.Eval(context)[:N_JOINTS]
+        wait = PART_FALL_TIME if cause == "grip" else 0.0
+        what = "is not in the gripper" if cause == "grip" else "does not sit in its seat"
+        event = f"{now:.2f}: {part} {what}: {recovery} once it rests"
+        return replace(
+            s,
+            mode=Mode.RECOVER,
+            plan=None,
+            q_hold=tuple(float(x) for x in q),
+            opening_hold=float(self._gripper_port.Eval(context)[0]) + 0.02,
+            settle_until=now + max(wait, self._limits.settle_time),
+            recovering=recovery,
+            recoveries=s.recoveries + 1,
+            grip_lost_at=None,
+            prompt=replace(s.prompt, kind=PromptKind.NONE),
+            detections=(*s.detections, Detection(cause, s.step, now)),
+            events=(*s.events, event),
+        )
+
+    def _pick_again(self, s: SupervisorStatus, config: CellConfiguration, now: float):
+        """Ask the planner to pick the task's part from where the configuration sensor reads
+        it and place it where the operator indicated, starting from where the arm holds."""
+        _proposed, indicated, part = s.pending
+        placement = config.placement(part)
+        if not placement.pose or placement.status == PartStatus.HELD:
+            raise SupervisorError(f"step {s.step}: {part} cannot be found", cause="grip")
+        layout = {i: t for i, t in config.layout().items() if i != part}
+        if frozenset(layout.values()) != s.tokens_before:
+            raise SupervisorError(
+                f"step {s.step}: while {part} was out of the gripper the cell changed to "
+                f"{sorted(layout.values())}; the task is handed over",
+                cause="configuration",
+            )
+        last = s.state[-1] if s.state else None
+        request = PlanRequest.of(
+            s.tokens_before,
+            indicated,
+            last,
+            layout,
+            instance=part,
+            source_pose=tuple(placement.pose),
+            start=s.q_hold,
+        )
+        self._plans.request(request)
+        event = f"{now:.2f}: plans to pick {part} from where it lies ({placement.status.value})"
+        return replace(
+            s,
+            mode=Mode.PLAN,
+            request=request,
+            requested_wall=time.perf_counter(),
+            events=(*s.events, event),
         )
 
     def _note_stop(self, s: SupervisorStatus, stop: bool, now: float) -> SupervisorStatus:
@@ -573,11 +656,12 @@ class Supervisor(LeafSystem):
         return replace(s, asked_at=now, detections=detections, events=(*s.events, event))
 
     @staticmethod
-    def _resolve(s: SupervisorStatus, cause: str, now: float, recovery: str):
-        """Mark the open detections of `cause` recovered by `recovery` at `now`."""
+    def _resolve(s: SupervisorStatus, cause: str | None, now: float, recovery: str):
+        """Mark the open detections of `cause` (None: every cause) recovered by `recovery` at
+        `now`."""
         detections = tuple(
             replace(d, resolved_at=now, recovery=recovery)
-            if d.cause == cause and d.resolved_at is None
+            if cause in (None, d.cause) and d.resolved_at is None
             else d
             for d in s.detections
         )
@@ -615,10 +699,22 @@ class Supervisor(LeafSystem):
             except ValueError:
                 continue  # a prediction the layout cannot serve: the boundary will tell
 
-    def _observe(self, s: SupervisorStatus, config: CellConfiguration, now: float):
-        """After the task: what the cell shows was done moves the MDP state on."""
+    def _observe(self, s: SupervisorStatus, context, now: float):
+        """After the task: what the cell shows was done moves the MDP state on. A part let go
+        out of any seat is picked again and re-placed (up to `recover_tries` times)."""
         proposed, indicated, part = s.pending
+        config: CellConfiguration = self._config_port.Eval(context)
+        unseated = indicated != UNDO and config.placement(part).status in (
+            PartStatus.MISPLACED,
+            PartStatus.TRANSIT,
+        )
+        if unseated and s.recoveries < self._limits.recover_tries:
+            return self._lose_part(s, context, now, "seat", "replace")
         observed, next_state = self._observed(s, config)
+        if s.recovering:
+            for cause in ("grip", "seat"):
+                s = self._resolve(s, cause, now, s.recovering)
+        s = replace(s, recovering="", recoveries=0)
         record = TaskRecord(
             step=s.step,
             state=s.state,
@@ -661,7 +757,8 @@ class Supervisor(LeafSystem):
         if removed or len(added) != 1:
             raise SupervisorError(
                 f"after {indicated} the cell shows {sorted(tokens)}: {part} is "
-                f"{config.placement(part).status.value}, not in a seat"
+                f"{config.placement(part).status.value}, not in a seat",
+                cause="seat",
             )
         (observed,) = added
         if observed not in {t for t, _ in self._space.tasks(self._space.index(s.state))}:

@@ -9,12 +9,14 @@ recovers or hands the task over to the operator.
 
 Kinds (`FaultKind`) and their parameters (defaults in brackets):
 
-- `grip-lost`: the grip force drops to `force` N [1.0] `after` s [1.0] into the carry; the part
-  falls where physics puts it.
-- `no-seat`: the part cannot seat: it sits `offset` m [0.006] along its length off in the
-  fingers, or (`obstacle: true`) an obstacle lies in the pocket.
+- `grip-lost`: the grip force drops to `force` N [1.0] `after` s [1.0] into the carry, until the
+  fingers open again; the part falls where physics puts it.
+- `no-seat`: the part cannot seat: it slides `offset` m [0.008] along the pads `after` s [0.8]
+  into the carry (lifted clear of the tray), so it is placed that far off its seat; or
+  (`obstacle: true`, not simulated yet) an obstacle lies in the pocket.
 - `gripper-stuck`: the gripper does not close (`stuck: close`) or open (`stuck: open`).
-- `no-path`: a temporary obstacle blocks the planner for `duration` s [3.0].
+- `no-path` (not simulated yet): a temporary obstacle blocks the planner for `duration` s
+  [3.0].
 - `operator-silent`: the operator gives no indication for `duration` s [15.0].
 - `protective-stop`: an external stop signal `after` s [4.0] into the task, for `duration` s
   [2.0].
@@ -47,7 +49,7 @@ class FaultConfig:
     task: int = 0
     force: float = 1.0
     after: float = -1.0  # -1: the kind's default (see `after_seconds`)
-    offset: float = 0.006
+    offset: float = 0.008
     obstacle: bool = False
     stuck: str = "close"
     duration: float = -1.0  # -1: the kind's default (see `duration_seconds`)
@@ -61,10 +63,13 @@ class FaultConfig:
 
     @property
     def after_seconds(self) -> float:
-        """Seconds into the carry (grip-lost) or into the task (protective-stop, pushed)."""
+        """Seconds into the carry (grip-lost, no-seat: from the fingers' stall on the part) or
+        into the task (protective-stop, pushed)."""
         if self.after >= 0:
             return self.after
-        return 1.0 if self.fault_kind == FaultKind.GRIP_LOST else 4.0
+        if self.fault_kind in (FaultKind.GRIP_LOST, FaultKind.NO_SEAT):
+            return 1.0 if self.fault_kind == FaultKind.GRIP_LOST else 0.8
+        return 4.0
 
     @property
     def duration_seconds(self) -> float:
@@ -82,6 +87,7 @@ class FaultConfig:
 # The kinds the simulated cell injects and the controller handles so far.
 SIMULATED = (
     FaultKind.GRIP_LOST,
+    FaultKind.NO_SEAT,
     FaultKind.GRIPPER_STUCK,
     FaultKind.OPERATOR_SILENT,
     FaultKind.PROTECTIVE_STOP,
@@ -136,6 +142,11 @@ def _check_values(fault: FaultConfig, kind: FaultKind, where: str) -> None:
         raise FaultError(
             f"{where}: offset {fault.offset} m lets the part seat (the pockets have 1.5 mm of "
             "clearance); give more than 0.0015, or obstacle: true"
+        )
+    if kind == FaultKind.NO_SEAT and fault.obstacle:
+        raise FaultError(
+            f"{where}: obstacle: true is not simulated yet; leave it out for a part placed "
+            "`offset` off its seat"
         )
     if fault.stuck not in ("close", "open"):
         raise FaultError(f"{where}: stuck {fault.stuck!r}: give close or open")

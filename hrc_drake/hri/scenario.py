@@ -181,6 +181,9 @@ class RunConfig:
             on and the robot holds still meanwhile, as on a real cell (live runs always).
         indication_timeout: seconds the robot waits for the operator's indication before it
             notes the silence and asks again (holding still meanwhile).
+        recover_tries: how often, within one task, the robot picks its part again from where
+            it lies (a part that slipped out of the gripper, or was let go out of its seat)
+            before it hands the task over to the operator.
     """
 
     period: float = 0.02
@@ -190,6 +193,7 @@ class RunConfig:
     plan_ahead: bool = True
     wait_for_planner: bool = True
     indication_timeout: float = 10.0
+    recover_tries: int = 2
 
 
 @dataclass
@@ -469,9 +473,11 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
         raise fail("physics.contact.static_friction", "must be >= dynamic_friction")
     if scenario.physics.time_step <= 0:
         raise fail("physics.time_step", "the cell is a discrete plant: give a step > 0 (1e-2)")
-    for key in ("period", "settle_time", "max_sim_time"):
+    for key in ("period", "settle_time", "max_sim_time", "indication_timeout"):
         if getattr(scenario.run, key) <= 0:
             raise fail(f"run.{key}", "must be > 0")
+    if scenario.run.recover_tries < 0:
+        raise fail("run.recover_tries", "must be >= 0 (0: hand every lost part over)")
     for key in ("human_speed", "reaction_time", "intrusion", "human_uncertainty"):
         if getattr(scenario.safety, key) < 0:
             raise fail(f"safety.{key}", "must be >= 0")

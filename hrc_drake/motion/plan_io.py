@@ -176,6 +176,7 @@ def plan_to_data(plan: Plan) -> dict:
                 "placed": [list(pair) for pair in p.layout.placed],
                 "carried": p.layout.carried,
                 "opening": float(p.layout.opening),
+                "loose": [[instance, list(values)] for instance, values in p.layout.loose],
                 "allowed_contacts": [list(pair) for pair in p.allowed_contacts],
             }
             for p in plan.phases
@@ -214,7 +215,12 @@ def _plan(data: dict, trajectory: Trajectory, gripper: PiecewisePolynomial) -> P
         CheckPhase(
             p["start"],
             p["end"],
-            Layout(tuple(tuple(pair) for pair in p["placed"]), p["carried"], p["opening"]),
+            Layout(
+                tuple(tuple(pair) for pair in p["placed"]),
+                p["carried"],
+                p["opening"],
+                tuple((instance, tuple(values)) for instance, values in p.get("loose", ())),
+            ),
             tuple(tuple(pair) for pair in p["allowed_contacts"]),
         )
         for p in data["phases"]

@@ -9,7 +9,7 @@ import numpy as np
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.trajectories import CompositeTrajectory, PiecewisePolynomial, Trajectory
 
-from hrc_drake.cell_models import CellDesign, CellModelError
+from hrc_drake.cell_models import TABLE, CellDesign, CellModelError
 from hrc_drake.motion.ik import UnreachableError, solve_ik
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.plan import CheckPhase, MotionTiming, Plan, Segment, Stage
@@ -18,6 +18,10 @@ from hrc_drake.motion.poses import (
     default_layout,
     offset_along_approach,
     part_pose,
+    pose_from_values,
+    pose_values,
+    quantize_joints,
+    quantize_pose,
     tcp_pose,
 )
 from hrc_drake.motion.scene import (
@@ -32,6 +36,7 @@ from hrc_drake.motion.scene import (
 )
 from hrc_drake.motion.trajectory import (
     JointLimits,
+    PlanningError,
     Retimed,
     free_path,
     retime,
@@ -45,6 +50,12 @@ from hrc_drake.tasks.tokens import UNDO
 _READY = np.array([0.0, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0])
 # Where home puts the tcp: above the work, between plate and tray [m above the seats].
 _HOME_HEIGHT = 0.20
+# A part lying tilted more than this from upright [rad] is not grasped from above: the
+# fingers would close on its slanted faces (and the tcp tilt past what the RG2's pads hold).
+_MAX_GRASP_TILT = 0.2
+# A loose part rests on, or leans against, what is this close to it [m] (measured poses are
+# a little off: a part may seem to float or sink by a millimetre or two).
+_RESTS_ON = 0.005
 
 
 @dataclass(frozen=True)
@@ -65,13 +76,14 @@ def resolve_task(
     task: str,
     last_token: str | None = None,
     layout: Mapping[str, str] | None = None,
+    instance: str | None = None,
 ) -> TaskMove:
     """Which instance `task` moves from `configuration`, and the token assignments around it.
 
     `layout` (instance -> token, e.g. measured by the SlotMonitor) says which instance sits at
     each token; without it, `default_layout` gives the robot's own routine. An assembly token
-    takes a part of its symbol from the tray (the lowest-numbered free one); `undo` returns the
-    part at `last_token` (the task done last) to its tray home.
+    takes a part of its symbol from the tray (`instance`, or the lowest-numbered free one);
+    `undo` returns the part at `last_token` (the task done last) to its tray home.
     """
     configuration = frozenset(configuration)
     if layout is None:
@@ -84,19 +96,57 @@ def resolve_task(
     if task == UNDO:
         if last_token is None or last_token not in configuration:
             raise ValueError(f"undo needs the last task placed (last_token), got {last_token!r}")
-        instance = before[last_token]
+        if instance is not None and instance != before[last_token]:
+            raise ValueError(f"undo moves {before[last_token]} (at {last_token}), not {instance}")
         after = {t: i for t, i in before.items() if t != last_token}
-        return TaskMove(task, instance, last_token, None, before, after)
+        return TaskMove(task, before[last_token], last_token, None, before, after)
     if task in configuration:
         raise ValueError(f"task {task} is already in place in {sorted(configuration)}")
     symbol = frames.spec.placement(task).part
     used = set(before.values())
     free = [i for i in frames.design.instances_of(symbol) if i not in used]
+    if instance in used:
+        seat = next(t for t, i in before.items() if i == instance)
+        raise ValueError(
+            f"task {task}: {instance} is not a free part, the layout has it at {seat}; pass the "
+            "measured layout without the part to move"
+        )
+    if instance is not None:
+        if instance not in free:
+            raise ValueError(f"task {task} places a {symbol}: {instance} is not one ({free})")
+        free = [instance]
     if not free:
         raise ValueError(f"task {task}: no {symbol} left in the tray in {sorted(configuration)}")
     after = dict(before)
     after[task] = free[0]
     return TaskMove(task, free[0], None, task, before, after)
+
+
+@dataclass(frozen=True)
+class _Measured:
+    """A plan's measured inputs, rounded to the plan cache's resolution: the part named, the
+    7 pose values where it lies, the joint positions the arm starts from (None: the lowest
+    free instance; its tray home or seat; `q_home`)."""
+
+    instance: str | None = None
+    source: tuple[float, ...] | None = None
+    start: tuple[float, ...] | None = None
+
+
+@dataclass(frozen=True)
+class _Pick:
+    """The pick half of a plan: its scene, the pre-grasp posture, the free path there (with
+    whether it needed collision constraints), the straight way down to the grasp, and the
+    contacts allowed going down (`hand`) and lifting the part (`lift`)."""
+
+    scene: PlanningScene
+    q_pregrasp: np.ndarray
+    approach: tuple
+    down: list[np.ndarray]
+    hand: tuple[tuple[str, str], ...]
+    lift: tuple[tuple[str, str], ...]
+    clear: list[np.ndarray] | None = None  # straight up from a start too close to the cell
+    near: tuple[tuple[str, str], ...] = ()  # the contacts allowed going up
 
 
 class _Timeline:
@@ -159,9 +209,10 @@ class MotionPlanner:
     """Plans the robot's motion for tasks of the flange case, caching scenes and plans.
 
     Plans start and end at the home posture `q_home` (default: the tcp pointing down 0.2 m above
-    the seats, halfway between the plate and the tray). Scenes are cached by layout; plans by
-    (task, which instance sits at each token, the token moved): for the flange case, that is
-    (configuration, task) plus, for undo, the last task.
+    the seats, halfway between the plate and the tray); a re-plan may start at a measured
+    posture and pick its part where it was measured lying. Scenes are cached by layout; plans
+    by (task, which instance sits at each token, the token moved): for the flange case, that is
+    (configuration, task) plus, for undo, the last task; and a re-plan's part, pose and start.
     """
 
     def __init__(
@@ -269,21 +320,34 @@ class MotionPlanner:
         *,
         last_token: str | None = None,
         layout: Mapping[str, str] | None = None,
+        instance: str | None = None,
+        source_pose: RigidTransform | None = None,
+        q_start: np.ndarray | None = None,
     ) -> Plan:
         """The plan of `task` from `configuration` (the tokens in place), home to home.
 
         `last_token` is the task done last; `undo` needs it (the part placed last goes back to
         its tray home). `layout` (instance -> token) is where each part physically is, as the
         cell measured it; without it the robot's own routine is assumed (`default_layout`).
+        `instance` is the part an assembly task moves (default: the lowest-numbered free one);
+        with `source_pose` (X_W_part, measured: on the table, plate, tray or other parts) it is
+        picked where it lies instead of from its tray home, and is not in `layout`. `q_start`
+        (the UR3's 6 joint positions) starts the plan there instead of at `q_home`; it still
+        ends at `q_home`. Measured values are rounded to the plan cache's resolution
+        (`poses.KEY_DIGITS`) before planning, so that the plan is a function of its cache key.
         Raises UnreachableError (naming the task and the violated constraint) when a pose is out
-        of reach, PlanningError when no path is found.
+        of reach or a part lies too tilted to be grasped from above, PlanningError when no path
+        is found (or the start posture is not clear of the cell), ValueError for arguments that
+        do not fit (a source pose for `undo` or without its instance, a seated instance).
         """
         configuration = frozenset(configuration)
-        move = resolve_task(self.frames, configuration, task, last_token, layout)
-        key = self._key(move)
+        move, measured = self._resolve(
+            configuration, task, last_token, layout, instance, source_pose, q_start
+        )
+        key = self._key(move, measured)
         if key not in self._plans:
             self._rng = np.random.default_rng(self.options.seed)
-            self._plans[key] = self._plan(configuration, move)
+            self._plans[key] = self._plan(configuration, move, measured)
         return self._plans[key]
 
     def has_plan(
@@ -293,59 +357,173 @@ class MotionPlanner:
         *,
         last_token: str | None = None,
         layout: Mapping[str, str] | None = None,
+        instance: str | None = None,
+        source_pose: RigidTransform | None = None,
+        q_start: np.ndarray | None = None,
     ) -> bool:
         """Whether `plan_task` with these arguments would return a plan made earlier."""
-        move = resolve_task(self.frames, frozenset(configuration), task, last_token, layout)
-        return self._key(move) in self._plans
+        move, measured = self._resolve(
+            frozenset(configuration), task, last_token, layout, instance, source_pose, q_start
+        )
+        return self._key(move, measured) in self._plans
+
+    def _resolve(
+        self, configuration, task, last_token, layout, instance, source_pose, q_start
+    ) -> tuple[TaskMove, _Measured]:
+        """`plan_task`'s arguments as the move and its rounded measured inputs."""
+        if source_pose is not None and task == UNDO:
+            raise ValueError(
+                "undo takes the part placed last from its seat; a source pose is for assembly "
+                "tasks (plan the part's placement from where it lies instead)"
+            )
+        if source_pose is not None and instance is None:
+            raise ValueError(f"task {task}: a source pose needs the part lying there (instance=)")
+        move = resolve_task(self.frames, configuration, task, last_token, layout, instance)
+        measured = _Measured(
+            instance,
+            None if source_pose is None else quantize_pose(pose_values(source_pose)),
+            None if q_start is None else quantize_joints(q_start, len(self.q_home)),
+        )
+        return move, measured
 
     @staticmethod
-    def _key(move: TaskMove) -> tuple:
-        # Which part sits where, and which one moves: all a plan depends on.
-        return (move.task, frozenset(move.before.items()), move.source)
+    def _key(move: TaskMove, measured: _Measured) -> tuple:
+        # Which part sits where, and which one moves: all a plan depends on; and, when given,
+        # the part named, where it lies and the posture the arm starts from.
+        key = (move.task, frozenset(move.before.items()), move.source)
+        if measured == _Measured():
+            return key
+        return (*key, move.instance, measured.source, measured.start)
 
-    def _plan(self, configuration: frozenset[str], move: TaskMove) -> Plan:
+    def _loose_grasp(self, task: str, part: str, X_W_part: RigidTransform) -> RigidTransform:
+        """The tcp pose grasping `part` lying at a measured X_W_part: its grasp frame there, or
+        that turned a half turn about the approach axis (the parts are symmetric under it),
+        whichever is closer to the grasp at the part's tray home, so that the wrist does not
+        wind. UnreachableError when the part lies too tilted to be grasped from above."""
+        frames = self.frames
+        X_W_home = frames.homes[part]
+        up = X_W_home.rotation().col(2)  # a part lies upright in its tray home
+        tilt = float(np.arccos(np.clip(X_W_part.rotation().col(2) @ up, -1.0, 1.0)))
+        if tilt > _MAX_GRASP_TILT:
+            raise UnreachableError(
+                task,
+                "grasp",
+                "orientation",
+                f"{part} lies tilted {tilt:.2f} rad from upright; the gripper grasps from above, "
+                f"up to {_MAX_GRASP_TILT} rad",
+            )
+        X_grasp = tcp_pose(frames, part, X_W_part)
+        turned = X_grasp @ RigidTransform(RotationMatrix.MakeZRotation(np.pi))
+        R_home_inv = tcp_pose(frames, part, X_W_home).rotation().inverse()
+
+        def wind(X: RigidTransform) -> float:
+            return (R_home_inv @ X.rotation()).ToAngleAxis().angle()
+
+        return min((X_grasp, turned), key=wind)
+
+    def _check_start(self, scene: PlanningScene, q: np.ndarray, task: str) -> None:
+        """A start posture other than home must be within the joint limits and clear of the
+        cell by the optimisers' margin: the free path's collision constraints hold at its start
+        too."""
+        limits, opts = self.limits, self.options
+        outside = np.flatnonzero((q < limits.lower) | (q > limits.upper))
+        if outside.size:
+            raise PlanningError(
+                f"task {task}: the start posture {np.round(q, 4).tolist()} is past joint "
+                f"{int(outside[0]) + 1}'s limits; start from a posture within them"
+            )
+        need = opts.clearance + opts.clearance_margin
+        distance, pair = scene.min_distance(q)
+        if distance < need:
+            raise PlanningError(
+                f"task {task}: the start posture is {distance * 1000:.1f} mm from {pair}; a "
+                f"plan starts {need * 1000:.0f} mm clear at least: move the arm clear first"
+            )
+
+    def _pick(
+        self, move: TaskMove, measured: _Measured, opening: float, q_start: np.ndarray
+    ) -> _Pick:
+        """The pick half of `move`: from `q_start` to the pre-grasp and down to the grasp, with
+        the part in its tray home, at its seat, or lying where it was measured."""
+        opts, frames, task, part = self.options, self.frames, move.task, move.instance
+        if measured.source is None:
+            X_src = (
+                frames.homes[part]
+                if move.source is None
+                else part_pose(frames, move.source, move.before.keys())
+            )
+            scene = self.scene(Layout.of(move.before, None, opening))
+            X_grasp = tcp_pose(frames, part, X_src)
+            supports = (self._support(move.source, move.before),)
+        else:
+            X_src = pose_from_values(measured.source)
+            X_grasp = self._loose_grasp(task, part, X_src)
+            scene = self.scene(Layout.of(move.before, None, opening, {part: X_src}))
+            # It lies on the table, the plate or the tray, or on or against other parts.
+            others = [i for i in frames.design.instance_names if i != part]
+            supports = (PLATE, TRAY, TABLE, *scene.near(part, others, _RESTS_ON))
+        # Near the grasp instant the fingertips come within a few mm of the surface the part
+        # rests on (they hold a 10 mm part), and the part touches it.
+        hand = ((GRIPPER, part), *((GRIPPER, s) for s in supports))
+        lift = tuple(pair for s in supports for pair in ((part, s), (GRIPPER, s)))
+        X_pregrasp = offset_along_approach(X_grasp, opts.approach_distance)
+        scene.set_allowed_contacts(())
+        clear, near = None, ()
+        if measured.start is not None:
+            clear, near = self._clear_start(scene, q_start, task)
+            q_start = q_start if clear is None else clear[-1]
+            self._check_start(scene, q_start, task)
+        q_pregrasp = self._ik(scene, X_pregrasp, q_start, task, "pre-grasp")
+        approach = free_path(scene, q_start, q_pregrasp, self.limits, opts)
+        scene.set_allowed_contacts(hand)
+        down = straight_waypoints(scene, q_pregrasp, X_grasp, opts, task=task, waypoint="grasp")
+        scene.set_allowed_contacts(())
+        return _Pick(scene, q_pregrasp, approach, down, hand, lift, clear, near)
+
+    def _clear_start(self, scene: PlanningScene, q: np.ndarray, task: str):
+        """(postures, allowed contacts) moving the tcp straight up by the approach distance
+        from a start posture closer to the cell than the optimisers' margin (the arm stopped
+        with its fingers by a part or a surface), or (None, ()) when the start is clear."""
+        opts = self.options
+        if scene.min_distance(q)[0] >= opts.clearance + opts.clearance_margin:
+            return None, ()
+        X = scene.tcp_pose(q)
+        up_by = np.array([0.0, 0.0, opts.approach_distance])
+        X_up = RigidTransform(X.rotation(), X.translation() + up_by)
+        near = tuple(
+            (GRIPPER, other) for other in (PLATE, TRAY, TABLE, *self.frames.design.instance_names)
+        )
+        scene.set_allowed_contacts(near)
+        up = straight_waypoints(scene, q, X_up, opts, task=task, waypoint="clear of the cell")
+        scene.set_allowed_contacts(())
+        return up, near
+
+    def _plan(self, configuration: frozenset[str], move: TaskMove, measured: _Measured) -> Plan:
         opts, frames, task = self.options, self.frames, move.task
         part = move.instance
         width = frames.widths[part]
         opening = float(min(MAX_OPENING, width + 2.0 * opts.finger_gap))
-        X_src = (
-            frames.homes[part]
-            if move.source is None
-            else part_pose(frames, move.source, move.before.keys())
-        )
         X_dst = (
             frames.homes[part]
             if move.target is None
             else part_pose(frames, move.target, move.after.keys())
         )
-        X_grasp = tcp_pose(frames, part, X_src)
         X_place = tcp_pose(frames, part, X_dst)
-        X_pregrasp = offset_along_approach(X_grasp, opts.approach_distance)
         X_preplace = offset_along_approach(X_place, opts.approach_distance)
+        q_home = self.q_home
+        q_start = q_home if measured.start is None else np.array(measured.start)
 
-        pick = self.scene(Layout.of(move.before, None, opening))
+        pick = self._pick(move, measured, opening, q_start)
         carry = self.scene(Layout.of(move.before, part, width))
         placed = self.scene(Layout.of(move.after, None, opening))
-        # Near the grasp and place instants the fingertips come within a few mm of the surface
-        # the part rests on (they hold a 10 mm part), and the part touches it.
-        source = self._support(move.source, move.before)
+        # Near the place instant, as near the grasp: the part on its target, the fingers by it.
         target = self._support(move.target, move.after)
-        hand = ((GRIPPER, part), (GRIPPER, source))
-        lift_allowed = ((part, source), (GRIPPER, source))
         place_allowed = ((part, target), (GRIPPER, target))
         release = ((GRIPPER, part), (GRIPPER, target))
 
-        q_home = self.q_home
-        pick.set_allowed_contacts(())
-        q_pregrasp = self._ik(pick, X_pregrasp, q_home, task, "pre-grasp")
-        approach = free_path(pick, q_home, q_pregrasp, self.limits, opts)
-        pick.set_allowed_contacts(hand)
-        down = straight_waypoints(pick, q_pregrasp, X_grasp, opts, task=task, waypoint="grasp")
-        pick.set_allowed_contacts(())
-
         carry.set_allowed_contacts(())
-        q_preplace = self._ik(carry, X_preplace, q_pregrasp, task, "pre-place")
-        transfer = free_path(carry, q_pregrasp, q_preplace, self.limits, opts)
+        q_preplace = self._ik(carry, X_preplace, pick.q_pregrasp, task, "pre-place")
+        transfer = free_path(carry, pick.q_pregrasp, q_preplace, self.limits, opts)
         carry.set_allowed_contacts(place_allowed)
         lower = straight_waypoints(carry, q_preplace, X_place, opts, task=task, waypoint="place")
         carry.set_allowed_contacts(())
@@ -355,24 +533,29 @@ class MotionPlanner:
         def timed(scene: PlanningScene, path) -> Retimed:
             return retime(scene, path, self.limits, opts)
 
-        line = _Timeline(q_home, opening)
+        line = _Timeline(q_start, opening)
         t0 = line.t
-        line.move("home to pre-grasp", timed(pick, approach[0]), approach)
-        line.phase(t0, pick.layout, ())
+        if pick.clear is not None:
+            line.move("up, clear of the cell", timed(pick.scene, spline_through(pick.clear)))
+            line.phase(t0, pick.scene.layout, pick.near)
         t1 = line.t
-        descend = timed(pick, spline_through(down))
+        start = "home" if measured.start is None else "start"
+        line.move(f"{start} to pre-grasp", timed(pick.scene, pick.approach[0]), pick.approach)
+        line.phase(t1, pick.scene.layout, ())
+        t1 = line.t
+        descend = timed(pick.scene, spline_through(pick.down))
         line.move("down to grasp", descend)
-        line.phase(t1, pick.layout, hand)
+        line.phase(t1, pick.scene.layout, pick.hand)
         line.stage(Stage.APPROACH, t0)
 
         t0 = line.t
         line.gripper(width - opts.grip_squeeze, opts.gripper_time)
-        line.phase(t0, pick.layout, hand)
+        line.phase(t0, pick.scene.layout, pick.hand)
         line.stage(Stage.GRASP, t0)
 
         t0 = line.t
         line.move("lift", descend.reversed())
-        line.phase(t0, carry.layout, lift_allowed)
+        line.phase(t0, carry.layout, pick.lift)
         t1 = line.t
         line.move("carry to pre-place", timed(carry, transfer[0]), transfer)
         line.phase(t1, carry.layout, ())

@@ -13,10 +13,11 @@ seats all use these functions.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RigidTransform
 
 from hrc_drake.cell_models import CellDesign
@@ -167,7 +168,53 @@ def offset_along_approach(X_W_tcp: RigidTransform, distance: float) -> RigidTran
     return RigidTransform(X_W_tcp.rotation(), X_W_tcp.translation() - distance * np.asarray(z))
 
 
+# Measured poses and postures as plan-cache keys: translations to 0.1 mm, quaternion
+# components and joint angles to 1e-4 (about 0.2 mrad). A plan is made from the rounded values,
+# so that a plan is a function of its cache key (same request, same plan, in any process).
+KEY_DIGITS = 4
+
+
+def pose_values(X: RigidTransform) -> tuple[float, ...]:
+    """The 7 values (x, y, z, qw, qx, qy, qz) of a pose: its translation, then the quaternion
+    `RotationMatrix.ToQuaternion()` gives."""
+    q = X.rotation().ToQuaternion()
+    return (*(float(v) for v in X.translation()), q.w(), q.x(), q.y(), q.z())
+
+
+def pose_from_values(values: Sequence[float]) -> RigidTransform:
+    """The pose of 7 values (x, y, z, qw, qx, qy, qz); the quaternion is normalized."""
+    values = _finite(values, 7, "a pose (x, y, z, qw, qx, qy, qz)")
+    q = np.array(values[3:])
+    norm = float(np.linalg.norm(q))
+    if norm < 0.5:
+        raise ValueError(f"pose {values}: its quaternion (qw, qx, qy, qz) is not a rotation")
+    return RigidTransform(Quaternion(q / norm), np.array(values[:3]))
+
+
+def quantize_pose(values: Sequence[float]) -> tuple[float, ...]:
+    """A pose's 7 values rounded to the plan cache's resolution (`KEY_DIGITS`), with the
+    quaternion normalized and its sign fixed (qw >= 0), so that one rotation has one key."""
+    values = pose_values(pose_from_values(values))
+    sign = -1.0 if values[3] < 0.0 else 1.0
+    rounded = [*values[:3], *(sign * v for v in values[3:])]
+    return tuple(round(v, KEY_DIGITS) + 0.0 for v in rounded)  # + 0.0: no -0.0
+
+
+def quantize_joints(values: Sequence[float], count: int = 6) -> tuple[float, ...]:
+    """Joint positions [rad] rounded to the plan cache's resolution (`KEY_DIGITS`)."""
+    values = _finite(values, count, f"a posture ({count} joint positions)")
+    return tuple(round(v, KEY_DIGITS) + 0.0 for v in values)
+
+
+def _finite(values: Sequence[float], count: int, what: str) -> tuple[float, ...]:
+    values = tuple(float(v) for v in np.asarray(values, dtype=float).ravel())
+    if len(values) != count or not all(np.isfinite(values)):
+        raise ValueError(f"{what} needs {count} finite numbers, got {values}")
+    return values
+
+
 __all__ = [
+    "KEY_DIGITS",
     "UNDO",
     "CellFrames",
     "default_layout",
@@ -175,6 +222,10 @@ __all__ = [
     "layout_poses",
     "offset_along_approach",
     "part_pose",
+    "pose_from_values",
+    "pose_values",
+    "quantize_joints",
+    "quantize_pose",
     "seat_pose",
     "tcp_pose",
 ]

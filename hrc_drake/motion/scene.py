@@ -1,8 +1,9 @@
 """Planning scenes: the cell as a MultibodyPlant + SceneGraph for one layout of the parts.
 
 A planning scene has no simulation: every part is welded where the layout puts it (the tray home,
-a seat, or the gripper's tcp at its grasp pose, so a carried part is robot geometry), the fingers
-are welded at one opening, and the only degrees of freedom are the six UR3 joints.
+a seat, a measured pose where it lies loose, or the gripper's tcp at its grasp pose, so a carried
+part is robot geometry), the fingers are welded at one opening, and the only degrees of freedom
+are the six UR3 joints.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from pydrake.multibody.tree import FixedOffsetFrame
 from pydrake.systems.framework import DiagramBuilder
 
 from hrc_drake.cell_models import PLATE, TRAY, CellDesign, add_cell_models, check_cell_models
-from hrc_drake.motion.poses import CellFrames, part_pose
+from hrc_drake.motion.poses import CellFrames, part_pose, pose_from_values, pose_values
 from hrc_drake.robot_models import GRIPPER, RG2_FINGER_JOINTS, RG2_MAX_OPENING, UR3, UR3_JOINTS
 
 ROBOT = UR3
@@ -68,20 +69,37 @@ class Layout:
     """Where each part is in a scene, hashable (the scene cache key).
 
     Attributes:
-        placed: (instance, token) for each part on the plate or a host; the rest are in the tray.
+        placed: (instance, token) for each part on the plate or a host; the rest are in the tray
+            unless loose.
         carried: the instance welded to the gripper at its grasp pose, if any.
         opening: finger opening [m] (between the finger insides).
+        loose: (instance, (x, y, z, qw, qx, qy, qz)) for each part lying where it was measured
+            (dropped, not seated: anywhere on the table, plate, tray or other parts), sorted.
     """
 
     placed: tuple[tuple[str, str], ...]
     carried: str | None
     opening: float
+    loose: tuple[tuple[str, tuple[float, ...]], ...] = ()
 
     @staticmethod
-    def of(assignment: Mapping[str, str], carried: str | None, opening: float) -> Layout:
-        """From token -> instance; a carried instance is taken out of `assignment`."""
+    def of(
+        assignment: Mapping[str, str],
+        carried: str | None,
+        opening: float,
+        loose: Mapping[str, RigidTransform] | None = None,
+    ) -> Layout:
+        """From token -> instance; a carried instance is taken out of `assignment`. `loose`:
+        instance -> X_W_part of parts lying where they were measured (neither placed nor
+        carried)."""
         placed = tuple(sorted((inst, tok) for tok, inst in assignment.items() if inst != carried))
-        return Layout(placed, carried, round(float(opening), 6))
+        lying = tuple(sorted((inst, pose_values(X)) for inst, X in (loose or {}).items()))
+        clash = {inst for inst, _ in lying} & ({inst for inst, _ in placed} | {carried})
+        if clash:
+            raise ValueError(
+                f"{sorted(clash)[0]} is loose and also placed or carried; a part is in one place"
+            )
+        return Layout(placed, carried, round(float(opening), 6), lying)
 
     @property
     def configuration(self) -> frozenset[str]:
@@ -195,14 +213,16 @@ class PlanningScene:
             X = RigidTransform(0.5 * layout.opening * model.finger_axes[name])
             frame.SetPoseInParentFrame(self.plant_context, X)
         placed = dict(layout.placed)
+        loose = {instance: pose_from_values(values) for instance, values in layout.loose}
         tokens = layout.configuration
         frames = model.frames
         for instance, frame in model.part_frames.items():
-            X_W_part = (
-                part_pose(frames, placed[instance], tokens)
-                if instance in placed
-                else frames.homes[instance]
-            )
+            if instance in loose:
+                X_W_part = loose[instance]
+            elif instance in placed:
+                X_W_part = part_pose(frames, placed[instance], tokens)
+            else:
+                X_W_part = frames.homes[instance]
             frame.SetPoseInParentFrame(self.plant_context, X_W_part)
         self._transient: list = []
 
@@ -226,6 +246,32 @@ class PlanningScene:
             for a, b in pairs:
                 declaration.ExcludeBetween(self.geometries(a), self.geometries(b))
             self._transient.append(manager.ApplyTransient(declaration))
+
+    def near(self, instance: str, others: Iterable[str], distance: float) -> tuple[str, ...]:
+        """The model instances among `others` with a collision geometry within `distance` of one
+        of `instance`'s (what a part lies on or against), in the order given.
+
+        Pairwise, regardless of collision filters (parts welded to the world are filtered
+        against each other); a shape pair the query cannot measure counts as near."""
+        query = self.scene_graph.get_query_output_port().Eval(self.sg_context)
+        inspector = query.inspector()
+        mine = inspector.GetGeometryIds(self.geometries(instance))
+
+        def gap(a, b) -> float:
+            try:
+                return query.ComputeSignedDistancePairClosestPoints(a, b).distance
+            except RuntimeError:  # an unsupported shape pair: assume it touches
+                return -np.inf
+
+        return tuple(
+            other
+            for other in others
+            if any(
+                gap(a, b) < distance
+                for a in mine
+                for b in inspector.GetGeometryIds(self.geometries(other))
+            )
+        )
 
     def set_positions(self, q: np.ndarray) -> None:
         """Put the UR3 at q."""

@@ -8,6 +8,10 @@ holding a safe state, and asks again at each update (`poll`) until the plan is t
     ...
     result = service.poll(request)     # None (not ready), a Plan, or a PlanFailure
 
+A request may also pick its part where it was measured lying (`instance`, `source_pose`) and
+start from the arm's measured posture (`start`): the re-grasp after a drop, the re-place of a
+part that did not seat.
+
 `WorkerPlanService` plans in a persistent worker process with its own `MotionPlanner` (a Python
 thread would take the interpreter lock from the control loop for tens of milliseconds at a
 time); the plans come back as plain data (`plan_io`) over a pipe the caller reads without ever
@@ -32,20 +36,25 @@ import struct
 import sys
 import time
 import traceback
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
+from pydrake.math import RigidTransform
 
 from hrc_drake.cell_models import CellDesign, CellModelError
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.plan import Plan
 from hrc_drake.motion.plan_io import plan_from_data_in_steps, plan_to_data
+from hrc_drake.motion.poses import pose_from_values, pose_values, quantize_joints, quantize_pose
 from hrc_drake.tasks.tokens import UNDO
 
-PlanFunction = Callable[[frozenset[str], str, str | None, dict[str, str] | None], Plan]
-"""(configuration, task, last_token, layout) -> Plan: the Supervisor's planner signature."""
+PlanFunction = Callable[..., Plan]
+"""(configuration, task, last_token, layout) -> Plan: the Supervisor's planner signature. A
+request with a measured pick or start calls it with the keywords of `PlanRequest.keywords` too
+(`instance`, `source_pose` as a RigidTransform, `q_start` as an array), as
+`MotionPlanner.plan_task` takes them; an ordinary request never does."""
 
 
 @dataclass(frozen=True)
@@ -58,12 +67,21 @@ class PlanRequest:
         last_token: the task done last (`undo` takes its part back).
         layout: (instance, token) for each placed part, sorted, as the cell measured it; None:
             the robot's own routine (`default_layout`).
+        instance: the part instance the task moves (None: the lowest-numbered free one);
+            required with `source_pose`.
+        source_pose: where that part lies, measured, not seated (it is not in `layout`):
+            (x, y, z, qw, qx, qy, qz) in the world, translation then
+            `RotationMatrix.ToQuaternion()`; None: its tray home.
+        start: the 6 UR3 joint positions the plan starts from; None: the planner's `q_home`.
     """
 
     configuration: frozenset[str]
     task: str
     last_token: str | None = None
     layout: tuple[tuple[str, str], ...] | None = None
+    instance: str | None = None
+    source_pose: tuple[float, ...] | None = None
+    start: tuple[float, ...] | None = None
 
     @staticmethod
     def of(
@@ -71,20 +89,57 @@ class PlanRequest:
         task: str,
         last_token: str | None = None,
         layout: Mapping[str, str] | None = None,
+        *,
+        instance: str | None = None,
+        source_pose: Sequence[float] | RigidTransform | None = None,
+        start: Sequence[float] | None = None,
     ) -> PlanRequest:
-        """From the planner's arguments (`layout`: instance -> token, e.g. measured)."""
+        """From the planner's arguments (`layout`: instance -> token, e.g. measured;
+        `source_pose`: 7 values or a RigidTransform; `start`: 6 joint positions). ValueError
+        for a source pose without its instance, or values of the wrong count."""
         placed = None if layout is None else tuple(sorted(layout.items()))
-        return PlanRequest(frozenset(configuration), task, last_token, placed)
+        if source_pose is not None:
+            if instance is None:
+                raise ValueError(
+                    f"task {task}: a source pose needs the part lying there (instance=)"
+                )
+            if isinstance(source_pose, RigidTransform):
+                source_pose = pose_values(source_pose)
+            source_pose = tuple(float(v) for v in source_pose)
+            quantize_pose(source_pose)  # checks the values
+        if start is not None:
+            start = tuple(float(v) for v in np.asarray(start, dtype=float).ravel())
+            quantize_joints(start)
+        return PlanRequest(
+            frozenset(configuration), task, last_token, placed, instance, source_pose, start
+        )
 
     def layout_map(self) -> dict[str, str] | None:
         """The layout as instance -> token (the planner's argument)."""
         return None if self.layout is None else dict(self.layout)
 
+    def keywords(self) -> dict:
+        """The planner's keyword arguments for a measured pick or start (`instance`,
+        `source_pose` as a RigidTransform, `q_start` as an array); {} for an ordinary request."""
+        if self.instance is None and self.source_pose is None and self.start is None:
+            return {}
+        return {
+            "instance": self.instance,
+            "source_pose": None if self.source_pose is None else pose_from_values(self.source_pose),
+            "q_start": None if self.start is None else np.array(self.start),
+        }
+
     def key(self) -> tuple:
         """Requests with equal keys get the same plan: with a measured layout, the last task
-        matters only to `undo` (as in `MotionPlanner`'s own cache key)."""
+        matters only to `undo` (as in `MotionPlanner`'s own cache key); a measured pose and
+        start count to 0.1 mm and 1e-4 (`poses.KEY_DIGITS`), as the planner rounds them."""
         last = self.last_token if self.layout is None or self.task == UNDO else None
-        return (self.configuration, self.task, last, self.layout)
+        key = (self.configuration, self.task, last, self.layout)
+        if self.instance is None and self.source_pose is None and self.start is None:
+            return key
+        source = None if self.source_pose is None else quantize_pose(self.source_pose)
+        start = None if self.start is None else quantize_joints(self.start)
+        return (*key, self.instance, source, start)
 
 
 @dataclass(frozen=True)
@@ -147,7 +202,11 @@ class InlinePlanService:
             return
         try:
             plan = self._plan_fn(
-                request.configuration, request.task, request.last_token, request.layout_map()
+                request.configuration,
+                request.task,
+                request.last_token,
+                request.layout_map(),
+                **request.keywords(),
             )
         except (RuntimeError, ValueError) as err:
             self._results[key] = PlanFailure(request, type(err).__name__, str(err))
@@ -184,8 +243,10 @@ class InlinePlanService:
 def planner_function(planner) -> PlanFunction:
     """A `MotionPlanner`'s `plan_task` as a plan function (for `InlinePlanService`)."""
 
-    def plan(configuration, task, last_token, layout):
-        return planner.plan_task(configuration, task, last_token=last_token, layout=layout)
+    def plan(configuration, task, last_token, layout, **measured):
+        return planner.plan_task(
+            configuration, task, last_token=last_token, layout=layout, **measured
+        )
 
     return plan
 
@@ -340,6 +401,7 @@ def _answer(planner, message: tuple) -> tuple:
             request.task,
             last_token=request.last_token,
             layout=request.layout_map(),
+            **request.keywords(),
         )
         seconds = time.perf_counter() - start  # planning only, not the encoding
         return ("plan", ident, plan_to_data(plan), seconds)
