@@ -10,7 +10,7 @@ from hrc_drake.cell.run import build_closed_loop
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 from hrc_drake.cell.supervisor import Mode
 from hrc_drake.hri.faults import FaultConfig, FaultError, check_faults
-from hrc_drake.robot_models import UR3
+from hrc_drake.robot_models import UR3, UR3_JOINTS
 
 ROW1_STATES = [(), ("F1",), ("F1", "S23"), ("F1", "S23", "F03")]
 
@@ -175,11 +175,14 @@ def test_without_faults_nothing_is_injected_or_detected():
         (FaultConfig(kind="no-seat", task=1, offset=-0.01), "offset -0.01 must be >= 0"),
         (FaultConfig(kind="no-seat", task=1, obstacle=True), "obstacle: true is not simulated"),
         (FaultConfig(kind="no-path", task=1), "does not simulate no-path"),
+        (FaultConfig(kind="pushed", task=1, joint="elbow"), "joint 'elbow' is not the robot's"),
     ],
 )
 def test_bad_fault_entries_are_named(entry, message):
     with pytest.raises(FaultError, match=message) as err:
-        check_faults([FaultConfig(kind="pushed", task=1), entry], "test", max_tasks=3)
+        check_faults(
+            [FaultConfig(kind="pushed", task=1), entry], "test", max_tasks=3, joints=UR3_JOINTS
+        )
     assert "faults[1]" in str(err.value) and "\n" not in str(err.value)
 
 

@@ -14,6 +14,7 @@ from hrc_drake.hri.faults import FaultError, check_faults
 from hrc_drake.hri.operator import ScriptedOperator
 from hrc_drake.hri.scenario import Scenario, with_operator_script
 from hrc_drake.paths import UsageError, check_output_path
+from hrc_drake.robot_models import UR3_JOINTS
 from hrc_drake.tasks.decide import check_script_within_run, run_decisions
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.spec import load_spec
@@ -91,6 +92,10 @@ def _check_faults_within_run(scenario: Scenario, space, policy, live: bool) -> N
     past the end is reported as never injected."""
     if not scenario.faults:
         return
+    try:
+        check_faults(scenario.faults, scenario.name or "--scenario-text", joints=UR3_JOINTS)
+    except FaultError as err:
+        raise UsageError(str(err)) from None
     if live or scenario.stochastic or scenario.operator.model:
         print(
             "note: faults: this run's length is known only when it ends; a fault whose task "

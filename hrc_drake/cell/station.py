@@ -213,8 +213,14 @@ def check_station_scenario(scenario: Scenario, design: CellDesign) -> None:
     if approximation not in _SAP_FAMILY:
         raise ValueError(
             f"physics.discrete_contact_approximation={approximation!r}: the station's bolts "
-            f"(weld constraints) need a SAP-family one; use one of {', '.join(_SAP_FAMILY)}"
+            f"(locked joints) need SAP; use one of {', '.join(_SAP_FAMILY)}"
         )
+    for i, fault in enumerate(scenario.faults):
+        if fault.fault_kind == FaultKind.PUSHED and fault.joint not in UR3_JOINTS:
+            raise ValueError(
+                f"faults[{i}] (pushed): joint {fault.joint!r} is not the UR3's; use one of "
+                f"{', '.join(UR3_JOINTS)}"
+            )
     station = scenario.station
     for part, where in station.initial_placements.items():
         key = f"station.initial_placements.{part}"

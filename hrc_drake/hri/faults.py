@@ -24,6 +24,7 @@ Kinds (`FaultKind`) and their parameters (defaults in brackets):
   the task, for `duration` s [0.3].
 """
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 
@@ -99,10 +100,15 @@ class FaultError(ValueError):
     """A fault entry that cannot be used; the message names the entry and the fix."""
 
 
-def check_faults(faults: list[FaultConfig], source: str, max_tasks: int | None = None) -> None:
+def check_faults(
+    faults: list[FaultConfig],
+    source: str,
+    max_tasks: int | None = None,
+    joints: Sequence[str] | None = None,
+) -> None:
     """Value checks of a `faults:` list: FaultError naming the entry (`faults[i]`) for an unknown
     kind, a task before 1 (or past `max_tasks`, the run's length when it is known), a negative or
-    out-of-range parameter."""
+    out-of-range parameter, or a pushed joint not among `joints` (the robot's, when known)."""
     kinds = ", ".join(k.value for k in FaultKind)
     for i, fault in enumerate(faults):
         where = f"scenario {source}: faults[{i}] ({fault.kind or 'no kind'})"
@@ -123,6 +129,10 @@ def check_faults(faults: list[FaultConfig], source: str, max_tasks: int | None =
                 "choose a task within it"
             )
         _check_values(fault, kind, where)
+        if kind == FaultKind.PUSHED and joints is not None and fault.joint not in joints:
+            raise FaultError(
+                f"{where}: joint {fault.joint!r} is not the robot's; use one of {', '.join(joints)}"
+            )
 
 
 def _check_values(fault: FaultConfig, kind: FaultKind, where: str) -> None:
