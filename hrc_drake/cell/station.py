@@ -213,7 +213,7 @@ def check_station_scenario(scenario: Scenario, design: CellDesign) -> None:
     if approximation not in _SAP_FAMILY:
         raise ValueError(
             f"physics.discrete_contact_approximation={approximation!r}: the station's bolts "
-            f"(locked joints) need SAP; use one of {', '.join(_SAP_FAMILY)}"
+            f"(locked joints) need a SAP-family one; use one of {', '.join(_SAP_FAMILY)}"
         )
     for i, fault in enumerate(scenario.faults):
         if fault.fault_kind == FaultKind.PUSHED and fault.joint not in UR3_JOINTS:
