@@ -40,6 +40,7 @@ import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.analysis import Simulator
+from timing import best_cpu_rtf
 
 import hrc_drake.cell_models as cell_models
 from hrc_drake.atomic import atomic_write_text
@@ -158,14 +159,7 @@ def _at_rest_rtf(scenario: Scenario, repeats: int) -> float:
     """The whole station (arm, gripper, body, parts in the tray) holding still: its RTF."""
     station = make_cell_station(scenario)
     context = station.create_default_context()
-    simulator = Simulator(station.diagram, context)
-    simulator.AdvanceTo(0.2)
-    best = 0.0
-    for _ in range(repeats):
-        cpu = time.process_time()
-        simulator.AdvanceTo(context.get_time() + 2.0)
-        best = max(best, 2.0 / (time.process_time() - cpu))
-    return best
+    return best_cpu_rtf(Simulator(station.diagram, context), 2.0, repeats)
 
 
 def settling(setting: Setting, repeats: int) -> dict:

@@ -29,6 +29,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from timing import best_cpu_rtf
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 REPORT = HERE / "reports" / "friction_rtf.md"
@@ -159,14 +161,7 @@ def hold_levers(scenario_name: str, repeats: int) -> dict[str, float]:
             # The bolted parts' floating joints locked, their contacts with the plate kept.
             for weld in bolts:
                 station.bolts.joints[weld.part].Lock(plant_context)
-        simulator = Simulator(station.diagram, context)
-        simulator.AdvanceTo(0.2)
-        best = 0.0
-        for _ in range(repeats):
-            cpu = time.process_time()
-            simulator.AdvanceTo(context.get_time() + 1.0)
-            best = max(best, 1.0 / (time.process_time() - cpu))
-        return best
+        return best_cpu_rtf(Simulator(station.diagram, context), 1.0, repeats)
 
     full = load_cell_scenario(scenario_name, [NO_DELAY])
     station = make_cell_station(full)

@@ -64,7 +64,15 @@ def _with_interaction(args, scenario: Scenario) -> Scenario:
     return dataclasses.replace(scenario, interaction=changed)
 
 
-def _check_still_time(still_time: float, scenario: Scenario, space, policy, live: bool) -> None:
+def _known_decisions(scenario: Scenario, space, policy, live: bool):
+    """The run's decisions when they are known in advance (a scripted or following operator,
+    not live), else None."""
+    if live or scenario.stochastic or scenario.operator.model:
+        return None
+    return run_decisions(space, policy, ScriptedOperator(scenario.script))[1]
+
+
+def _check_still_time(still_time: float, scenario: Scenario, decisions) -> None:
     """Before the run: refuse a `--still-time` past the longest run (`run.max_sim_time`); when
     the tasks are known in advance (a scripted or following operator, not live), a time within
     their bolting holds is surely within the run; otherwise say at once that the run's length is
@@ -75,10 +83,8 @@ def _check_still_time(still_time: float, scenario: Scenario, space, policy, live
             f"--still-time {still_time} s is past the end of the run: a run lasts at most "
             f"run.max_sim_time, {limit} s; choose a time within it"
         )
-    if not (live or scenario.stochastic or scenario.operator.model):
-        _, decisions = run_decisions(space, policy, ScriptedOperator(scenario.script))
-        if still_time <= len(decisions) * scenario.motion.hold_time:
-            return  # the holds alone last longer: the run is surely still going then
+    if decisions is not None and still_time <= len(decisions) * scenario.motion.hold_time:
+        return  # the holds alone last longer: the run is surely still going then
     print(
         f"note: --still-time {still_time} s: this run's length is known only when it ends; if it "
         "ends earlier, that is reported then and no still is written",
@@ -86,28 +92,23 @@ def _check_still_time(still_time: float, scenario: Scenario, space, policy, live
     )
 
 
-def _check_faults_within_run(scenario: Scenario, space, policy, live: bool) -> None:
+def _check_faults_within_run(scenario: Scenario, decisions) -> None:
     """Before the run: a fault's task must be within the run when its tasks are known in
     advance (a scripted or following operator, not live); otherwise say at once that a fault
     past the end is reported as never injected."""
     if not scenario.faults:
         return
+    tasks = None if decisions is None else len(decisions)
     try:
-        check_faults(scenario.faults, scenario.name or "--scenario-text", joints=UR3_JOINTS)
+        check_faults(scenario.faults, scenario.name or "--scenario-text", tasks, UR3_JOINTS)
     except FaultError as err:
         raise UsageError(str(err)) from None
-    if live or scenario.stochastic or scenario.operator.model:
+    if decisions is None:
         print(
             "note: faults: this run's length is known only when it ends; a fault whose task "
             "it does not reach is reported as not injected",
             file=sys.stderr,
         )
-        return
-    _, decisions = run_decisions(space, policy, ScriptedOperator(scenario.script))
-    try:
-        check_faults(scenario.faults, scenario.name or "--scenario-text", len(decisions))
-    except FaultError as err:
-        raise UsageError(str(err)) from None
 
 
 def _check_port(port: int) -> None:
@@ -176,12 +177,14 @@ def _checked_run(args, live: bool, still):
         if d.task != UNDO:
             space.spec.placement(d.task)
     policy = scenario_policy(scenario, space)
-    if scenario.script and not live:
-        _, decisions = run_decisions(space, policy, ScriptedOperator(scenario.script))
+    # One decision loop serves every check that needs the run's tasks (a scripted operator is
+    # never stochastic: the scenario check refuses both).
+    decisions = _known_decisions(scenario, space, policy, live)
+    if scenario.script and decisions is not None:
         check_script_within_run(scenario.script, decisions)
-    _check_faults_within_run(scenario, space, policy, live)
+    _check_faults_within_run(scenario, decisions)
     if still is not None:
-        _check_still_time(args.still_time, scenario, space, policy, live)
+        _check_still_time(args.still_time, scenario, decisions)
     return scenario, policy
 
 

@@ -27,7 +27,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from hrc_drake.cell.gripper import STALL_GAP
+from hrc_drake.cell.gripper import STALL_GAP, stopped_short
 from hrc_drake.hri.faults import FaultConfig, FaultKind
 from hrc_drake.hri.messages import Prompt, PromptKind
 
@@ -160,10 +160,9 @@ class FaultInjector(LeafSystem):
             if now >= injection.task_start + fault.after_seconds:
                 return replace(injection, injected_at=now)
             return injection
-        command = float(self._opening.Eval(context)[0])
-        opening, rate = self._measured.Eval(context)
+        command, opening, rate = self._fingers(context)
         # The fingers stand still short of their target: on a part (or stuck).
-        stalled = opening - command > STALL_GAP and abs(rate) < STILL_RATE
+        stalled = stopped_short(opening, command) and abs(rate) < STILL_RATE
         if kind in (FaultKind.NO_SEAT, FaultKind.GRIP_LOST):
             return self._in_carry(fault, injection, stalled, now)
         if kind == FaultKind.GRIPPER_STUCK and fault.stuck == "close" and stalled:
@@ -171,8 +170,8 @@ class FaultInjector(LeafSystem):
         if kind == FaultKind.GRIPPER_STUCK and fault.stuck == "open":
             if injection.since is None:
                 return replace(injection, since=now) if stalled else injection
-            if command - opening > STALL_GAP:
-                return replace(injection, injected_at=now)  # an open they do not obey
+            if command - opening > STALL_GAP:  # an open the fingers do not obey
+                return replace(injection, injected_at=now)
         return injection
 
     @staticmethod
@@ -189,9 +188,13 @@ class FaultInjector(LeafSystem):
 
     def _end_grip_loss(self, context, injection: Injection, now: float) -> Injection:
         """A lost grip lasts until the fingers are told to open again (a new grasp grips)."""
-        command = float(self._opening.Eval(context)[0])
-        opening = float(self._measured.Eval(context)[0])
+        command, opening, _ = self._fingers(context)
         return replace(injection, ended_at=now) if command - opening > STALL_GAP else injection
+
+    def _fingers(self, context) -> tuple[float, float, float]:
+        """(commanded opening, measured opening, measured rate) of the gripper."""
+        opening, rate = self._measured.Eval(context)
+        return float(self._opening.Eval(context)[0]), float(opening), float(rate)
 
     def pending_shifts(self, context) -> list[tuple[int, FaultConfig]]:
         """(index, fault) of the no-seat faults injected whose part the station has not moved

@@ -29,6 +29,12 @@ RG2_MAX_FORCE = 40.0  # N
 STALL_GAP = 0.001  # m
 
 
+def stopped_short(opening: float, commanded: float) -> bool:
+    """Whether fingers at `opening` stand more than STALL_GAP wider than `commanded`: stopped on
+    an object (or stuck) before the target, the RG2's "grip detected"."""
+    return opening - commanded > STALL_GAP
+
+
 class GripSensor(LeafSystem):
     """`grip_detected` (1): 1 while the measured opening stands more than STALL_GAP wider than
     the commanded one (the fingers stopped on an object before their target, the RG2's rule).
@@ -43,7 +49,7 @@ class GripSensor(LeafSystem):
     def _calc(self, context, output) -> None:
         opening = self._measured.Eval(context)[0]
         commanded = self._commanded.Eval(context)[0]
-        output.SetFromVector([1.0 if opening - commanded > STALL_GAP else 0.0])
+        output.SetFromVector([1.0 if stopped_short(opening, commanded) else 0.0])
 
 
 class FingerServo(LeafSystem):
@@ -119,4 +125,5 @@ __all__ = [
     "FingerServo",
     "GripSensor",
     "add_gripper_ports",
+    "stopped_short",
 ]

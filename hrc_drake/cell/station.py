@@ -57,7 +57,7 @@ from pydrake.systems.sensors import CameraConfig, RgbdSensor
 
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.arm_servo import GravityCompensation
-from hrc_drake.cell.contacts import contact_pairs, geometry_owners
+from hrc_drake.cell.contacts import geometry_owners, owner_pairs
 from hrc_drake.cell.faults import FaultInjector, SilentOperator
 from hrc_drake.cell.gripper import add_gripper_ports
 from hrc_drake.cell.operator_body import BodyScript, BodySpheres, OperatorBody
@@ -66,7 +66,7 @@ from hrc_drake.cell.sim_operator import SimulatedOperator
 from hrc_drake.cell.slot_monitor import CellConfiguration, SlotMonitor
 from hrc_drake.cell.welds import Bolts, Weld
 from hrc_drake.cell_models import CellDesign, add_cell_models
-from hrc_drake.hri.faults import FaultKind
+from hrc_drake.hri.faults import FaultKind, check_faults
 from hrc_drake.hri.messages import Prompt
 from hrc_drake.hri.scenario import CameraSettings, Scenario
 from hrc_drake.motion.poses import IN_TRAY, CellFrames, layout_poses
@@ -93,6 +93,7 @@ class CellStation:
     bolts: Bolts
     meshcat: Meshcat | None = None
     visualizer: MeshcatVisualizer | None = None
+    injector: FaultInjector | None = None  # with the robot
 
     @property
     def has_robot(self) -> bool:
@@ -140,15 +141,13 @@ class CellStation:
         self.bolts.apply(plant_context, wanted, filters)
         for index, fault in self._pending_shifts(context):
             self._slide_in_fingers(plant_context, fault.offset)
-            injector = self.diagram.GetSubsystemByName("fault_injector")
-            injector.mark_shifted(injector.GetMyMutableContextFromRoot(context), index)
+            self.injector.mark_shifted(self.injector.GetMyMutableContextFromRoot(context), index)
         return wanted
 
     def _pending_shifts(self, context: Context) -> list:
-        if not self.scenario.faults or not self.diagram.HasSubsystemNamed("fault_injector"):
+        if not self.scenario.faults or self.injector is None:
             return []
-        injector = self.diagram.GetSubsystemByName("fault_injector")
-        return injector.pending_shifts(injector.GetMyContextFromRoot(context))
+        return self.injector.pending_shifts(self.injector.GetMyContextFromRoot(context))
 
     def _slide_in_fingers(self, plant_context, offset: float) -> None:
         """Move the part between the fingers `offset` along the pads (across the fingers'
@@ -215,12 +214,8 @@ def check_station_scenario(scenario: Scenario, design: CellDesign) -> None:
             f"physics.discrete_contact_approximation={approximation!r}: the station's bolts "
             f"(locked joints) need a SAP-family one; use one of {', '.join(_SAP_FAMILY)}"
         )
-    for i, fault in enumerate(scenario.faults):
-        if fault.fault_kind == FaultKind.PUSHED and fault.joint not in UR3_JOINTS:
-            raise ValueError(
-                f"faults[{i}] (pushed): joint {fault.joint!r} is not the UR3's; use one of "
-                f"{', '.join(UR3_JOINTS)}"
-            )
+    # The scenario check could not know the robot's joints (the HRI layer imports no Drake).
+    check_faults(scenario.faults, scenario.name or "scenario", joints=UR3_JOINTS)
     station = scenario.station
     for part, where in station.initial_placements.items():
         key = f"station.initial_placements.{part}"
@@ -336,9 +331,6 @@ def _add_operator(builder, plant, scene_graph, parts, scenario: Scenario, operat
         "operator", SimulatedOperator(operator, scenario.motion.hold_time, run.period)
     )
     builder.ExportInput(person.GetInputPort("hri.prompt"), "hri.prompt")
-    if builder.HasSubsystemNamed("fault_injector"):
-        faults = builder.GetSubsystemByName("fault_injector")
-        builder.ConnectInput("hri.prompt", faults.GetInputPort("hri.prompt"))
     builder.ExportOutput(person.GetOutputPort("hri.indication"), "hri.indication")
     if not scenario.body.enabled:
         nobody = BodySpheres(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
@@ -372,9 +364,7 @@ class RestingParts(LeafSystem):
     def __init__(self, plant: MultibodyPlant, parts: Mapping[str, object]):
         super().__init__()
         self._bodies = {name: int(plant.GetBodyIndices(model)[0]) for name, model in parts.items()}
-        owners = geometry_owners(plant)
-        self._part_of = {g: o.model for g, o in owners.items() if o.model in parts}
-        self._gripper = {g for g, o in owners.items() if o.model == GRIPPER}
+        self._owners = geometry_owners(plant)
         self._contacts = self.DeclareAbstractInputPort(
             "contact_results", AbstractValue.Make(ContactResults())
         )
@@ -387,11 +377,11 @@ class RestingParts(LeafSystem):
 
     def _calc(self, context, output) -> None:
         held = set()
-        for a, b in contact_pairs(self._contacts.Eval(context)):
-            if a in self._gripper and b in self._part_of:
-                held.add(self._part_of[b])
-            elif b in self._gripper and a in self._part_of:
-                held.add(self._part_of[a])
+        for a, b in owner_pairs(self._contacts.Eval(context), self._owners):
+            if a.model == GRIPPER:
+                held.add(b.model)
+            elif b.model == GRIPPER:
+                held.add(a.model)
         velocities = self._velocities.Eval(context)
         output.set_value(
             frozenset(
@@ -512,14 +502,17 @@ def make_cell_station(
         operator = SilentOperator(operator, scenario.faults)
     builder = DiagramBuilder()
     plant, scene_graph, instances, bolts, frames = _add_plant(builder, scenario, design)
+    injector = None
     if scenario.station.robot:
         _add_arm(builder, plant, instances[UR3])
-        faults = _add_faults(builder, plant, scenario)
-        add_gripper_ports(builder, plant, instances[GRIPPER], scenario.station.rg2.kp, faults)
+        injector = _add_faults(builder, plant, scenario)
+        add_gripper_ports(builder, plant, instances[GRIPPER], scenario.station.rg2.kp, injector)
     else:
         _export_disturbance(builder, plant)
     parts = {name: instances[name] for name in design.instance_names}
     person = _add_operator(builder, plant, scene_graph, parts, scenario, operator, body_script)
+    if injector is not None:  # it counts tasks from the prompts the station shows
+        builder.ConnectInput("hri.prompt", injector.GetInputPort("hri.prompt"))
     _add_part_sensors(builder, plant, scene_graph, frames, parts, person)
     builder.ExportOutput(person.GetOutputPort("bolts"), "sim.welds")
     _export_sim_ports(builder, plant, scene_graph)
@@ -542,6 +535,7 @@ def make_cell_station(
         bolts,
         meshcat,
         visualizer,
+        injector,
     )
 
 
