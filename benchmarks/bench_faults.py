@@ -7,7 +7,8 @@ task of the run), when it strikes, and the kind's other parameter (a stop's leng
 the operator stays silent, whether the gripper sticks closed or open). Per cell and kind:
 detection rate (of the faults injected, those the controller found from its measurements),
 recovery rate (the cell went on by itself and finished the assembly), the simulated time lost,
-robot collisions and separation violations.
+robot collisions, separation violations (the robot moving under its own command closer than
+S_p) and, apart, the steps an outside force (a push) moved the arm closer than S_p.
 
 Usage: ``python benchmarks/bench_faults.py [--seeds 10] [--workers 2] [--lean]`` (with
 ``--lean`` the report is printed, not written).
@@ -36,13 +37,31 @@ RECOVERS = {
     FaultKind.GRIPPER_STUCK: False,
     FaultKind.GRIP_LOST: True,
     FaultKind.NO_SEAT: True,
+    FaultKind.NO_PATH: True,
 }
+# The cases run: each kind, and no-seat with debris in the pocket, which no re-placement
+# fixes (the cell should hand it over).
+NO_SEAT_DEBRIS = "no-seat (debris)"
+CASES = [*(k.value for k in SIMULATED), NO_SEAT_DEBRIS]
+
+
+def case_kind(case: str) -> FaultKind:
+    """The fault kind of a case."""
+    return FaultKind.NO_SEAT if case == NO_SEAT_DEBRIS else FaultKind(case)
+
+
+def should_recover(case: str) -> bool:
+    """Whether the cell should recover from a case by itself."""
+    return case != NO_SEAT_DEBRIS and RECOVERS[FaultKind(case)]
+
+
 REPORT = Path(__file__).parent / "reports" / "faults.md"
 
 
-def fault_entry(kind: FaultKind, seed: int, tasks: int) -> str:
+def fault_entry(case: str, seed: int, tasks: int) -> str:
     """The `faults:` entry of one seeded run (YAML flow text)."""
-    rng = np.random.default_rng([seed, list(FaultKind).index(kind)])
+    kind = case_kind(case)
+    rng = np.random.default_rng([seed, CASES.index(case)])
     task = int(rng.integers(1, tasks + 1))
     extra = {
         FaultKind.PROTECTIVE_STOP: f"after: {rng.uniform(3.0, 6.0):.2f}, "
@@ -52,7 +71,10 @@ def fault_entry(kind: FaultKind, seed: int, tasks: int) -> str:
         FaultKind.GRIPPER_STUCK: f"stuck: {'close' if seed % 2 == 0 else 'open'}",
         FaultKind.GRIP_LOST: f"after: {rng.uniform(0.3, 1.5):.2f}",
         FaultKind.NO_SEAT: f"offset: {rng.uniform(0.008, 0.012):.4f}",
+        FaultKind.NO_PATH: f"duration: {rng.uniform(4.0, 9.0):.2f}",
     }[kind]
+    if case == NO_SEAT_DEBRIS:
+        extra = "obstacle: true"
     return f"{{kind: {kind.value}, task: {task}, {extra}}}"
 
 
@@ -110,6 +132,7 @@ def one_run(job: tuple[str, str, int, str, bool]) -> dict:
         "terminal": result.done,
         "collisions": len(result.collisions),
         "violations": safety.violations if safety is not None else 0,
+        "imposed": safety.imposed if safety is not None else 0,
         "sim_time": result.sim_time,
     }
 
@@ -118,39 +141,43 @@ def summary_rows(runs: list[dict]) -> list[str]:
     """The report's table rows, one per cell and kind."""
     rows = []
     for cell in CELLS:
-        for kind in SIMULATED:
-            mine = [r for r in runs if r["cell"] == cell and r["kind"] == kind.value]
+        for case in CASES:
+            mine = [r for r in runs if r["cell"] == cell and r["kind"] == case]
             injected = [r for r in mine if r["record"]["injected_at"] is not None]
             detected = [r for r in injected if r["record"]["detected_at"] is not None]
             recovered = [r for r in detected if r["record"]["recovered"] and r["terminal"]]
             lost = [r["record"]["seconds_lost"] for r in detected]
-            expected = "recover" if RECOVERS[kind] else "hand over"
+            expected = "recover" if should_recover(case) else "hand over"
             rows.append(
-                f"| {cell} | {kind.value} | {expected} | {len(mine)} | {len(injected)} | "
+                f"| {cell} | {case} | {expected} | {len(mine)} | {len(injected)} | "
                 f"{len(detected)}/{len(injected)} | {len(recovered)}/{len(detected)} | "
                 f"{np.mean(lost) if lost else 0:.2f} | {max(lost) if lost else 0:.2f} | "
-                f"{sum(r['collisions'] for r in mine)} | {sum(r['violations'] for r in mine)} |"
+                f"{sum(r['collisions'] for r in mine)} | {sum(r['violations'] for r in mine)} | "
+                f"{sum(r['imposed'] for r in mine)} |"
             )
     return rows
 
 
 def violations_note(runs: list[dict]) -> list[str]:
-    """A paragraph on the kinds whose runs counted separation violations, if any."""
+    """A paragraph on the kinds whose runs counted separation violations, if any, and on the
+    steps pushed closer than S_p while the robot held still."""
     kinds = sorted({r["kind"] for r in runs if r["violations"]})
-    if not kinds:
-        return ["No run counted a separation violation.", ""]
     text = (
-        f"Separation violations (monitor steps with the arm moving closer to the body than S_p) "
-        f"were counted only in {', '.join(kinds)} runs."
+        f"Separation violations (monitor steps with the arm moving closer to the body than S_p "
+        f"under its own command) were counted only in {', '.join(kinds)} runs."
+        if kinds
+        else "No run counted a separation violation."
     )
-    if kinds == [FaultKind.PUSHED.value]:
+    pushed = sorted({r["kind"] for r in runs if r["imposed"]})
+    if pushed:
         text += (
-            " They fall in the push itself: 80 N·m on the shoulder pan is more than its servo's "
-            "56 N·m, so for the push's 0.3 s the arm moves faster than commanded and S_p, which "
-            "grows with the measured joint speed, passes the separation for a step or two. The "
-            "controller detects the push 0.05–0.07 s after it begins and commands a hold, but "
-            "cannot brake an arm pushed harder than its motors: on a real UR3 the safety "
-            "system's protective stop (brakes) would act there."
+            f" *Moved from outside* counts, apart, the steps of {', '.join(pushed)} runs in "
+            "which the arm came closer than S_p while an outside force moved it: a joint more "
+            "than 0.3 rad/s faster than commanded, or moving while the controller commanded a "
+            "standstill (a push of 80 N·m on the shoulder pan is more than its servo's 56 N·m; "
+            "a part landing on a pocket's rim blocks the arm and springs it back). The "
+            "controller stops the task at once, but cannot brake an arm pushed harder than its "
+            "motors (a real UR3's protective stop brakes there)."
         )
     return [text, ""]
 
@@ -165,9 +192,9 @@ def main(argv: list[str] | None = None) -> int:
     jobs = []
     for cell in CELLS:
         tasks = run_tasks(cell, args.lean)
-        for kind in SIMULATED:
+        for case in CASES:
             for seed in range(args.seeds):
-                jobs.append((cell, kind.value, seed, fault_entry(kind, seed, tasks), args.lean))
+                jobs.append((cell, case, seed, fault_entry(case, seed, tasks), args.lean))
     start = time.perf_counter()
     runs = []
     context = multiprocessing.get_context("spawn")
@@ -206,7 +233,8 @@ def report(runs: list[dict], args, wall: float) -> str:
         "operator's body and the separation monitor on; the operator follows the robot.",
         "",
         "A seed draws the task struck (any of the run's), when (stop and push: 3–6 s into the "
-        "task; lost grip: 0.3–1.5 s into the carry), a stop's length (0.5–3 s), the silence "
+        "task; lost grip: 0.3–1.5 s into the carry), a stop's length (0.5–3 s), how long the "
+        "box of a no-path fault stands over the proposed seat (4–9 s), the silence "
         "(11–20 s, past the 10 s timeout), whether the gripper sticks closed (even seeds) or "
         "open (odd), and how far a part slides in the fingers (no-seat: 8–12 mm; at 5 mm a "
         "part may still find its seat). *detected*: "
@@ -217,20 +245,20 @@ def report(runs: list[dict], args, wall: float) -> str:
         "over (which ends when the task stops).",
         "",
         "| cell | kind | the cell should | runs | injected | detected | recovered | lost, mean "
-        "[s] | lost, max [s] | collisions | separation violations |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "[s] | lost, max [s] | collisions | separation violations | moved from outside |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
         *summary_rows(runs),
         "",
         *violations_note(runs),
         "## Runs",
         "",
         "| cell | seed | fault | detected at [s] | recovery | terminal | collisions | "
-        "separation violations |",
-        "|---|---|---|---|---|---|---|---|",
+        "separation violations | moved from outside |",
+        "|---|---|---|---|---|---|---|---|---|",
         *(
             f"| {r['cell']} | {r['seed']} | `{r['entry']}` | {r['record']['detected_at']} | "
             f"{r['record']['recovery'] or '—'} | {'yes' if r['terminal'] else 'no'} | "
-            f"{r['collisions']} | {r['violations']} |"
+            f"{r['collisions']} | {r['violations']} | {r['imposed']} |"
             for r in runs
         ),
         "",

@@ -148,6 +148,70 @@ def test_a_part_that_cannot_be_replaced_in_time_is_handed_over():
     assert record.detected_at is not None and not record.recovered
 
 
+def test_an_obstacle_over_the_seat_blocks_the_path_until_it_is_taken_away():
+    # The box stands over S23's seat for 6 s from task 2's prompt: the robot, which sees it,
+    # finds no path, holds still at home, and plans again once the box is gone.
+    loop = build_closed_loop(
+        load_cell_scenario("row1-optimal", [LEAN, "{faults: [{kind: no-path, task: 2}]}"])
+    )
+    plant, station = loop.station.plant, loop.station
+    seen, speeds, t = [], [], 0.0
+    while loop.advance_to(t) not in (Mode.DONE, Mode.FAILED) and t < 120:
+        t += 0.1
+        context = plant.GetMyContextFromRoot(loop.root_context)
+        obstacle = (
+            station.diagram.GetOutputPort("configuration")
+            .Eval(station.diagram.GetMyContextFromRoot(loop.root_context))
+            .obstacle
+        )
+        seen.append((t, bool(obstacle)))
+        if loop.status.mode == Mode.BLOCKED:
+            speeds.append(np.abs(plant.GetVelocities(context, station.instances[UR3])).max())
+    status = loop.status
+    assert status.mode == Mode.DONE and status.visited == ROW1_STATES, status.events
+    (found,) = status.detections
+    assert found.cause == "plan" and found.step == 2 and found.recovery == "retry"
+    # The box was seen while the robot waited, and not once the robot planned again.
+    assert any(s for t, s in seen if found.at <= t < found.resolved_at)
+    assert not any(s for t, s in seen if t > found.resolved_at + 0.1)
+    assert speeds and max(speeds) < 1e-3
+    assert any("obstacle is gone: plans again" in e for e in status.events)
+    assert not loop.watch.contacts.collisions
+
+
+def test_an_obstacle_that_stays_hands_the_task_over():
+    text = "{run: {path_timeout: 4}, faults: [{kind: no-path, task: 1, duration: 60}]}"
+    result = _result(text)
+    assert not result.done and "blocked the path for 4 s" in result.error
+    (record,) = result.faults
+    assert record.detected_at is not None and not record.recovered
+    assert record.recovery == "operator"
+    assert result.states == ROW1_STATES[:1] and not result.collisions
+
+
+def test_debris_in_the_pocket_keeps_the_part_off_its_seat_and_the_task_is_handed_over():
+    # The debris is too small for the cell to see: the part lands on it, is found off its seat
+    # at the release, is picked and placed again (once), lands on it again, and is handed over.
+    text = "{run: {recover_tries: 1}, faults: [{kind: no-seat, task: 1, obstacle: true}]}"
+    loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, text]))
+    result = loop.run()
+    assert not result.done and "oval_flange_1 is" in result.error
+    assert "not in a seat" in result.error
+    assert sum("does not sit in its seat" in e for e in result.events) == 1
+    assert sum("plans to pick oval_flange_1 from where it lies" in e for e in result.events) == 1
+    (record,) = result.faults
+    assert record.detected_at > record.injected_at and not record.recovered
+    assert record.recovery == "operator"
+    assert not result.collisions
+    # The part stands on the debris: higher than a seated flange by about its 3 mm.
+    context = loop.station.plant.GetMyContextFromRoot(loop.root_context)
+    flange = loop.station.plant.EvalBodyPoseInWorld(
+        context, loop.station.part_body("oval_flange_1")
+    )
+    seat = loop.station.frames.seats[1]
+    assert flange.translation()[2] - seat.translation()[2] > 0.002
+
+
 def test_a_grip_too_weak_for_the_part_slips_and_is_detected():
     # The square flange (0.57 kg) slips at 3 N, the RG2's least force.
     loop = _run("{station: {rg2: {grip_force: 3}}}")
@@ -173,8 +237,6 @@ def test_without_faults_nothing_is_injected_or_detected():
         (FaultConfig(kind="pushed", task=1, after=-2.0), "after -2.0 must be >= 0"),
         (FaultConfig(kind="grip-lost", task=1, force=-1.0), "force -1.0 must be >= 0"),
         (FaultConfig(kind="no-seat", task=1, offset=-0.01), "offset -0.01 must be >= 0"),
-        (FaultConfig(kind="no-seat", task=1, obstacle=True), "obstacle: true is not simulated"),
-        (FaultConfig(kind="no-path", task=1), "does not simulate no-path"),
         (FaultConfig(kind="pushed", task=1, joint="elbow"), "joint 'elbow' is not the robot's"),
     ],
 )

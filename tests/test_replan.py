@@ -20,7 +20,7 @@ from hrc_drake.motion import (
 )
 from hrc_drake.motion.ik import ORIENTATION_TOLERANCE
 from hrc_drake.motion.plan_io import plan_to_data
-from hrc_drake.motion.poses import part_pose, pose_values, tcp_pose
+from hrc_drake.motion.poses import part_pose, pose_from_values, pose_values, tcp_pose
 from hrc_drake.motion.service import (
     InlinePlanService,
     PlanFailure,
@@ -205,3 +205,18 @@ def test_a_start_by_a_placed_part_first_moves_the_tool_straight_up(planner):
     assert plan.motions[0].name == "up, clear of the cell"
     np.testing.assert_allclose(plan.positions(0.0), by_the_plate, rtol=0, atol=5e-5 + 1e-12)
     validate_plan(plan, planner)
+
+
+def test_a_part_lying_askew_on_the_tray_is_refused_when_a_finger_would_touch_the_tray(planner):
+    # Where a square flange came to rest on the tray's edge after a lost grip (measured in a
+    # faulted run): going down to it, the right finger would touch the tray. The planner says so
+    # instead of planning a grasp the cell would see as a collision.
+    lying = pose_from_values(
+        (0.21138, -0.19335, 0.020764, 0.596849, -0.068999, -0.046955, 0.798001)
+    )
+    with pytest.raises(UnreachableError, match=r"fingers going down to it would touch the cell"):
+        planner.plan_task({"F1"}, "S23", instance="square_flange", source_pose=lying, q_start=None)
+    # The same part lying flat on the table beside the tray, on its bosses, is planned.
+    home = planner.frames.homes["square_flange"]
+    flat = RigidTransform(home.rotation(), [0.46, home.translation()[1] + 0.08, 0.0045])
+    assert planner.plan_task({"F1"}, "S23", instance="square_flange", source_pose=flat)

@@ -367,3 +367,26 @@ def test_the_log_counts_time_stopped_or_slowed_only_where_the_plan_would_move():
     assert log.steps == 4 and log.min_separation == 0.2
     assert log.stopped_time == pytest.approx(0.02) and log.slowed_time == pytest.approx(0.02)
     assert log.violations == 2 and log.min_margin == -0.05 and log.body_contacts == 0
+
+
+def test_an_arm_moved_from_outside_is_counted_apart_from_the_robots_violations(cell):
+    """A joint faster than commanded by more than IMPOSED_SPEED (a push), or moving while the
+    robot commands a standstill, is moved from outside: a step closer than S_p then counts as
+    `imposed`, not as a violation of the robot's own motion."""
+    _, envelope = cell
+    q, qdot = np.array(POSTURES[0]), np.array([0.6, 0.3, 0.0, 0.0, 0.0, 0.0])
+    p, v = _tcp_motion(envelope, q, qdot)
+    hand = _one_sphere(p + 0.08 * v / np.linalg.norm(v), radius=0.05)
+    config = SafetyConfig()
+    intent = MotionIntent(qdot=qdot, moving=True)
+    own = assess(envelope, q, qdot, hand, intent, config, 3.0, 0.05)
+    pushed = assess(envelope, q, qdot + [0.5, 0, 0, 0, 0, 0], hand, intent, config, 3.0, 0.05)
+    assert own.margin < 0 and not own.imposed
+    assert pushed.margin < 0 and pushed.imposed
+    held = assess(envelope, q, qdot, hand, MotionIntent(), config, 3.0, 0.05)
+    assert held.imposed
+    log = SafetyLog()
+    for reading, why in ((own, intent), (pushed, intent), (held, MotionIntent())):
+        log = log_step(log, reading, why, 0.02)
+    assert log.violations == 1 and log.imposed == 2
+    assert log.to_json()["imposed"] == 2

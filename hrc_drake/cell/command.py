@@ -269,7 +269,9 @@ def _print_summary(result, scenario) -> None:
         figures = result.safety.to_json()
         print(
             f"  safety: least separation {figures['min_separation']} m, "
-            f"{figures['violations']} violation(s), slowed {figures['slowed_time']} s, "
+            f"{figures['violations']} violation(s)"
+            + (f" (+{figures['imposed']} moved from outside)" if figures["imposed"] else "")
+            + f", slowed {figures['slowed_time']} s, "
             f"stopped {figures['stopped_time']} s"
         )
     if result.collisions:

@@ -69,6 +69,7 @@ def supervisor_limits(scenario: Scenario, options: MotionOptions) -> SupervisorL
         plan_ahead=run.plan_ahead,
         indication_timeout=run.indication_timeout,
         recover_tries=run.recover_tries,
+        path_timeout=run.path_timeout,
     )
 
 

@@ -12,9 +12,12 @@ fingers stalled on the part; until they open again), `gripper-stuck` (the finger
 or do not open again, in the task), `no-seat` (the part slides `offset` along the pads `after`
 s into the carry: the station moves it, `CellStation.apply_welds`, so the robot places it
 that far off its seat), `protective-stop` (`safety.stop` is 1 from `after` s into the task for
-`duration` s), `pushed` (a torque on `joint` from `after` s into the task for `duration` s).
-`operator-silent` is the simulated operator's (`SilentOperator`); the injector notes when its
-task's prompt appears.
+`duration` s), `pushed` (a torque on `joint` from `after` s into the task for `duration` s),
+`no-path` (when the task's prompt appears, a box is set down over the seat the robot proposes,
+`hrc_drake.cell.obstacle`, and taken away `duration` s later), `no-seat` with `obstacle: true`
+(when the task's prompt appears, debris drops into the pocket of the seat the robot proposes,
+and stays). `operator-silent` is the
+simulated operator's (`SilentOperator`); the injector notes when its task's prompt appears.
 """
 
 from __future__ import annotations
@@ -28,11 +31,18 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from hrc_drake.cell.gripper import STALL_GAP, stopped_short
+from hrc_drake.cell.obstacle import SeatPositions
 from hrc_drake.hri.faults import FaultConfig, FaultKind
 from hrc_drake.hri.messages import Prompt, PromptKind
+from hrc_drake.obstacle_models import OBSTACLE_PARK, obstacle_pose_over
 
 # The fingers count as standing still below this rate (they close at about 0.5 m/s).
 STILL_RATE = 0.005  # m/s
+# The box of a no-path fault moves under the table to below its seat, then rises into place
+# this long after the prompt; the operator, who set it down, answers OBSTACLE_SET_TIME after
+# the prompt (`SilentOperator`), once it stands there.
+OBSTACLE_RISE_DELAY = 0.3  # s
+OBSTACLE_SET_TIME = 1.0  # s
 
 
 @dataclass(frozen=True)
@@ -46,6 +56,7 @@ class Injection:
     since: float | None = None  # grip-lost: the carry began; stuck open: the fingers stalled
     ended_at: float | None = None  # grip-lost: the fingers opened again (the fault is over)
     shifted: bool = False  # no-seat: the station has moved the part in the fingers
+    target: tuple[float, ...] = ()  # no-path: where the box stands (its centre, world)
 
     def __deepcopy__(self, memo) -> Injection:
         return self
@@ -65,11 +76,21 @@ class FaultInjector(LeafSystem):
     Input ports: `hri.prompt` (Prompt), `opening` and `force` (the gripper's command after its
     range clip, 1 each), `measured` (the gripper's opening and rate, 2). Output ports: `opening`,
     `force` (the command the fingers' servo obeys), `safety.stop` (1), `torque` (the plant's
-    generalized forces), `injected` (tuple of Injection). Updated every `period` seconds."""
+    generalized forces), `obstacle` and `debris` (their carriages' desired states: x, y, z,
+    then three zero rates), `injected` (tuple of Injection). Updated every `period` seconds.
+    `seat_position` (a `hrc_drake.cell.obstacle.SeatPositions`) places a no-path fault's box
+    and a no-seat fault's debris."""
 
-    def __init__(self, plant: MultibodyPlant, faults: Sequence[FaultConfig], period: float):
+    def __init__(
+        self,
+        plant: MultibodyPlant,
+        faults: Sequence[FaultConfig],
+        period: float,
+        seat_position: SeatPositions | None = None,
+    ):
         super().__init__()
         self._faults = tuple(faults)
+        self._seat_position = seat_position
         self._nv = plant.num_velocities()
         self._dof = {}
         for fault in self._faults:
@@ -85,6 +106,8 @@ class FaultInjector(LeafSystem):
         self.DeclareVectorOutputPort("force", BasicVector(1), self._calc_force)
         self.DeclareVectorOutputPort("safety.stop", BasicVector(1), self._calc_stop)
         self.DeclareVectorOutputPort("torque", BasicVector(self._nv), self._calc_torque)
+        self.DeclareVectorOutputPort("obstacle", BasicVector(6), self._calc_obstacle)
+        self.DeclareVectorOutputPort("debris", BasicVector(6), self._calc_debris)
         self.DeclareStateOutputPort("injected", self._state)
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
 
@@ -135,6 +158,29 @@ class FaultInjector(LeafSystem):
                 torque[self._dof[fault.joint]] += fault.torque
         output.SetFromVector(torque)
 
+    def _calc_obstacle(self, context, output) -> None:
+        now = context.get_time()
+        where = np.array(OBSTACLE_PARK, dtype=float)
+        for fault, injection in self._active(context, FaultKind.NO_PATH):
+            if not injection.target:
+                continue
+            since = now - injection.injected_at
+            if since < fault.duration_seconds:
+                where[:2] = injection.target[:2]  # under the table, below its seat
+            if OBSTACLE_RISE_DELAY <= since < fault.duration_seconds:
+                where[2] = injection.target[2]
+        output.SetFromVector(np.concatenate([where, np.zeros(3)]))
+
+    def _calc_debris(self, context, output) -> None:
+        where = np.array(OBSTACLE_PARK, dtype=float)
+        for fault, injection in self._active(context, FaultKind.NO_SEAT):
+            if fault.obstacle and injection.target:
+                since = context.get_time() - injection.injected_at
+                where[:2] = injection.target[:2]  # under the table, below its pocket
+                if since >= OBSTACLE_RISE_DELAY:
+                    where[2] = injection.target[2]
+        output.SetFromVector(np.concatenate([where, np.zeros(3)]))
+
     # --- what happened -------------------------------------------------------------------
     def _update(self, context, state) -> None:
         now = context.get_time()
@@ -146,6 +192,8 @@ class FaultInjector(LeafSystem):
                     injection = replace(injection, task_start=now)
                     if fault.fault_kind == FaultKind.OPERATOR_SILENT:
                         injection = replace(injection, injected_at=now)
+                    if fault.fault_kind == FaultKind.NO_PATH or fault.obstacle:
+                        injection = self._set_down(fault, injection, prompt, now)
             elif injection.injected_at is None and prompt.step == fault.task:
                 injection = self._inject(context, fault, injection, now)
             elif injection.ended_at is None and fault.fault_kind == FaultKind.GRIP_LOST:
@@ -173,6 +221,18 @@ class FaultInjector(LeafSystem):
             if command - opening > STALL_GAP:  # an open the fingers do not obey
                 return replace(injection, injected_at=now)
         return injection
+
+    def _set_down(self, fault: FaultConfig, injection: Injection, prompt: Prompt, now: float):
+        """A no-path fault's box goes over the seat the robot proposes; a no-seat fault's
+        debris into its pocket."""
+        seats = self._seat_position
+        if seats is None:
+            raise ValueError(f"a {fault.kind} fault needs the station's seat positions")
+        if fault.fault_kind == FaultKind.NO_PATH:
+            where = obstacle_pose_over(seats(prompt)).translation()
+        else:
+            where = seats.pocket(prompt)
+        return replace(injection, injected_at=now, target=tuple(float(v) for v in where))
 
     @staticmethod
     def _in_carry(fault: FaultConfig, injection: Injection, stalled: bool, now: float):
@@ -205,6 +265,7 @@ class FaultInjector(LeafSystem):
                 zip(self._faults, self._injections(context), strict=True)
             )
             if fault.fault_kind == FaultKind.NO_SEAT
+            and not fault.obstacle
             and injection.injected_at is not None
             and not injection.shifted
         ]
@@ -217,15 +278,21 @@ class FaultInjector(LeafSystem):
 
 
 class SilentOperator:
-    """The simulated operator with the `operator-silent` faults: the answer to each silent
-    task's choice comes `duration` s later than the operator would give it (its own
-    `indication_delay`, if it has one, plus the silence)."""
+    """The simulated operator with the `operator-silent` and `no-path` faults: the answer to
+    each silent task's choice comes `duration` s later than the operator would give it (its own
+    `indication_delay`, if it has one, plus the silence); to a no-path task's,
+    OBSTACLE_SET_TIME later (the box is set down first)."""
+
+    KINDS = (FaultKind.OPERATOR_SILENT, FaultKind.NO_PATH)
 
     def __init__(self, operator, faults: Sequence[FaultConfig]):
         self._operator = operator
-        self._silence = {
-            f.task: f.duration_seconds for f in faults if f.fault_kind == FaultKind.OPERATOR_SILENT
-        }
+        self._silence: dict[int, float] = {}
+        for f in faults:
+            if f.fault_kind == FaultKind.OPERATOR_SILENT:
+                self._silence[f.task] = self._silence.get(f.task, 0.0) + f.duration_seconds
+            elif f.fault_kind == FaultKind.NO_PATH:
+                self._silence[f.task] = self._silence.get(f.task, 0.0) + OBSTACLE_SET_TIME
 
     def __call__(self, step, state, proposal):
         return self._operator(step, state, proposal)

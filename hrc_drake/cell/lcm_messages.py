@@ -97,6 +97,8 @@ struct lcmt_cell_configuration {
     int64_t utime;
     int32_t num_parts;
     lcmt_part_placement placements[num_parts];  // sorted by instance
+    boolean has_obstacle;   // a temporary obstacle is seen in the work
+    double obstacle[7];     // its world pose, as a part's (all zeros without one)
 }
 
 // The tracked operator body as world-frame spheres (hrc_drake.cell.operator_body.BodySpheres).
@@ -523,7 +525,16 @@ def configuration_message(stamp: int, configuration: CellConfiguration):
         )
         for name, p in configuration.placements
     ]
-    return lcmt_cell_configuration(utime=stamp, num_parts=len(placements), placements=placements)
+    obstacle = configuration.obstacle
+    if len(obstacle) not in (0, 7):
+        raise ValueError(f"configuration: an obstacle pose of {len(obstacle)} values; give 7")
+    return lcmt_cell_configuration(
+        utime=stamp,
+        num_parts=len(placements),
+        placements=placements,
+        has_obstacle=bool(obstacle),
+        obstacle=list(obstacle) if obstacle else [0.0] * 7,
+    )
 
 
 def configuration_value(message) -> tuple[CellConfiguration]:
@@ -545,7 +556,8 @@ def configuration_value(message) -> tuple[CellConfiguration]:
         )
     except ValueError as err:
         raise LcmDecodeError(f"a configuration message: {err}") from None
-    return (CellConfiguration(placements),)
+    obstacle = tuple(float(x) for x in message.obstacle) if message.has_obstacle else ()
+    return (CellConfiguration(placements, obstacle),)
 
 
 def body_message(stamp: int, body: BodySpheres):

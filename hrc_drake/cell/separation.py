@@ -39,8 +39,11 @@ zero, S_s = v_r T_s / 2.
 every pair keeps at least S_p(s) + `slow_band`, with the plan's own velocities scaled by s (S_p
 is quadratic in s): 1 is full speed, 0 a stop. The monitor's update logs each period
 (`SafetyLog`): least separation, least margin (separation − S_p with the measured velocities)
-while the robot moves, violations (steps where the robot moved with separation < S_p), body
-contacts, and the time spent slowed and stopped while the plan moves the arm.
+while the robot moves, violations (steps where the robot moved with separation < S_p under its
+own command: its plan moving it, or stopping it from a move), steps moved closer than S_p by an
+outside force (`imposed`: a standstill commanded, or a joint IMPOSED_SPEED faster than
+commanded: the arm pushed; counted apart, never hidden), body contacts, and the time spent
+slowed and stopped while the plan moves the arm.
 """
 
 from __future__ import annotations
@@ -62,6 +65,10 @@ from hrc_drake.motion.scene import TCP
 from hrc_drake.robot_models import GRIPPER, RG2_FINGER_JOINTS, UR3, UR3_JOINTS
 
 GRASP = "grasp"  # the frame of a part where the gripper's tcp holds it (cell_models)
+# A joint this much faster than commanded is moved from outside [rad/s] (our choice: the
+# servo tracks its command to a few hundredths of a rad/s; an 80 N·m push on the shoulder
+# reaches this within one 20 ms period).
+IMPOSED_SPEED = 0.3
 _TINY = 1e-12
 _YZX, _ZXY = [1, 2, 0], [2, 0, 1]
 
@@ -75,12 +82,15 @@ class SeparationReading:
         margin: least separation − S_p with the measured velocities [m].
         limit: the speed scale allowed (see the module docstring).
         moving: a robot joint moves faster than `SafetyConfig.moving_speed`.
+        imposed: a joint moves faster than commanded by more than IMPOSED_SPEED: the arm is
+            moved by an outside force (a push), not by its servo.
     """
 
     separation: float = float("inf")
     margin: float = float("inf")
     limit: float = 1.0
     moving: bool = False
+    imposed: bool = False
 
     def __deepcopy__(self, memo) -> SeparationReading:
         return self  # immutable once made (Drake copies abstract values often)
@@ -94,6 +104,7 @@ class SafetyLog:
     min_separation: float = float("inf")
     min_margin: float = float("inf")
     violations: int = 0
+    imposed: int = 0  # moved closer than S_p while the robot commanded a standstill
     body_contacts: int = 0
     slowed_time: float = 0.0
     stopped_time: float = 0.0
@@ -111,6 +122,7 @@ class SafetyLog:
             "min_separation": finite(self.min_separation),
             "min_margin": finite(self.min_margin),
             "violations": self.violations,
+            "imposed": self.imposed,
             "body_contacts": self.body_contacts,
             "slowed_time": round(self.slowed_time, 3),
             "stopped_time": round(self.stopped_time, 3),
@@ -434,8 +446,10 @@ def assess(
     context (its only side effect)."""
     v = np.asarray(v, dtype=float)
     moving = bool(np.abs(v).max(initial=0.0) > config.moving_speed)
+    commanded = np.asarray(intent.qdot, dtype=float) * intent.rate
+    imposed = bool(np.abs(v - commanded).max(initial=0.0) > IMPOSED_SPEED)
     if len(body.radii) == 0:
-        return SeparationReading(moving=moving)
+        return SeparationReading(moving=moving, imposed=imposed)
     qdot = np.asarray(intent.qdot, dtype=float)
     shapes = envelope.shapes(intent.carrying, opening is not None)
     R_WB, p_WB = envelope.pose(np.asarray(q, dtype=float), opening)
@@ -461,6 +475,7 @@ def assess(
         margin=float((gap - s_p).min()),
         limit=limit,
         moving=moving,
+        imposed=imposed,
     )
 
 
@@ -476,10 +491,13 @@ def log_step(
         body_contacts=log.body_contacts + int(reading.separation <= 0.0),
     )
     if reading.moving:
+        short = int(reading.margin < 0.0)
+        commanded = plan_moves(intent) and not reading.imposed
         log = replace(
             log,
             min_margin=min(log.min_margin, reading.margin),
-            violations=log.violations + int(reading.margin < 0.0),
+            violations=log.violations + (short if commanded else 0),
+            imposed=log.imposed + (0 if commanded else short),
         )
     if plan_moves(intent):
         if intent.rate <= 1e-9:

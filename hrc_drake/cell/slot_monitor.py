@@ -28,6 +28,7 @@ from pydrake.systems.framework import LeafSystem
 from hrc_drake.cell.contacts import contact_pairs, geometry_owners
 from hrc_drake.cell_models import BOSS, PLATE, POCKET_CLEARANCE, POCKET_DEPTH
 from hrc_drake.motion.poses import CellFrames, seat_pose
+from hrc_drake.obstacle_models import OBSTACLE, OBSTACLE_SEEN_ABOVE, OBSTACLE_SIZE
 from hrc_drake.robot_models import GRIPPER
 from hrc_drake.tasks.spec import SpecError
 
@@ -99,6 +100,9 @@ class CellConfiguration:
     statuses)."""
 
     placements: tuple[tuple[str, PartPlacement], ...] = ()
+    # The world pose (x, y, z, qw, qx, qy, qz) of a temporary obstacle seen in the work
+    # (`hrc_drake.obstacle_models`), or () when there is none.
+    obstacle: tuple[float, ...] = ()
 
     def __deepcopy__(self, memo) -> CellConfiguration:
         # Immutable: Drake's copies of this abstract value can share it.
@@ -249,6 +253,10 @@ class SlotMonitor(LeafSystem):
         # The tray is welded: its homes are fixed world poses.
         self._homes = [(self._symbols[part], X_WH) for part, X_WH in frames.homes.items()]
         self._read_gripper(plant)
+        self._obstacle = None
+        if plant.HasModelInstanceNamed(OBSTACLE):
+            model = plant.GetModelInstanceByName(OBSTACLE)
+            self._obstacle = int(plant.GetBodyByName(OBSTACLE, model).index())
         self.DeclareAbstractInputPort("contact_results", AbstractValue.Make(ContactResults()))
         self.DeclareAbstractInputPort("body_poses", AbstractValue.Make([RigidTransform()]))
         self._query = self.DeclareAbstractInputPort(
@@ -467,7 +475,15 @@ class SlotMonitor(LeafSystem):
             part: replace(placement, pose=pose_tuple(poses[int(self._parts[part].index())]))
             for part, placement in placements.items()
         }
-        output.set_value(CellConfiguration(tuple(sorted(measured.items()))))
+        output.set_value(CellConfiguration(tuple(sorted(measured.items())), self._seen(poses)))
+
+    def _seen(self, poses) -> tuple[float, ...]:
+        """The obstacle's pose if it is in the work (its bottom above the parked height)."""
+        if self._obstacle is None:
+            return ()
+        X_W_obstacle = poses[self._obstacle]
+        bottom = X_W_obstacle.translation()[2] - OBSTACLE_SIZE[2] / 2
+        return pose_tuple(X_W_obstacle) if bottom > OBSTACLE_SEEN_ABOVE else ()
 
 
 __all__ = [

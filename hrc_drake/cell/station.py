@@ -60,17 +60,24 @@ from hrc_drake.cell.arm_servo import GravityCompensation
 from hrc_drake.cell.contacts import geometry_owners, owner_pairs
 from hrc_drake.cell.faults import FaultInjector, SilentOperator
 from hrc_drake.cell.gripper import add_gripper_ports
+from hrc_drake.cell.obstacle import (
+    SeatPositions,
+    filter_obstacle_contacts,
+    mount_obstacle,
+    mounted_obstacles,
+)
 from hrc_drake.cell.operator_body import BodyScript, BodySpheres, OperatorBody
 from hrc_drake.cell.scenario import cell_design, plant_config, scene_graph_config
 from hrc_drake.cell.sim_operator import SimulatedOperator
 from hrc_drake.cell.slot_monitor import CellConfiguration, SlotMonitor
 from hrc_drake.cell.welds import Bolts, Weld
 from hrc_drake.cell_models import CellDesign, add_cell_models
-from hrc_drake.hri.faults import FaultKind, check_faults
+from hrc_drake.hri.faults import check_faults
 from hrc_drake.hri.messages import Prompt
 from hrc_drake.hri.scenario import CameraSettings, Scenario
 from hrc_drake.motion.poses import IN_TRAY, CellFrames, layout_poses
 from hrc_drake.motion.scene import read_cell_frames
+from hrc_drake.obstacle_models import DEBRIS, OBSTACLE
 from hrc_drake.robot_models import GRIPPER, UR3, UR3_JOINTS
 from hrc_drake.tasks.decide import Operator
 from hrc_drake.tasks.graph import generate_states
@@ -292,7 +299,12 @@ def _add_plant(builder: DiagramBuilder, scenario: Scenario, design: CellDesign):
     _apply_friction(plant, scene_graph, scenario)
     if robot:
         _set_servo_gains(plant, instances, scenario)
+    obstacles = mounted_obstacles(scenario.faults) if robot else ()
+    for name in obstacles:
+        instances[name] = mount_obstacle(plant, name)
     plant.Finalize()
+    for name in obstacles:
+        filter_obstacle_contacts(plant, scene_graph, name, design.host_tags)
     bolts = Bolts.of(plant, instances, design)
     frames = read_cell_frames(plant, scene_graph, plant.CreateDefaultContext(), design)
     layout = {p: IN_TRAY for p in design.instance_names}
@@ -431,12 +443,19 @@ def _add_camera(builder: DiagramBuilder, scene_graph, settings: CameraSettings) 
     builder.ExportOutput(sensor.color_image_output_port(), "sim.camera.rgb_image")
 
 
-def _add_faults(builder: DiagramBuilder, plant: MultibodyPlant, scenario: Scenario):
+def _add_faults(builder: DiagramBuilder, plant: MultibodyPlant, scenario: Scenario, seats):
     """The fault injector (it passes everything through when the scenario has no faults):
-    `safety.stop` out, the pushes on the plant's joints, `sim.faults` (what it injected)."""
+    `safety.stop` out, the pushes on the plant's joints, the obstacle's servo target (when the
+    plant has the obstacle), `sim.faults` (what it injected). `seats`: a SeatPositions."""
     faults = builder.AddNamedSystem(
-        "fault_injector", FaultInjector(plant, scenario.faults, scenario.run.period)
+        "fault_injector", FaultInjector(plant, scenario.faults, scenario.run.period, seats)
     )
+    for name in (OBSTACLE, DEBRIS):
+        if plant.HasModelInstanceNamed(name):
+            builder.Connect(
+                faults.GetOutputPort(name),
+                plant.get_desired_state_input_port(plant.GetModelInstanceByName(name)),
+            )
     builder.ExportOutput(faults.GetOutputPort("safety.stop"), "safety.stop")
     builder.ExportOutput(faults.GetOutputPort("injected"), "sim.faults")
     builder.Connect(
@@ -496,16 +515,17 @@ def make_cell_station(
     spec does not fit the cell; ValueError naming the scenario key for a bad station value."""
     design = cell_design(scenario, load_spec(scenario.assembly_path))
     check_station_scenario(scenario, design)
+    space = generate_states(design.spec)
     if operator is None:
-        operator = scenario.operator_for(generate_states(design.spec))
-    if any(f.fault_kind == FaultKind.OPERATOR_SILENT for f in scenario.faults):
+        operator = scenario.operator_for(space)
+    if any(f.fault_kind in SilentOperator.KINDS for f in scenario.faults):
         operator = SilentOperator(operator, scenario.faults)
     builder = DiagramBuilder()
     plant, scene_graph, instances, bolts, frames = _add_plant(builder, scenario, design)
     injector = None
     if scenario.station.robot:
         _add_arm(builder, plant, instances[UR3])
-        injector = _add_faults(builder, plant, scenario)
+        injector = _add_faults(builder, plant, scenario, SeatPositions(frames, space))
         add_gripper_ports(builder, plant, instances[GRIPPER], scenario.station.rg2.kp, injector)
     else:
         _export_disturbance(builder, plant)

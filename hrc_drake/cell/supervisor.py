@@ -19,7 +19,9 @@ It checks what it commands against what it measures: a joint farther from its co
 should hold (and have not stalled on it), or that have not left it after the release, stop the
 task with the reason (handed over to the operator). A protective stop on the `safety.stop`
 input stops the robot on its path until it clears; an operator silent for
-`run.indication_timeout` is asked again. Each is recorded as a `Detection` (what the run
+`run.indication_timeout` is asked again. A task with no path while the configuration sensor
+sees an obstacle waits for it to move or go, planning again each time it does, for up to
+`run.path_timeout`. Each is recorded as a `Detection` (what the run
 reports of the scenario's faults, `hrc_drake.cell.fault_report`).
 
 The robot follows its plan in plan time `tau`, which advances at the speed scale s ∈ [0, 1] that
@@ -64,6 +66,7 @@ class Mode(enum.Enum):
     DECIDE = "decide"  # at a task boundary
     ASK = "ask"  # the proposal is shown; waiting for the operator's indication
     PLAN = "plan"  # waiting for the planner (the arm holds still)
+    BLOCKED = "blocked"  # no path past an obstacle: waiting for it to move or go
     EXECUTE = "execute"  # following a plan (holding the part while the operator bolts it)
     SETTLE = "settle"  # plan done; let the parts come to rest before reading the cell
     RECOVER = "recover"  # a part lost or not seated: it comes to rest, then is picked again
@@ -141,6 +144,7 @@ class SupervisorStatus:
     idle: float = 0.0  # wall seconds waited on the planner for the current task
     grip_lost_at: float | None = None  # when the grasp (or the release) started to look wrong
     asked_at: float = 0.0  # when the operator was last asked to choose
+    blocked_at: float = 0.0  # when the task's path was found blocked
     recovering: str = ""  # "regrasp" or "replace" while the task's part is picked again
     recoveries: int = 0  # how often the task's part was picked again
     stopped: bool = False  # the protective-stop input is on
@@ -184,6 +188,17 @@ class SupervisorStatus:
         return [(), *(r.next_state for r in self.history)]
 
 
+# An obstacle counts as moved (worth planning again) past this distance [m].
+OBSTACLE_MOVED = 0.005
+
+
+def _moved(planned: tuple[float, ...] | None, seen: tuple[float, ...]) -> bool:
+    """Whether the obstacle seen differs from the one planned against (or came or went)."""
+    if not planned or not seen:
+        return bool(planned) != bool(seen)
+    return float(np.linalg.norm(np.subtract(planned[:3], seen[:3]))) > OBSTACLE_MOVED
+
+
 class SupervisorError(RuntimeError):
     """The supervisor cannot go on; `cause` is the Detection cause it reports."""
 
@@ -206,6 +221,7 @@ class SupervisorLimits:
     plan_ahead: bool = True
     indication_timeout: float = 10.0
     recover_tries: int = 2
+    path_timeout: float = 10.0
 
 
 class Supervisor(LeafSystem):
@@ -358,6 +374,8 @@ class Supervisor(LeafSystem):
             return self._take_indication(status, context, now)
         if mode == Mode.PLAN:
             return self._take_plan(status, self._config_port.Eval(context), now)
+        if mode == Mode.BLOCKED:
+            return self._wait_for_path(status, self._config_port.Eval(context), now)
         if mode == Mode.EXECUTE:
             return self._execute(status, context, now)
         if mode == Mode.SETTLE and now >= status.settle_until:
@@ -435,7 +453,9 @@ class Supervisor(LeafSystem):
             )
         config: CellConfiguration = self._config_port.Eval(context)
         last = s.state[-1] if s.state else None
-        request = PlanRequest.of(s.tokens_before, indicated, last, config.layout())
+        request = PlanRequest.of(
+            s.tokens_before, indicated, last, config.layout(), obstacle=config.obstacle
+        )
         ready = self._plans.is_cached(request)
         self._plans.request(request)
         event = (
@@ -457,6 +477,8 @@ class Supervisor(LeafSystem):
         if result is None:
             return s
         step, (proposed, indicated, _) = s.step, s.pending
+        if isinstance(result, PlanFailure) and s.request.obstacle is not None:
+            return self._blocked(s, result, now)
         if isinstance(result, PlanFailure) and s.recovering:
             raise SupervisorError(
                 f"step {step}: the robot cannot pick {s.pending[2]} from where it lies "
@@ -466,6 +488,7 @@ class Supervisor(LeafSystem):
         if isinstance(result, PlanFailure):
             raise SupervisorError(f"step {step}: {result}", cause="plan")
         plan: Plan = result
+        s = self._resolve(s, "plan", now, "retry")  # a path once the obstacle moved
         placement = config.placement(plan.instance)
         expected = PartStatus.SEATED if indicated == UNDO else PartStatus.TRAY
         if placement.status != expected and not s.recovering:
@@ -619,6 +642,7 @@ class Supervisor(LeafSystem):
             instance=part,
             source_pose=tuple(placement.pose),
             start=s.q_hold,
+            obstacle=config.obstacle,
         )
         self._plans.request(request)
         event = f"{now:.2f}: plans to pick {part} from where it lies ({placement.status.value})"
@@ -628,6 +652,41 @@ class Supervisor(LeafSystem):
             request=request,
             requested_wall=time.perf_counter(),
             events=(*s.events, event),
+        )
+
+    def _blocked(self, s: SupervisorStatus, failure: PlanFailure, now: float):
+        """No path while an obstacle is in the cell: hold still and wait for it to move."""
+        if any(d.cause == "plan" and d.resolved_at is None for d in s.detections):
+            return replace(s, mode=Mode.BLOCKED)  # planned again, still blocked
+        event = f"{now:.2f}: step {s.step}: an obstacle blocks the path ({failure.reason}); waits"
+        return replace(
+            s,
+            mode=Mode.BLOCKED,
+            blocked_at=now,
+            detections=(*s.detections, Detection("plan", s.step, now)),
+            events=(*s.events, event),
+        )
+
+    def _wait_for_path(self, s: SupervisorStatus, config: CellConfiguration, now: float):
+        """Plan again once the obstacle has moved or gone; hand over after `path_timeout`."""
+        timeout = self._limits.path_timeout
+        if now - s.blocked_at > timeout:
+            raise SupervisorError(
+                f"step {s.step}: an obstacle has blocked the path for {timeout:g} s "
+                "(run.path_timeout): clear the cell; the task is handed over",
+                cause="plan",
+            )
+        if not _moved(s.request.obstacle, config.obstacle):
+            return s
+        request = replace(s.request, obstacle=config.obstacle or None)
+        self._plans.request(request)
+        event = f"{now:.2f}: the obstacle " + ("moved" if config.obstacle else "is gone")
+        return replace(
+            s,
+            mode=Mode.PLAN,
+            request=request,
+            requested_wall=time.perf_counter(),
+            events=(*s.events, f"{event}: plans again"),
         )
 
     def _note_stop(self, s: SupervisorStatus, stop: bool, now: float) -> SupervisorStatus:

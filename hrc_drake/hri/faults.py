@@ -12,11 +12,13 @@ Kinds (`FaultKind`) and their parameters (defaults in brackets):
 - `grip-lost`: the grip force drops to `force` N [1.0] `after` s [1.0] into the carry, until the
   fingers open again; the part falls where physics puts it.
 - `no-seat`: the part cannot seat: it slides `offset` m [0.008] along the pads `after` s [0.8]
-  into the carry (lifted clear of the tray), so it is placed that far off its seat; or
-  (`obstacle: true`, not simulated yet) an obstacle lies in the pocket.
+  into the carry (lifted clear of the tray), so it is placed that far off its seat; or, with
+  `obstacle: true`, debris too small for the cell to see drops into the pocket of the seat the
+  robot proposes when the task's prompt appears, and stays (the part lands on it).
 - `gripper-stuck`: the gripper does not close (`stuck: close`) or open (`stuck: open`).
-- `no-path` (not simulated yet): a temporary obstacle blocks the planner for `duration` s
-  [3.0].
+- `no-path`: a temporary obstacle (a box) stands over the seat of the task the robot proposes
+  from the task's prompt on, for `duration` s [6.0]; the operator, who set it down, answers 1 s
+  after the prompt.
 - `operator-silent`: the operator gives no indication for `duration` s [15.0].
 - `protective-stop`: an external stop signal `after` s [4.0] into the task, for `duration` s
   [2.0].
@@ -78,7 +80,7 @@ class FaultConfig:
         if self.duration >= 0:
             return self.duration
         return {
-            FaultKind.NO_PATH: 3.0,
+            FaultKind.NO_PATH: 6.0,
             FaultKind.OPERATOR_SILENT: 15.0,
             FaultKind.PROTECTIVE_STOP: 2.0,
             FaultKind.PUSHED: 0.3,
@@ -90,6 +92,7 @@ SIMULATED = (
     FaultKind.GRIP_LOST,
     FaultKind.NO_SEAT,
     FaultKind.GRIPPER_STUCK,
+    FaultKind.NO_PATH,
     FaultKind.OPERATOR_SILENT,
     FaultKind.PROTECTIVE_STOP,
     FaultKind.PUSHED,
@@ -152,11 +155,6 @@ def _check_values(fault: FaultConfig, kind: FaultKind, where: str) -> None:
         raise FaultError(
             f"{where}: offset {fault.offset} m lets the part seat (the pockets have 1.5 mm of "
             "clearance); give more than 0.0015, or obstacle: true"
-        )
-    if kind == FaultKind.NO_SEAT and fault.obstacle:
-        raise FaultError(
-            f"{where}: obstacle: true is not simulated yet; leave it out for a part placed "
-            "`offset` off its seat"
         )
     if fault.stuck not in ("close", "open"):
         raise FaultError(f"{where}: stuck {fault.stuck!r}: give close or open")

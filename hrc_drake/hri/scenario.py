@@ -184,6 +184,9 @@ class RunConfig:
         recover_tries: how often, within one task, the robot picks its part again from where
             it lies (a part that slipped out of the gripper, or was let go out of its seat)
             before it hands the task over to the operator.
+        path_timeout: seconds the robot waits for a path that an obstacle blocks (holding
+            still, planning again whenever the obstacle moves or goes) before it hands the task
+            over to the operator.
     """
 
     period: float = 0.02
@@ -194,6 +197,7 @@ class RunConfig:
     wait_for_planner: bool = True
     indication_timeout: float = 10.0
     recover_tries: int = 2
+    path_timeout: float = 10.0
 
 
 @dataclass
@@ -473,7 +477,7 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
         raise fail("physics.contact.static_friction", "must be >= dynamic_friction")
     if scenario.physics.time_step <= 0:
         raise fail("physics.time_step", "the cell is a discrete plant: give a step > 0 (1e-2)")
-    for key in ("period", "settle_time", "max_sim_time", "indication_timeout"):
+    for key in ("period", "settle_time", "max_sim_time", "indication_timeout", "path_timeout"):
         if getattr(scenario.run, key) <= 0:
             raise fail(f"run.{key}", "must be > 0")
     if scenario.run.recover_tries < 0:

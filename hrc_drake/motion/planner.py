@@ -126,11 +126,13 @@ def resolve_task(
 class _Measured:
     """A plan's measured inputs, rounded to the plan cache's resolution: the part named, the
     7 pose values where it lies, the joint positions the arm starts from (None: the lowest
-    free instance; its tray home or seat; `q_home`)."""
+    free instance; its tray home or seat; `q_home`), the 7 pose values of an obstacle in the
+    cell (): none)."""
 
     instance: str | None = None
     source: tuple[float, ...] | None = None
     start: tuple[float, ...] | None = None
+    obstacle: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -323,6 +325,7 @@ class MotionPlanner:
         instance: str | None = None,
         source_pose: RigidTransform | None = None,
         q_start: np.ndarray | None = None,
+        obstacle: RigidTransform | None = None,
     ) -> Plan:
         """The plan of `task` from `configuration` (the tokens in place), home to home.
 
@@ -333,8 +336,10 @@ class MotionPlanner:
         with `source_pose` (X_W_part, measured: on the table, plate, tray or other parts) it is
         picked where it lies instead of from its tray home, and is not in `layout`. `q_start`
         (the UR3's 6 joint positions) starts the plan there instead of at `q_home`; it still
-        ends at `q_home`. Measured values are rounded to the plan cache's resolution
-        (`poses.KEY_DIGITS`) before planning, so that the plan is a function of its cache key.
+        ends at `q_home`. `obstacle` is the world pose of a temporary obstacle the cell measures
+        (`hrc_drake.obstacle_models`): the plan keeps clear of it. Measured values are rounded
+        to the plan cache's resolution (`poses.KEY_DIGITS`) before planning, so that the plan is
+        a function of its cache key.
         Raises UnreachableError (naming the task and the violated constraint) when a pose is out
         of reach or a part lies too tilted to be grasped from above, PlanningError when no path
         is found (or the start posture is not clear of the cell), ValueError for arguments that
@@ -342,7 +347,7 @@ class MotionPlanner:
         """
         configuration = frozenset(configuration)
         move, measured = self._resolve(
-            configuration, task, last_token, layout, instance, source_pose, q_start
+            configuration, task, last_token, layout, instance, source_pose, q_start, obstacle
         )
         key = self._key(move, measured)
         if key not in self._plans:
@@ -360,15 +365,23 @@ class MotionPlanner:
         instance: str | None = None,
         source_pose: RigidTransform | None = None,
         q_start: np.ndarray | None = None,
+        obstacle: RigidTransform | None = None,
     ) -> bool:
         """Whether `plan_task` with these arguments would return a plan made earlier."""
         move, measured = self._resolve(
-            frozenset(configuration), task, last_token, layout, instance, source_pose, q_start
+            frozenset(configuration),
+            task,
+            last_token,
+            layout,
+            instance,
+            source_pose,
+            q_start,
+            obstacle,
         )
         return self._key(move, measured) in self._plans
 
     def _resolve(
-        self, configuration, task, last_token, layout, instance, source_pose, q_start
+        self, configuration, task, last_token, layout, instance, source_pose, q_start, obstacle
     ) -> tuple[TaskMove, _Measured]:
         """`plan_task`'s arguments as the move and its rounded measured inputs."""
         if source_pose is not None and task == UNDO:
@@ -383,6 +396,7 @@ class MotionPlanner:
             instance,
             None if source_pose is None else quantize_pose(pose_values(source_pose)),
             None if q_start is None else quantize_joints(q_start, len(self.q_home)),
+            () if obstacle is None else quantize_pose(pose_values(obstacle)),
         )
         return move, measured
 
@@ -393,7 +407,7 @@ class MotionPlanner:
         key = (move.task, frozenset(move.before.items()), move.source)
         if measured == _Measured():
             return key
-        return (*key, move.instance, measured.source, measured.start)
+        return (*key, move.instance, measured.source, measured.start, measured.obstacle)
 
     def _loose_grasp(self, task: str, part: str, X_W_part: RigidTransform) -> RigidTransform:
         """The tcp pose grasping `part` lying at a measured X_W_part: its grasp frame there, or
@@ -452,13 +466,15 @@ class MotionPlanner:
                 if move.source is None
                 else part_pose(frames, move.source, move.before.keys())
             )
-            scene = self.scene(Layout.of(move.before, None, opening))
+            scene = self.scene(Layout.of(move.before, None, opening, obstacle=measured.obstacle))
             X_grasp = tcp_pose(frames, part, X_src)
             supports = (self._support(move.source, move.before),)
         else:
             X_src = pose_from_values(measured.source)
             X_grasp = self._loose_grasp(task, part, X_src)
-            scene = self.scene(Layout.of(move.before, None, opening, {part: X_src}))
+            scene = self.scene(
+                Layout.of(move.before, None, opening, {part: X_src}, measured.obstacle)
+            )
             # It lies on the table, the plate or the tray, or on or against other parts.
             others = [i for i in frames.design.instance_names if i != part]
             supports = (PLATE, TRAY, TABLE, *scene.near(part, others, _RESTS_ON))
@@ -477,8 +493,26 @@ class MotionPlanner:
         approach = free_path(scene, q_start, q_pregrasp, self.limits, opts)
         scene.set_allowed_contacts(hand)
         down = straight_waypoints(scene, q_pregrasp, X_grasp, opts, task=task, waypoint="grasp")
+        if measured.source is not None:
+            self._check_fingers_clear(scene, part, down, task)
         scene.set_allowed_contacts(())
         return _Pick(scene, q_pregrasp, approach, down, hand, lift, clear, near)
+
+    @staticmethod
+    def _check_fingers_clear(scene: PlanningScene, part: str, down: list, task: str) -> None:
+        """UnreachableError when, going down to a part lying loose, the gripper would touch
+        what the part lies on (allowed near it, not into it: a part lying askew on the tray may
+        leave no room for a finger beside it)."""
+        scene.set_allowed_contacts(((GRIPPER, part),))
+        for q in down:
+            gap, pair = scene.min_distance(q, max_distance=0.01)
+            if gap <= 0.0 and GRIPPER in pair:
+                raise UnreachableError(
+                    task,
+                    "grasp",
+                    "collision",
+                    f"{part} lies where the fingers going down to it would touch the cell ({pair})",
+                )
 
     def _clear_start(self, scene: PlanningScene, q: np.ndarray, task: str):
         """(postures, allowed contacts) moving the tcp straight up by the approach distance
@@ -514,8 +548,8 @@ class MotionPlanner:
         q_start = q_home if measured.start is None else np.array(measured.start)
 
         pick = self._pick(move, measured, opening, q_start)
-        carry = self.scene(Layout.of(move.before, part, width))
-        placed = self.scene(Layout.of(move.after, None, opening))
+        carry = self.scene(Layout.of(move.before, part, width, obstacle=measured.obstacle))
+        placed = self.scene(Layout.of(move.after, None, opening, obstacle=measured.obstacle))
         # Near the place instant, as near the grasp: the part on its target, the fingers by it.
         target = self._support(move.target, move.after)
         place_allowed = ((part, target), (GRIPPER, target))

@@ -30,6 +30,7 @@ from pydrake.systems.framework import DiagramBuilder
 
 from hrc_drake.cell_models import PLATE, TRAY, CellDesign, add_cell_models, check_cell_models
 from hrc_drake.motion.poses import CellFrames, part_pose, pose_from_values, pose_values
+from hrc_drake.obstacle_models import add_fixed_obstacle, far_below
 from hrc_drake.robot_models import GRIPPER, RG2_FINGER_JOINTS, RG2_MAX_OPENING, UR3, UR3_JOINTS
 
 ROBOT = UR3
@@ -75,12 +76,15 @@ class Layout:
         opening: finger opening [m] (between the finger insides).
         loose: (instance, (x, y, z, qw, qx, qy, qz)) for each part lying where it was measured
             (dropped, not seated: anywhere on the table, plate, tray or other parts), sorted.
+        obstacle: the world pose (x, y, z, qw, qx, qy, qz) of the temporary obstacle the cell
+            measures (`hrc_drake.obstacle_models`), or () for none.
     """
 
     placed: tuple[tuple[str, str], ...]
     carried: str | None
     opening: float
     loose: tuple[tuple[str, tuple[float, ...]], ...] = ()
+    obstacle: tuple[float, ...] = ()
 
     @staticmethod
     def of(
@@ -88,10 +92,11 @@ class Layout:
         carried: str | None,
         opening: float,
         loose: Mapping[str, RigidTransform] | None = None,
+        obstacle: tuple[float, ...] = (),
     ) -> Layout:
         """From token -> instance; a carried instance is taken out of `assignment`. `loose`:
         instance -> X_W_part of parts lying where they were measured (neither placed nor
-        carried)."""
+        carried); `obstacle`: the measured obstacle's 7 pose values, or ()."""
         placed = tuple(sorted((inst, tok) for tok, inst in assignment.items() if inst != carried))
         lying = tuple(sorted((inst, pose_values(X)) for inst, X in (loose or {}).items()))
         clash = {inst for inst, _ in lying} & ({inst for inst, _ in placed} | {carried})
@@ -99,7 +104,9 @@ class Layout:
             raise ValueError(
                 f"{sorted(clash)[0]} is loose and also placed or carried; a part is in one place"
             )
-        return Layout(placed, carried, round(float(opening), 6), lying)
+        if obstacle and len(obstacle) != 7:
+            raise ValueError(f"an obstacle pose of {len(obstacle)} values; give 7 (or none)")
+        return Layout(placed, carried, round(float(opening), 6), lying, tuple(obstacle))
 
     @property
     def configuration(self) -> frozenset[str]:
@@ -140,6 +147,7 @@ class SceneModel:
             )
             plant.WeldFrames(frame, body.body_frame(), RigidTransform())
             self.part_frames[instance] = frame
+        self.obstacle_frame = add_fixed_obstacle(plant)
         plant.Finalize()
         ur3 = plant.GetModelInstanceByName(ROBOT)
         starts = [plant.GetJointByName(j, ur3).position_start() for j in UR3_JOINTS]
@@ -224,6 +232,8 @@ class PlanningScene:
             else:
                 X_W_part = frames.homes[instance]
             frame.SetPoseInParentFrame(self.plant_context, X_W_part)
+        X_W_obstacle = pose_from_values(layout.obstacle) if layout.obstacle else far_below()
+        model.obstacle_frame.SetPoseInParentFrame(self.plant_context, X_W_obstacle)
         self._transient: list = []
 
     def geometries(self, instance: str) -> GeometrySet:

@@ -52,9 +52,10 @@ from hrc_drake.tasks.tokens import UNDO
 
 PlanFunction = Callable[..., Plan]
 """(configuration, task, last_token, layout) -> Plan: the Supervisor's planner signature. A
-request with a measured pick or start calls it with the keywords of `PlanRequest.keywords` too
-(`instance`, `source_pose` as a RigidTransform, `q_start` as an array), as
-`MotionPlanner.plan_task` takes them; an ordinary request never does."""
+request with a measured pick, start or obstacle calls it with the keywords of
+`PlanRequest.keywords` too (`instance`, `source_pose` as a RigidTransform, `q_start` as an array,
+`obstacle` as a RigidTransform), as `MotionPlanner.plan_task` takes them; an ordinary request
+never does."""
 
 
 @dataclass(frozen=True)
@@ -73,6 +74,8 @@ class PlanRequest:
             (x, y, z, qw, qx, qy, qz) in the world, translation then
             `RotationMatrix.ToQuaternion()`; None: its tray home.
         start: the 6 UR3 joint positions the plan starts from; None: the planner's `q_home`.
+        obstacle: the world pose (7 values, as `source_pose`) of a temporary obstacle the cell
+            measures (`hrc_drake.obstacle_models`); None: no obstacle.
     """
 
     configuration: frozenset[str]
@@ -82,6 +85,7 @@ class PlanRequest:
     instance: str | None = None
     source_pose: tuple[float, ...] | None = None
     start: tuple[float, ...] | None = None
+    obstacle: tuple[float, ...] | None = None
 
     @staticmethod
     def of(
@@ -93,10 +97,12 @@ class PlanRequest:
         instance: str | None = None,
         source_pose: Sequence[float] | RigidTransform | None = None,
         start: Sequence[float] | None = None,
+        obstacle: Sequence[float] | RigidTransform | None = None,
     ) -> PlanRequest:
         """From the planner's arguments (`layout`: instance -> token, e.g. measured;
-        `source_pose`: 7 values or a RigidTransform; `start`: 6 joint positions). ValueError
-        for a source pose without its instance, or values of the wrong count."""
+        `source_pose` and `obstacle`: 7 values or a RigidTransform, the latter empty for none;
+        `start`: 6 joint positions). ValueError for a source pose without its instance, or
+        values of the wrong count."""
         placed = None if layout is None else tuple(sorted(layout.items()))
         if source_pose is not None:
             if instance is None:
@@ -110,8 +116,22 @@ class PlanRequest:
         if start is not None:
             start = tuple(float(v) for v in np.asarray(start, dtype=float).ravel())
             quantize_joints(start)
+        if isinstance(obstacle, RigidTransform):
+            obstacle = pose_values(obstacle)
+        if obstacle is not None and len(obstacle) == 0:
+            obstacle = None
+        if obstacle is not None:
+            obstacle = tuple(float(v) for v in obstacle)
+            quantize_pose(obstacle)  # checks the values
         return PlanRequest(
-            frozenset(configuration), task, last_token, placed, instance, source_pose, start
+            frozenset(configuration),
+            task,
+            last_token,
+            placed,
+            instance,
+            source_pose,
+            start,
+            obstacle,
         )
 
     def layout_map(self) -> dict[str, str] | None:
@@ -119,15 +139,27 @@ class PlanRequest:
         return None if self.layout is None else dict(self.layout)
 
     def keywords(self) -> dict:
-        """The planner's keyword arguments for a measured pick or start (`instance`,
-        `source_pose` as a RigidTransform, `q_start` as an array); {} for an ordinary request."""
-        if self.instance is None and self.source_pose is None and self.start is None:
+        """The planner's keyword arguments for a measured pick, start or obstacle (`instance`,
+        `source_pose` and `obstacle` as RigidTransforms, `q_start` as an array); {} for an
+        ordinary request."""
+        if self._ordinary():
             return {}
-        return {
+        keywords = {
             "instance": self.instance,
             "source_pose": None if self.source_pose is None else pose_from_values(self.source_pose),
             "q_start": None if self.start is None else np.array(self.start),
         }
+        if self.obstacle is not None:
+            keywords["obstacle"] = pose_from_values(self.obstacle)
+        return keywords
+
+    def _ordinary(self) -> bool:
+        return (
+            self.instance is None
+            and self.source_pose is None
+            and self.start is None
+            and self.obstacle is None
+        )
 
     def key(self) -> tuple:
         """Requests with equal keys get the same plan: with a measured layout, the last task
@@ -135,11 +167,12 @@ class PlanRequest:
         start count to 0.1 mm and 1e-4 (`poses.KEY_DIGITS`), as the planner rounds them."""
         last = self.last_token if self.layout is None or self.task == UNDO else None
         key = (self.configuration, self.task, last, self.layout)
-        if self.instance is None and self.source_pose is None and self.start is None:
+        if self._ordinary():
             return key
         source = None if self.source_pose is None else quantize_pose(self.source_pose)
         start = None if self.start is None else quantize_joints(self.start)
-        return (*key, self.instance, source, start)
+        obstacle = None if self.obstacle is None else quantize_pose(self.obstacle)
+        return (*key, self.instance, source, start, obstacle)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,123 @@
+"""The station's things in the robot's way (simulator only): the box of a `no-path` fault and
+the debris of a `no-seat` fault with `obstacle: true` (`hrc_drake.obstacle_models`).
+
+Each rides an x-y-z carriage servoed by the plant's PD actuators; the fault injector sets its
+target. The box touches only the robot and what the robot carries: it is there to be in the
+robot's way, not to move parts. The debris touches the robot and the parts that are placed on
+something, not the plate, tray, table or host parts (it lies in a pocket's floor, on the plate
+or on a host, and rises to it through them). Where they go: over, or into the pocket of, the
+seat of the task the robot proposes, so that the task the operator then confirms has no path
+until the box is taken away, or its part lands on the debris.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+import numpy as np
+from pydrake.geometry import CollisionFilterDeclaration, GeometrySet
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import BodyIndex, JointActuatorIndex, PdControllerGains
+
+from hrc_drake.cell_models import PLATE, POCKET_DEPTH, SEAT_GAP, TABLE, TRAY
+from hrc_drake.hri.faults import FaultKind
+from hrc_drake.hri.messages import Prompt
+from hrc_drake.motion.poses import CellFrames, part_pose
+from hrc_drake.obstacle_models import DEBRIS, DEBRIS_SIZE, OBSTACLE, add_mounted_obstacle
+from hrc_drake.robot_models import GRIPPER, UR3
+from hrc_drake.tasks.graph import StateSpace
+from hrc_drake.tasks.tokens import UNDO
+
+# The carriage's servo: stiff enough that the box stands where it is put (it settles in about
+# 0.1 s), critically damped for the carriage's 0.6 kg.
+_KP = 4000.0  # N/m
+_KD = 100.0  # N·s/m
+
+
+def mounted_obstacles(faults) -> tuple[str, ...]:
+    """The things a scenario's faults need on carriages: OBSTACLE (a no-path fault), DEBRIS (a
+    no-seat fault with an obstacle)."""
+    kinds = {f.fault_kind for f in faults}
+    debris = any(f.fault_kind == FaultKind.NO_SEAT and f.obstacle for f in faults)
+    return (OBSTACLE,) * (FaultKind.NO_PATH in kinds) + (DEBRIS,) * debris
+
+
+def mount_obstacle(plant: MultibodyPlant, name: str):
+    """Add the box or the debris on its carriage (before Finalize): servoed, without weight (its
+    servo holds it like a hand, or as stuck in the pocket); returns its model instance."""
+    model = add_mounted_obstacle(plant, name)
+    for index in range(plant.num_actuators()):
+        actuator = plant.get_joint_actuator(JointActuatorIndex(index))
+        if actuator.model_instance() == model:
+            actuator.set_controller_gains(PdControllerGains(p=_KP, d=_KD))
+    plant.set_gravity_enabled(model, False)
+    return model
+
+
+def filter_obstacle_contacts(
+    plant: MultibodyPlant, scene_graph, name: str, hosts: Iterable[str] = ()
+) -> None:
+    """What the box or debris does not touch (after Finalize): the box, anything but the robot;
+    the debris, the plate, tray, table and the `hosts` (host part instances)."""
+    model = plant.GetModelInstanceByName(name)
+    if name == OBSTACLE:
+        keep = {plant.GetModelInstanceByName(n) for n in (UR3, GRIPPER)} | {model}
+        passes = [m for m in _instances(plant) if m not in keep]
+    else:
+        passes = [plant.GetModelInstanceByName(n) for n in (PLATE, TRAY, TABLE, *hosts)]
+    scene_graph.collision_filter_manager().Apply(
+        CollisionFilterDeclaration().ExcludeBetween(
+            GeometrySet(_geometries(plant, [model])), GeometrySet(_geometries(plant, passes))
+        )
+    )
+
+
+def _instances(plant: MultibodyPlant) -> set:
+    return {plant.get_body(BodyIndex(i)).model_instance() for i in range(plant.num_bodies())}
+
+
+def _geometries(plant: MultibodyPlant, models) -> list:
+    models = set(models)
+    return [
+        g
+        for i in range(plant.num_bodies())
+        if (body := plant.get_body(BodyIndex(i))).model_instance() in models
+        for g in plant.GetCollisionGeometriesForBody(body)
+    ]
+
+
+class SeatPositions:
+    """Where the robot's proposal of a prompt puts its part (or, for `undo`, takes it from),
+    from the cell's frames and the task space."""
+
+    def __init__(self, frames: CellFrames, space: StateSpace):
+        self._frames = frames
+        self._space = space
+
+    def _token(self, prompt: Prompt) -> tuple[str, frozenset[str]]:
+        state = tuple(prompt.state)
+        configuration = self._space.configuration(self._space.index(state))
+        if prompt.proposal == UNDO:
+            return state[-1], configuration
+        return prompt.proposal, configuration | {prompt.proposal}
+
+    def __call__(self, prompt: Prompt) -> np.ndarray:
+        """The seat's world position [m] (a seated part's underside centre), for a CHOOSE
+        prompt."""
+        token, configuration = self._token(prompt)
+        return np.asarray(part_pose(self._frames, token, configuration).translation())
+
+    def pocket(self, prompt: Prompt) -> np.ndarray:
+        """The centre of the debris lying on the floor of the seat's (first) pocket [m]."""
+        token, configuration = self._token(prompt)
+        placement = self._frames.spec.placement(token)
+        if placement.host is None:
+            X_W_seat: RigidTransform = self._frames.seats[placement.slots[0]]
+        else:
+            X_W_seat = part_pose(self._frames, token, configuration)
+        floor = X_W_seat @ np.array([0.0, 0.0, -(SEAT_GAP + POCKET_DEPTH)])
+        return floor + np.array([0.0, 0.0, DEBRIS_SIZE[2] / 2])
+
+
+__all__ = ["SeatPositions", "filter_obstacle_contacts", "mount_obstacle", "mounted_obstacles"]
