@@ -220,3 +220,29 @@ def test_a_part_lying_askew_on_the_tray_is_refused_when_a_finger_would_touch_the
     home = planner.frames.homes["square_flange"]
     flat = RigidTransform(home.rotation(), [0.46, home.translation()[1] + 0.08, 0.0045])
     assert planner.plan_task({"F1"}, "S23", instance="square_flange", source_pose=flat)
+
+
+@pytest.mark.parametrize(("task", "home"), [("F3", False), (UNDO, True)])
+def test_a_held_part_is_carried_from_where_the_arm_is_to_another_seat_or_home(
+    planner, mid_carry, task, home
+):
+    # The robot started on F1 and is halfway through the carry when the operator indicates F3
+    # (a re-target), or another part (a swap: the flange goes back to its tray home).
+    plan = planner.plan_task(frozenset(), task, instance=PART, q_start=mid_carry, held=True)
+    assert (plan.task, plan.instance) == (task, PART)
+    # From where the arm is (to the plan cache's 1e-4 rad), with no pick: it starts holding
+    # the part (the fingers at the grip) and goes straight on.
+    np.testing.assert_allclose(plan.positions(0.0), mid_carry, atol=1e-4)
+    assert plan.segment(Stage.GRASP).end == 0.0 and plan.segment(Stage.CARRY).start == 0.0
+    assert plan.gripper_opening(0.0) < planner.frames.widths[PART]
+    assert plan.motions[0].name == "carry to pre-place"
+    X_dst = (
+        planner.frames.homes[PART] if home else part_pose(planner.frames, "F3", frozenset({"F3"}))
+    )
+    _assert_near(_tcp(planner, plan, plan.t_in_place), tcp_pose(planner.frames, PART, X_dst))
+    np.testing.assert_allclose(plan.positions(plan.duration), planner.q_home, atol=1e-6)
+    validate_plan(plan, planner)
+    assert planner.has_plan(frozenset(), task, instance=PART, q_start=mid_carry, held=True)
+    # A held part is held somewhere: the plan needs the arm's posture.
+    with pytest.raises(ValueError, match="needs its instance and q_start"):
+        planner.plan_task(frozenset(), task, instance=PART, held=True)

@@ -380,7 +380,8 @@ def test_an_arm_moved_from_outside_is_counted_apart_from_the_robots_violations(c
     config = SafetyConfig()
     intent = MotionIntent(qdot=qdot, moving=True)
     own = assess(envelope, q, qdot, hand, intent, config, 3.0, 0.05)
-    pushed = assess(envelope, q, qdot + [0.5, 0, 0, 0, 0, 0], hand, intent, config, 3.0, 0.05)
+    push = np.array([0.5, 0.0, 0.0, 0.0, 0.0, 0.0])
+    pushed = assess(envelope, q, qdot + push, hand, intent, config, 3.0, 0.05)
     assert own.margin < 0 and not own.imposed
     assert pushed.margin < 0 and pushed.imposed
     held = assess(envelope, q, qdot, hand, MotionIntent(), config, 3.0, 0.05)

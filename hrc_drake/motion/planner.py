@@ -133,6 +133,18 @@ class _Measured:
     source: tuple[float, ...] | None = None
     start: tuple[float, ...] | None = None
     obstacle: tuple[float, ...] = ()
+    held: bool = False  # the part is in the gripper at `start` already
+
+
+@dataclass(frozen=True)
+class _Given:
+    """`plan_task`'s measured keywords as given (before rounding)."""
+
+    instance: str | None = None
+    source_pose: RigidTransform | None = None
+    q_start: np.ndarray | None = None
+    obstacle: RigidTransform | None = None
+    held: bool = False
 
 
 @dataclass(frozen=True)
@@ -326,6 +338,7 @@ class MotionPlanner:
         source_pose: RigidTransform | None = None,
         q_start: np.ndarray | None = None,
         obstacle: RigidTransform | None = None,
+        held: bool = False,
     ) -> Plan:
         """The plan of `task` from `configuration` (the tokens in place), home to home.
 
@@ -339,7 +352,11 @@ class MotionPlanner:
         ends at `q_home`. `obstacle` is the world pose of a temporary obstacle the cell measures
         (`hrc_drake.obstacle_models`): the plan keeps clear of it. Measured values are rounded
         to the plan cache's resolution (`poses.KEY_DIGITS`) before planning, so that the plan is
-        a function of its cache key.
+        a function of its cache key. With `held`, `instance` is already in the gripper, grasped,
+        the arm at `q_start` (a robot that started on another task: a re-target): the plan
+        carries it from there to `task`'s seat, or with `task` `undo` back to its tray home
+        (a swap: the part is put back), then home; it has no pick (its approach and grasp
+        stages last no time).
         Raises UnreachableError (naming the task and the violated constraint) when a pose is out
         of reach or a part lies too tilted to be grasped from above, PlanningError when no path
         is found (or the start posture is not clear of the cell), ValueError for arguments that
@@ -347,7 +364,11 @@ class MotionPlanner:
         """
         configuration = frozenset(configuration)
         move, measured = self._resolve(
-            configuration, task, last_token, layout, instance, source_pose, q_start, obstacle
+            configuration,
+            task,
+            last_token,
+            layout,
+            _Given(instance, source_pose, q_start, obstacle, held),
         )
         key = self._key(move, measured)
         if key not in self._plans:
@@ -366,6 +387,7 @@ class MotionPlanner:
         source_pose: RigidTransform | None = None,
         q_start: np.ndarray | None = None,
         obstacle: RigidTransform | None = None,
+        held: bool = False,
     ) -> bool:
         """Whether `plan_task` with these arguments would return a plan made earlier."""
         move, measured = self._resolve(
@@ -373,32 +395,56 @@ class MotionPlanner:
             task,
             last_token,
             layout,
-            instance,
-            source_pose,
-            q_start,
-            obstacle,
+            _Given(instance, source_pose, q_start, obstacle, held),
         )
         return self._key(move, measured) in self._plans
 
     def _resolve(
-        self, configuration, task, last_token, layout, instance, source_pose, q_start, obstacle
+        self, configuration, task, last_token, layout, given: _Given
     ) -> tuple[TaskMove, _Measured]:
         """`plan_task`'s arguments as the move and its rounded measured inputs."""
-        if source_pose is not None and task == UNDO:
+        instance, source_pose, q_start, obstacle = (
+            given.instance,
+            given.source_pose,
+            given.q_start,
+            given.obstacle,
+        )
+        if given.held:
+            move = self._held_move(configuration, task, last_token, layout, given)
+        elif source_pose is not None and task == UNDO:
             raise ValueError(
                 "undo takes the part placed last from its seat; a source pose is for assembly "
                 "tasks (plan the part's placement from where it lies instead)"
             )
-        if source_pose is not None and instance is None:
+        elif source_pose is not None and instance is None:
             raise ValueError(f"task {task}: a source pose needs the part lying there (instance=)")
-        move = resolve_task(self.frames, configuration, task, last_token, layout, instance)
+        else:
+            move = resolve_task(self.frames, configuration, task, last_token, layout, instance)
         measured = _Measured(
             instance,
             None if source_pose is None else quantize_pose(pose_values(source_pose)),
             None if q_start is None else quantize_joints(q_start, len(self.q_home)),
             () if obstacle is None else quantize_pose(pose_values(obstacle)),
+            given.held,
         )
         return move, measured
+
+    def _held_move(self, configuration, task, last_token, layout, given: _Given) -> TaskMove:
+        """The move of a part already in the gripper: to `task`'s seat, or (`undo`) home."""
+        if given.instance is None or given.q_start is None:
+            raise ValueError(f"task {task}: a held part needs its instance and q_start")
+        if given.source_pose is not None:
+            raise ValueError(f"task {task}: a held part is in the gripper, not lying somewhere")
+        if task != UNDO:
+            return resolve_task(
+                self.frames, configuration, task, last_token, layout, given.instance
+            )
+        if layout is None:
+            layout = default_layout(self.frames, configuration, last_token)
+        before = {token: inst for inst, token in layout.items()}
+        if given.instance in before.values():
+            raise ValueError(f"{given.instance} is placed in the layout, not held")
+        return TaskMove(UNDO, given.instance, None, None, before, before)
 
     @staticmethod
     def _key(move: TaskMove, measured: _Measured) -> tuple:
@@ -407,7 +453,14 @@ class MotionPlanner:
         key = (move.task, frozenset(move.before.items()), move.source)
         if measured == _Measured():
             return key
-        return (*key, move.instance, measured.source, measured.start, measured.obstacle)
+        return (
+            *key,
+            move.instance,
+            measured.source,
+            measured.start,
+            measured.obstacle,
+            measured.held,
+        )
 
     def _loose_grasp(self, task: str, part: str, X_W_part: RigidTransform) -> RigidTransform:
         """The tcp pose grasping `part` lying at a measured X_W_part: its grasp frame there, or
@@ -533,47 +586,35 @@ class MotionPlanner:
         return up, near
 
     def _plan(self, configuration: frozenset[str], move: TaskMove, measured: _Measured) -> Plan:
-        opts, frames, task = self.options, self.frames, move.task
-        part = move.instance
-        width = frames.widths[part]
+        opts, part = self.options, move.instance
+        width = self.frames.widths[part]
         opening = float(min(MAX_OPENING, width + 2.0 * opts.finger_gap))
-        X_dst = (
-            frames.homes[part]
-            if move.target is None
-            else part_pose(frames, move.target, move.after.keys())
-        )
-        X_place = tcp_pose(frames, part, X_dst)
-        X_preplace = offset_along_approach(X_place, opts.approach_distance)
-        q_home = self.q_home
-        q_start = q_home if measured.start is None else np.array(measured.start)
-
-        pick = self._pick(move, measured, opening, q_start)
+        q_start = self.q_home if measured.start is None else np.array(measured.start)
         carry = self.scene(Layout.of(move.before, part, width, obstacle=measured.obstacle))
-        placed = self.scene(Layout.of(move.after, None, opening, obstacle=measured.obstacle))
-        # Near the place instant, as near the grasp: the part on its target, the fingers by it.
-        target = self._support(move.target, move.after)
-        place_allowed = ((part, target), (GRIPPER, target))
-        release = ((GRIPPER, part), (GRIPPER, target))
+        if measured.held:  # in the gripper already: no pick
+            line = _Timeline(q_start, width - opts.grip_squeeze)
+            line.stage(Stage.APPROACH, 0.0)
+            line.stage(Stage.GRASP, 0.0)
+            q_from = q_start
+        else:
+            pick = self._pick(move, measured, opening, q_start)
+            line = _Timeline(q_start, opening)
+            self._pick_into(line, pick, carry, width, "home" if measured.start is None else "start")
+            q_from = pick.q_pregrasp
+        return self._place_into(line, configuration, move, measured, carry, q_from)
 
-        carry.set_allowed_contacts(())
-        q_preplace = self._ik(carry, X_preplace, pick.q_pregrasp, task, "pre-place")
-        transfer = free_path(carry, pick.q_pregrasp, q_preplace, self.limits, opts)
-        carry.set_allowed_contacts(place_allowed)
-        lower = straight_waypoints(carry, q_preplace, X_place, opts, task=task, waypoint="place")
-        carry.set_allowed_contacts(())
-        placed.set_allowed_contacts(())
-        back = free_path(placed, q_preplace, q_home, self.limits, opts)
+    def _timed(self, scene: PlanningScene, path) -> Retimed:
+        return retime(scene, path, self.limits, self.options)
 
-        def timed(scene: PlanningScene, path) -> Retimed:
-            return retime(scene, path, self.limits, opts)
-
-        line = _Timeline(q_start, opening)
+    def _pick_into(self, line: _Timeline, pick: _Pick, carry, width: float, start: str) -> None:
+        """The pick half on `line`: (clear of the cell,) to the pre-grasp, down, grasp, lift;
+        the carry stage starts with the lift (it ends in `_place_into`)."""
+        timed = self._timed
         t0 = line.t
         if pick.clear is not None:
             line.move("up, clear of the cell", timed(pick.scene, spline_through(pick.clear)))
             line.phase(t0, pick.scene.layout, pick.near)
         t1 = line.t
-        start = "home" if measured.start is None else "start"
         line.move(f"{start} to pre-grasp", timed(pick.scene, pick.approach[0]), pick.approach)
         line.phase(t1, pick.scene.layout, ())
         t1 = line.t
@@ -583,20 +624,50 @@ class MotionPlanner:
         line.stage(Stage.APPROACH, t0)
 
         t0 = line.t
-        line.gripper(width - opts.grip_squeeze, opts.gripper_time)
+        line.gripper(width - self.options.grip_squeeze, self.options.gripper_time)
         line.phase(t0, pick.scene.layout, pick.hand)
         line.stage(Stage.GRASP, t0)
 
         t0 = line.t
         line.move("lift", descend.reversed())
         line.phase(t0, carry.layout, pick.lift)
+
+    def _place_into(self, line, configuration, move: TaskMove, measured, carry, q_from) -> Plan:
+        """The place half on `line`, from `q_from` (the part held): carry to the pre-place,
+        down, hold, release, retreat, home; the finished plan."""
+        opts, frames, task, part = self.options, self.frames, move.task, move.instance
+        width = frames.widths[part]
+        opening = float(min(MAX_OPENING, width + 2.0 * opts.finger_gap))
+        X_dst = (
+            frames.homes[part]
+            if move.target is None
+            else part_pose(frames, move.target, move.after.keys())
+        )
+        X_place = tcp_pose(frames, part, X_dst)
+        placed = self.scene(Layout.of(move.after, None, opening, obstacle=measured.obstacle))
+        # Near the place instant, as near the grasp: the part on its target, the fingers by it.
+        target = self._support(move.target, move.after)
+        place_allowed = ((part, target), (GRIPPER, target))
+        release = ((GRIPPER, part), (GRIPPER, target))
+
+        carry.set_allowed_contacts(())
+        X_preplace = offset_along_approach(X_place, opts.approach_distance)
+        q_preplace = self._ik(carry, X_preplace, q_from, task, "pre-place")
+        transfer = free_path(carry, q_from, q_preplace, self.limits, opts)
+        carry.set_allowed_contacts(place_allowed)
+        lower = straight_waypoints(carry, q_preplace, X_place, opts, task=task, waypoint="place")
+        carry.set_allowed_contacts(())
+        placed.set_allowed_contacts(())
+        back = free_path(placed, q_preplace, self.q_home, self.limits, opts)
+
+        t_carry = line.segments[-1].end  # the carry begins where the grasp ends (the lift)
         t1 = line.t
-        line.move("carry to pre-place", timed(carry, transfer[0]), transfer)
+        line.move("carry to pre-place", self._timed(carry, transfer[0]), transfer)
         line.phase(t1, carry.layout, ())
-        line.stage(Stage.CARRY, t0)
+        line.stage(Stage.CARRY, t_carry)
 
         t0 = line.t
-        lowering = timed(carry, spline_through(lower))
+        lowering = self._timed(carry, spline_through(lower))
         line.move("down to place", lowering)
         line.stage(Stage.PLACE, t0)
         t_in_place = line.t
@@ -611,7 +682,7 @@ class MotionPlanner:
         line.move("retreat up", lowering.reversed())
         line.phase(t_release, placed.layout, release)
         t1 = line.t
-        line.move("pre-place to home", timed(placed, back[0]), back)
+        line.move("pre-place to home", self._timed(placed, back[0]), back)
         line.phase(t1, placed.layout, ())
         line.stage(Stage.RETREAT, t0)
 

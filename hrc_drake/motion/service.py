@@ -52,10 +52,10 @@ from hrc_drake.tasks.tokens import UNDO
 
 PlanFunction = Callable[..., Plan]
 """(configuration, task, last_token, layout) -> Plan: the Supervisor's planner signature. A
-request with a measured pick, start or obstacle calls it with the keywords of
+request with a measured pick, start or obstacle, or a held part, calls it with the keywords of
 `PlanRequest.keywords` too (`instance`, `source_pose` as a RigidTransform, `q_start` as an array,
-`obstacle` as a RigidTransform), as `MotionPlanner.plan_task` takes them; an ordinary request
-never does."""
+`obstacle` as a RigidTransform, `held`), as `MotionPlanner.plan_task` takes them; an ordinary
+request never does."""
 
 
 @dataclass(frozen=True)
@@ -76,6 +76,8 @@ class PlanRequest:
         start: the 6 UR3 joint positions the plan starts from; None: the planner's `q_home`.
         obstacle: the world pose (7 values, as `source_pose`) of a temporary obstacle the cell
             measures (`hrc_drake.obstacle_models`); None: no obstacle.
+        held: `instance` is in the gripper already, the arm at `start` (a re-target, or with
+            `undo` a swap: the part goes back to its tray home).
     """
 
     configuration: frozenset[str]
@@ -86,6 +88,7 @@ class PlanRequest:
     source_pose: tuple[float, ...] | None = None
     start: tuple[float, ...] | None = None
     obstacle: tuple[float, ...] | None = None
+    held: bool = False
 
     @staticmethod
     def of(
@@ -98,11 +101,13 @@ class PlanRequest:
         source_pose: Sequence[float] | RigidTransform | None = None,
         start: Sequence[float] | None = None,
         obstacle: Sequence[float] | RigidTransform | None = None,
+        held: bool = False,
     ) -> PlanRequest:
         """From the planner's arguments (`layout`: instance -> token, e.g. measured;
         `source_pose` and `obstacle`: 7 values or a RigidTransform, the latter empty for none;
-        `start`: 6 joint positions). ValueError for a source pose without its instance, or
-        values of the wrong count."""
+        `start`: 6 joint positions; `held`: the instance is in the gripper at `start`).
+        ValueError for a source pose without its instance, a held part without its instance
+        and start, or values of the wrong count."""
         placed = None if layout is None else tuple(sorted(layout.items()))
         if source_pose is not None:
             if instance is None:
@@ -116,6 +121,8 @@ class PlanRequest:
         if start is not None:
             start = tuple(float(v) for v in np.asarray(start, dtype=float).ravel())
             quantize_joints(start)
+        if held and (instance is None or start is None):
+            raise ValueError(f"task {task}: a held part needs its instance and start")
         if isinstance(obstacle, RigidTransform):
             obstacle = pose_values(obstacle)
         if obstacle is not None and len(obstacle) == 0:
@@ -132,6 +139,7 @@ class PlanRequest:
             source_pose,
             start,
             obstacle,
+            bool(held),
         )
 
     def layout_map(self) -> dict[str, str] | None:
@@ -151,6 +159,8 @@ class PlanRequest:
         }
         if self.obstacle is not None:
             keywords["obstacle"] = pose_from_values(self.obstacle)
+        if self.held:
+            keywords["held"] = True
         return keywords
 
     def _ordinary(self) -> bool:
@@ -159,6 +169,7 @@ class PlanRequest:
             and self.source_pose is None
             and self.start is None
             and self.obstacle is None
+            and not self.held
         )
 
     def key(self) -> tuple:
@@ -172,7 +183,7 @@ class PlanRequest:
         source = None if self.source_pose is None else quantize_pose(self.source_pose)
         start = None if self.start is None else quantize_joints(self.start)
         obstacle = None if self.obstacle is None else quantize_pose(self.obstacle)
-        return (*key, self.instance, source, start, obstacle)
+        return (*key, self.instance, source, start, obstacle, self.held)
 
 
 @dataclass(frozen=True)
