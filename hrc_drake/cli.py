@@ -441,9 +441,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_interaction_flags(
         p,
-        " (sets the scenario's interaction). The cell does not anticipate yet: in both modes its "
-        "robot waits for the indication, which the simulated operator gives after the "
-        "interface's delay",
+        " (sets the scenario's interaction): in anticipate mode the robot starts on its "
+        "commitment while the indication, which the simulated operator gives after the "
+        "interface's delay, is on its way, and turns if it names another task; in wait mode it "
+        "waits for it",
     )
     p.add_argument(
         "--operator-profile",

@@ -22,10 +22,11 @@ Time figures (mean, p95, worst) are over the completed runs.
 At cell level (``--cell``) each run is a closed-loop simulation of the physical cell: times are
 the cell's simulated seconds, and the robot's idle time at a boundary is the wall time it waited
 for the planner after the operator's answer (``plan_ready_rate``: the share of boundaries whose
-plan was made ahead, while the operator bolted). The cell does not anticipate yet: its robot waits
-for the indication, which the simulated operator gives after the interface's delay
-(`DelayedIndications`), so a cell run plays ``wait`` whatever the mode asked (the report says
-so). This module does not know the cell: `Setup.cell` is an object that plays cell runs
+plan was made ahead, while the operator bolted). The deciders bet at task level only: a cell run
+plays ``wait`` whatever the mode asked (the report says so), its robot waiting for the
+indication, which the simulated operator gives after the interface's delay
+(`DelayedIndications`); `simulate` runs the cell's anticipation. This module does not know
+the cell: `Setup.cell` is an object that plays cell runs
 (`CellRuns`; `hrc_drake.cell.evaluate.CellOptions`), so the dependency goes one way, from the
 cell to here. The command line is
 `hrc_drake.evaluate_command`.
@@ -398,7 +399,8 @@ def evaluate(
         )
     asked = setup.interaction.mode
     if setup.cell is not None and setup.interaction.anticipates:
-        # The cell does not anticipate yet: its robot waits, and the decider prices waiting.
+        # Cell runs play wait (`hrc_drake.cell.evaluate.evaluation_scenario`): the decider
+        # prices waiting.
         setup = replace(setup, interaction=replace(setup.interaction, mode=WAIT))
     # Fail fast, in this process, on a bad decider, model, parameter or cost table.
     operator = make_operator_model(setup.operator_model, setup.space, seed=0, **setup.params)

@@ -244,8 +244,8 @@ def cmd_evaluate(args) -> int:
             raise UsageError(str(err)) from None
     elif interaction.anticipates:
         print(
-            "note: evaluate --cell: the cell does not anticipate yet; its robot waits for every "
-            f"indication, which comes after the {interaction.interface}'s delay",
+            "note: evaluate --cell plays wait: its robot waits for every indication, which "
+            f"comes after the {interaction.interface}'s delay (simulate runs anticipation)",
             file=sys.stderr,
         )
     setup = Setup(
@@ -337,7 +337,7 @@ def add_evaluate_parser(add) -> None:
         "--param", action="append", default=None, help="operator model parameter KEY=VALUE"
     )
     add_interaction_flags(
-        p, "; with --cell the cell plays wait in both modes (its robot does not anticipate yet)"
+        p, "; with --cell the cell plays wait in both modes (simulate runs anticipation)"
     )
     p.add_argument(
         "--keep-model",

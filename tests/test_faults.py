@@ -115,7 +115,8 @@ def test_a_lost_grip_lets_the_part_fall_and_the_robot_picks_it_up_from_where_it_
 def test_a_part_that_fell_tilted_is_handed_over():
     # Lost a little later in the carry, the flange lands tilted against the plate's edge: the
     # gripper cannot take it from above, and the task goes to the operator.
-    text = "{faults: [{kind: grip-lost, task: 1, after: 0.6}]}"
+    # (The robot waits for the indication: the fall depends on the carry's timing.)
+    text = "{interaction: {mode: wait}, faults: [{kind: grip-lost, task: 1, after: 0.6}]}"
     loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, text]))
     result = loop.run()
     assert not result.done and "cannot pick oval_flange_1 from where it lies" in result.error
@@ -149,11 +150,11 @@ def test_a_part_that_cannot_be_replaced_in_time_is_handed_over():
 
 
 def test_an_obstacle_over_the_seat_blocks_the_path_until_it_is_taken_away():
-    # The box stands over S23's seat for 6 s from task 2's prompt: the robot, which sees it,
-    # finds no path, holds still at home, and plans again once the box is gone.
-    loop = build_closed_loop(
-        load_cell_scenario("row1-optimal", [LEAN, "{faults: [{kind: no-path, task: 2}]}"])
-    )
+    # The box stands over S23's seat for 6 s from task 2's prompt: the robot, which waits for
+    # the indication, sees it, finds no path, holds still at home, and plans again once the box
+    # is gone.
+    text = "{interaction: {mode: wait}, faults: [{kind: no-path, task: 2}]}"
+    loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, text]))
     plant, station = loop.station.plant, loop.station
     seen, speeds, t = [], [], 0.0
     while loop.advance_to(t) not in (Mode.DONE, Mode.FAILED) and t < 120:
@@ -177,6 +178,21 @@ def test_an_obstacle_over_the_seat_blocks_the_path_until_it_is_taken_away():
     assert speeds and max(speeds) < 1e-3
     assert any("obstacle is gone: plans again" in e for e in status.events)
     assert not loop.watch.contacts.collisions
+
+
+def test_an_obstacle_set_down_while_the_robot_moves_stops_it_on_its_path():
+    # Anticipating, the robot has started on S23 when the box comes down over the seat: it
+    # sees the box, stops along its path, finds no path from there, waits, and plans again
+    # from where it stands once the box is gone.
+    result = _result("{faults: [{kind: no-path, task: 2}]}")
+    assert result.done and result.states == ROW1_STATES, result.error
+    (record,) = result.faults
+    assert record.recovered and record.recovery == "retry"
+    events = result.events
+    appears = next(i for i, e in enumerate(events) if "an obstacle appears" in e)
+    assert "turns to S23 (replan)" in events[appears + 1]
+    assert "an obstacle blocks the path" in events[appears + 2]
+    assert not result.collisions
 
 
 def test_an_obstacle_that_stays_hands_the_task_over():

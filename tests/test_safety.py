@@ -58,7 +58,8 @@ def test_a_hand_in_the_robots_path_slows_then_stops_it_and_it_resumes():
     """Mid-carry the operator's hand moves above the seat the robot is heading for, stays 2 s
     and goes back: the robot slows, stops short of it, never moves with less than S_p, then
     resumes and finishes the run as without the hand."""
-    scenario = load_cell_scenario("row1-optimal", LEAN)
+    # The hand is scripted against the robot's timing when it waits for each indication.
+    scenario = load_cell_scenario("row1-optimal", [LEAN, "{interaction: {mode: wait}}"])
     frames = make_cell_station(station_scenario(scenario, robot=False)).frames
     above_seat = part_pose(frames, "F1", []).translation() + np.array([0.0, 0.0, 0.12])
     # The plan of step 1 starts as the operator indicates F1 (simulated time stands still while

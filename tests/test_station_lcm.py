@@ -399,7 +399,8 @@ def _plant_positions(station, root) -> np.ndarray:
 @pytest.mark.slow
 def test_cell_station_over_memq_equals_one_diagram():
     """The cell's station and controller over LCM in one process, against the one-diagram run:
-    while the first part is held (5 s: by the fingers' friction) and after it is let go (8 s),
+    while the first part is held (3.5 s: by the fingers' friction; the robot started on it at
+    once) and after it is let go (6.5 s),
     the plant's state, the touching pairs the collision watch reads and the Supervisor's events
     are the same, bit for bit."""
     scenario = load_cell_scenario("row1-optimal", LEAN)
@@ -413,7 +414,7 @@ def test_cell_station_over_memq_equals_one_diagram():
     interface = make_cell_station_interface(setup.scenario, lcm, timeouts=QUICK, sim_contacts=True)
     remote = ClosedLoop(setup, RemoteCell(interface), controller_of(setup))
     owners = geometry_owners(loop.station.plant)
-    for t, held in ((5.0, True), (8.0, False)):
+    for t, held in ((3.5, True), (6.5, False)):
         loop.advance_to(t)
         remote.simulator.AdvanceTo(t)
         assert np.array_equal(

@@ -51,8 +51,8 @@ def _scenario(args) -> Scenario:
 
 def _with_interaction(args, scenario: Scenario) -> Scenario:
     """`--interaction` and `--interface` set the scenario's interaction (a delay the scenario
-    gives stays; left out, the interface's). The cell does not anticipate yet: its robot waits
-    for the indication in both modes, which the simulated operator gives after the delay."""
+    gives stays; left out, the interface's): in anticipate mode the robot starts on its
+    commitment and turns if the indication names another task; in wait mode it waits for it."""
     from hrc_drake.evaluate_command import interaction_from_flags
 
     interaction_from_flags(args)  # a bad mode or interface: one line, before anything is built

@@ -70,6 +70,7 @@ def supervisor_limits(scenario: Scenario, options: MotionOptions) -> SupervisorL
         indication_timeout=run.indication_timeout,
         recover_tries=run.recover_tries,
         path_timeout=run.path_timeout,
+        anticipate=scenario.interaction_model().anticipates,
     )
 
 

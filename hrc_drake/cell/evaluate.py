@@ -28,6 +28,7 @@ from typing import Any
 from hrc_drake.evaluate import RunResult, predicted_tasks
 from hrc_drake.paths import UsageError
 from hrc_drake.tasks.graph import StateKind, StateSpace
+from hrc_drake.tasks.interaction import WAIT
 from hrc_drake.tasks.policy import PolicyFileError
 from hrc_drake.tasks.spec import AssemblySpec
 from hrc_drake.tasks.tokens import UNDO
@@ -54,6 +55,10 @@ class DeciderPolicy:
         (`hrc_drake.evaluate.predicted_tasks`)."""
         proposal = self.next_task(state)
         return [] if proposal is None else predicted_tasks(self.decider, state, proposal)
+
+    def commit(self, state: tuple[str, ...], proposal: str) -> str | None:
+        """The placement the decider bets on before the indication (None: it waits)."""
+        return self.decider.commit(tuple(state), proposal)
 
     def observe(self, record) -> None:
         """The Supervisor's `on_task`: the decider learns what the cell observed."""
@@ -110,7 +115,10 @@ def evaluation_scenario(options: CellOptions, spec: AssemblySpec):
     scenario = load_cell_scenario(options.scenario, list(options.overrides))
     if spec.source and Path(spec.source).is_file():
         scenario = dataclasses.replace(scenario, assembly=str(spec.source))
-    return scenario
+    # `evaluate` prices waiting in the cell (its deciders bet at task level only): the robot
+    # waits for every indication.
+    waiting = dataclasses.replace(scenario.interaction, mode=WAIT)
+    return dataclasses.replace(scenario, interaction=waiting)
 
 
 def check_cell_operator(operator, model_name: str) -> None:

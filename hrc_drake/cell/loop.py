@@ -75,6 +75,8 @@ class RunResult:
     """The run was ended by Ctrl-C before it finished."""
     faults: tuple[FaultRecord, ...] = ()
     """The scenario's faults: when injected, detected, and what came of them."""
+    interaction: str = ""
+    """The interaction mode the robot ran in: `anticipate` or `wait`."""
 
     @property
     def idle(self) -> tuple[float, ...]:
@@ -113,6 +115,7 @@ class RunResult:
             "recording": str(self.recording) if self.recording else None,
             "safety": self.safety.to_json() if self.safety is not None else None,
             "faults": [f.to_json() for f in self.faults],
+            "interaction": self.interaction,
         }
 
 
@@ -126,6 +129,10 @@ def _step_json(t: TaskRecord) -> dict:
         "sim_time": round(t.end_time - t.start_time, 3),
         "idle_time": round(t.idle, 4),
         "plan_ready": t.plan_ready,
+        "committed": t.committed,
+        "indicated_at": None if t.indicated_at is None else round(t.indicated_at, 3),
+        "retargeted": t.retargeted,
+        "swapped": t.swapped,
     }
 
 
@@ -280,6 +287,10 @@ class ClosedLoop:
                 return mode
             self.watch.welds = self.cell.apply_welds(self.root_context)
         return self.status.mode
+
+    def result(self) -> RunResult:
+        """What the run did so far (after `advance_to`; no wall time measured: 0)."""
+        return _result(self, 0.0, None, interrupted=False)
 
     def run(self, record=None, live: bool = False, progress: bool = False) -> RunResult:
         """Simulate to the end (see the class docstring); with `record`, save the Meshcat
@@ -487,6 +498,7 @@ def _result(loop: ClosedLoop, wall: float, path, interrupted: bool) -> RunResult
         safety=loop.controller.safety_log(root),
         speed_changes=tuple(watch.lights.changes) if watch.lights is not None else (),
         interrupted=interrupted,
+        interaction=setup.scenario.interaction.mode,
         faults=tuple(
             fault_records(
                 setup.scenario.faults, loop.cell.injected(root), status.detections, root.get_time()

@@ -42,6 +42,7 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
+from hrc_drake.cell.anticipation import Turn, same_part, turn_at, wait_point
 from hrc_drake.cell.intent import MotionIntent
 from hrc_drake.cell.slot_monitor import CellConfiguration, PartStatus
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
@@ -89,6 +90,10 @@ class TaskRecord:
     end_time: float
     idle: float = 0.0  # wall seconds the robot waited for the planner after the indication
     plan_ready: bool = False  # the plan was made ahead of the indication
+    committed: str | None = None  # the task the robot started on before the indication
+    indicated_at: float | None = None  # when the indication came [s]
+    retargeted: bool = False  # the robot turned to another seat for the same kind of part
+    swapped: bool = False  # the robot turned to another part (putting a carried one back)
 
 
 @dataclass(frozen=True)
@@ -145,6 +150,13 @@ class SupervisorStatus:
     grip_lost_at: float | None = None  # when the grasp (or the release) started to look wrong
     asked_at: float = 0.0  # when the operator was last asked to choose
     blocked_at: float = 0.0  # when the task's path was found blocked
+    committed: str | None = None  # anticipating: the task the robot started on
+    awaiting: bool = False  # started on `committed`; the indication is not in yet
+    indicated_at: float | None = None
+    change: str | None = None  # the indicated task the robot is stopping to turn to
+    retargeted: bool = False
+    swapped: bool = False
+    returning: bool = False  # carrying the committed part back to its tray (a swap)
     recovering: str = ""  # "regrasp" or "replace" while the task's part is picked again
     recoveries: int = 0  # how often the task's part was picked again
     stopped: bool = False  # the protective-stop input is on
@@ -222,6 +234,7 @@ class SupervisorLimits:
     indication_timeout: float = 10.0
     recover_tries: int = 2
     path_timeout: float = 10.0
+    anticipate: bool = False  # start on the policy's commitment before the indication
 
 
 class Supervisor(LeafSystem):
@@ -338,7 +351,7 @@ class Supervisor(LeafSystem):
         limit = self._speed_port.Eval(context)[0] if self._speed_port.HasValue(context) else 1.0
         stop = self._stop_port.HasValue(context) and self._stop_port.Eval(context)[0] > 0.5
         status = self._note_stop(status, stop, now)
-        if stop:
+        if stop or self._stopping_to_turn(status, now):
             limit = 0.0  # decelerate along the path, as for the separation monitor's stop
         try:
             self._check_tracking(status, context, now)
@@ -367,6 +380,14 @@ class Supervisor(LeafSystem):
         )
 
     def _step(self, status: SupervisorStatus, context, now: float) -> SupervisorStatus:
+        if status.awaiting and status.mode in (Mode.PLAN, Mode.BLOCKED, Mode.EXECUTE):
+            status = self._await_indication(status, context, now)
+        if status.mode == Mode.EXECUTE and status.change is None:
+            status = self._watch_obstacle(status, self._config_port.Eval(context), now)
+        if status.change is not None:
+            turned = self._turn(status, self._config_port.Eval(context), now)
+            if turned is not None:
+                return turned
         mode = status.mode
         if mode == Mode.DECIDE:
             return self._decide(status, self._config_port.Eval(context), now)
@@ -408,6 +429,8 @@ class Supervisor(LeafSystem):
             return replace(s, speed=limit)
         plan = s.plan
         tau = s.plan_time(now)
+        if s.awaiting and tau >= wait_point(plan):  # no indication yet: wait above the seat
+            return replace(s, tau=wait_point(plan), tau_time=now, speed=limit, rate=0.0)
         if s.holding_for_bolts(tau):
             return replace(s, tau=plan.t_in_place, tau_time=now, speed=limit, rate=0.0)
         qdot = np.abs(plan.trajectory.EvalDerivative(min(tau, plan.duration), 1)).max()
@@ -434,8 +457,50 @@ class Supervisor(LeafSystem):
             self._plan_ahead(s.state, config.layout())
         proposal = self._policy.next_task(s.state)
         prompt = Prompt(s.step + 1, PromptKind.CHOOSE, s.state, proposal)
+        committed = self._commit(s.state, proposal) if self._limits.anticipate else None
+        s = replace(
+            s,
+            mode=Mode.ASK,
+            step=s.step + 1,
+            prompt=prompt,
+            tokens_before=tokens,
+            asked_at=now,
+            committed=committed,
+            awaiting=committed is not None,
+            indicated_at=None,
+            change=None,
+            retargeted=False,
+            swapped=False,
+            returning=False,
+        )
+        if committed is None:
+            return s
+        event = f"{now:.2f}: step {s.step} proposes {proposal}, starts on {committed}"
+        s = replace(s, pending=(proposal, committed, ""), events=(*s.events, event))
+        return self._request(s, committed, config, now)
+
+    def _commit(self, state: tuple[str, ...], proposal: str) -> str | None:
+        """The placement the policy bets on (its `commit`; a policy without one bets on its
+        proposal when that is a placement)."""
+        commit = getattr(self._policy, "commit", None)
+        if commit is not None:
+            return commit(state, proposal)
+        return None if proposal == UNDO else proposal
+
+    def _request(self, s: SupervisorStatus, task: str, config: CellConfiguration, now: float):
+        """Ask the planner for `task` from the boundary's layout (the arm at home)."""
+        last = s.state[-1] if s.state else None
+        request = PlanRequest.of(
+            s.tokens_before, task, last, config.layout(), obstacle=config.obstacle
+        )
+        ready = self._plans.is_cached(request)
+        self._plans.request(request)
         return replace(
-            s, mode=Mode.ASK, step=s.step + 1, prompt=prompt, tokens_before=tokens, asked_at=now
+            s,
+            mode=Mode.PLAN,
+            request=request,
+            requested_wall=time.perf_counter(),
+            plan_ready=ready,
         )
 
     def _take_indication(self, s: SupervisorStatus, context, now: float):
@@ -444,30 +509,107 @@ class Supervisor(LeafSystem):
         if not indication.answers(s.prompt):
             return self._note_silence(s, now)
         s = self._resolve(s, "silence", now, "ask")
-        space, step, indicated = self._space, s.step, indication.task
+        indicated = self._feasible(s, indication.task)
+        event = f"{now:.2f}: step {s.step} proposes {s.prompt.proposal}, operator indicates "
+        s = replace(
+            s,
+            indicated_at=now,
+            pending=(s.prompt.proposal, indicated, ""),
+            events=(*s.events, event + indicated),
+        )
+        return self._request(s, indicated, self._config_port.Eval(context), now)
+
+    def _feasible(self, s: SupervisorStatus, indicated: str) -> str:
+        """The indicated task, if feasible in the state; SupervisorError if not."""
+        space = self._space
         feasible = {t for t, _ in space.tasks(space.index(s.state))}
         if indicated not in feasible:
             raise SupervisorError(
-                f"step {step}: the operator indicated {indicated!r}, not feasible in "
+                f"step {s.step}: the operator indicated {indicated!r}, not feasible in "
                 f"{list(s.state)} (feasible: {sorted(feasible)})"
             )
-        config: CellConfiguration = self._config_port.Eval(context)
-        last = s.state[-1] if s.state else None
+        return indicated
+
+    def _await_indication(self, s: SupervisorStatus, context, now: float):
+        """Moving on its commitment: take the indication when it comes; another task than
+        the committed one is turned to (`_turn`) once the robot can."""
+        indication: Indication = self._indication_port.Eval(context)
+        if not indication.answers(s.prompt):
+            return self._note_silence(s, now)
+        s = self._resolve(s, "silence", now, "ask")
+        indicated = self._feasible(s, indication.task)
+        event = f"{now:.2f}: step {s.step}: operator indicates {indicated}"
+        s = replace(s, awaiting=False, indicated_at=now, events=(*s.events, event))
+        if indicated == s.committed:
+            return s
+        proposed, _, part = s.pending
+        same = same_part(self._space.spec, s.committed, indicated)
+        return replace(
+            s,
+            change=indicated,
+            pending=(proposed, indicated, part),
+            retargeted=same,
+            swapped=not same,
+        )
+
+    def _watch_obstacle(self, s: SupervisorStatus, config: CellConfiguration, now: float):
+        """An obstacle seen that the plan did not know (it came after the plan was made): stop
+        on the path and plan the task again from there (`_turn` to the same task)."""
+        if not config.obstacle or not _moved(s.request.obstacle, config.obstacle):
+            return s
+        task, tau = s.pending[1], s.plan_time(now)
+        if turn_at(s.plan, tau, self._space.spec, task) == Turn.TOO_LATE:
+            return s  # placing: the part is where it goes
+        event = f"{now:.2f}: an obstacle appears: stops to plan {task} again"
+        return replace(s, change=task, events=(*s.events, event))
+
+    def _stopping_to_turn(self, s: SupervisorStatus, now: float) -> bool:
+        """Whether the robot decelerates to turn to another task (not while its fingers
+        close on the part or lift it)."""
+        if s.change is None or s.mode != Mode.EXECUTE or s.plan is None:
+            return False
+        return turn_at(s.plan, s.plan_time(now), self._space.spec, s.change) != Turn.LATER
+
+    def _turn(self, s: SupervisorStatus, config: CellConfiguration, now: float):
+        """Turn to the indicated task `s.change`: before the robot moves, ask for its plan
+        instead; once it stands still on its path, plan from there (with the part it holds:
+        on to the indicated seat, or back to its tray home). None while it cannot yet."""
+        indicated, last = s.change, (s.state[-1] if s.state else None)
+        if s.mode in (Mode.PLAN, Mode.BLOCKED):
+            return self._request(replace(s, change=None), indicated, config, now)
+        if s.mode != Mode.EXECUTE or s.speed > 0.0:
+            return None
+        plan, tau = s.plan, s.plan_time(now)
+        turn = turn_at(plan, tau, self._space.spec, indicated)
+        if turn == Turn.LATER:
+            return None
+        if turn == Turn.TOO_LATE:
+            raise SupervisorError(
+                f"step {s.step}: the operator indicated {indicated} after {plan.instance} was "
+                "placed; the task is handed over"
+            )
+        q = tuple(float(x) for x in plan.trajectory.value(tau).ravel())
+        if turn == Turn.REPLAN:
+            layout, keywords = config.layout(), {"start": q}
+        else:
+            layout = {i: t for i, t in config.layout().items() if i != plan.instance}
+            keywords = {"instance": plan.instance, "start": q, "held": True}
+        task = UNDO if turn == Turn.RETURN else indicated
         request = PlanRequest.of(
-            s.tokens_before, indicated, last, config.layout(), obstacle=config.obstacle
+            s.tokens_before, task, last, layout, obstacle=config.obstacle, **keywords
         )
-        ready = self._plans.is_cached(request)
         self._plans.request(request)
-        event = (
-            f"{now:.2f}: step {step} proposes {s.prompt.proposal}, operator indicates {indicated}"
-        )
+        event = f"{now:.2f}: turns to {indicated} ({turn.value}) at {tau:.2f} s into its plan"
         return replace(
             s,
             mode=Mode.PLAN,
+            plan=None,
             request=request,
             requested_wall=time.perf_counter(),
-            plan_ready=ready,
-            pending=(s.prompt.proposal, indicated, ""),
+            q_hold=q,
+            opening_hold=plan.gripper_opening(tau),
+            change=None,
+            returning=turn == Turn.RETURN,
             events=(*s.events, event),
         )
 
@@ -491,7 +633,7 @@ class Supervisor(LeafSystem):
         s = self._resolve(s, "plan", now, "retry")  # a path once the obstacle moved
         placement = config.placement(plan.instance)
         expected = PartStatus.SEATED if indicated == UNDO else PartStatus.TRAY
-        if placement.status != expected and not s.recovering:
+        if placement.status != expected and not (s.recovering or s.request.held):
             raise SupervisorError(
                 f"step {step}: {plan.instance} should be {expected.value} for {indicated}, the "
                 f"cell shows it {placement.status.value}"
@@ -506,7 +648,7 @@ class Supervisor(LeafSystem):
             rate=s.speed,
             pending=(proposed, indicated, plan.instance),
             bolted=False,
-            planned_ahead=False,
+            planned_ahead=s.returning,  # a part put back: nothing to plan ahead for yet
             idle=time.perf_counter() - s.requested_wall,
         )
 
@@ -523,6 +665,10 @@ class Supervisor(LeafSystem):
             self._plan_ahead_after(s, self._config_port.Eval(context))
         if s.holding_for_bolts(tau):
             return self._hold_for_bolts(s, context, now)
+        if tau >= plan.duration and s.returning:  # the part is back: the indicated task
+            q_end = tuple(float(x) for x in plan.trajectory.value(plan.duration).ravel())
+            s = replace(s, plan=None, q_hold=q_end, returning=False)
+            return self._request(s, s.pending[1], self._config_port.Eval(context), now)
         if tau >= plan.duration:
             q_end = tuple(float(x) for x in plan.trajectory.value(plan.duration).ravel())
             return replace(
@@ -786,6 +932,10 @@ class Supervisor(LeafSystem):
             end_time=now,
             idle=s.idle,
             plan_ready=s.plan_ready,
+            committed=s.committed,
+            indicated_at=s.indicated_at,
+            retargeted=s.retargeted,
+            swapped=s.swapped,
         )
         if self._on_task is not None:
             self._on_task(record)

@@ -353,7 +353,7 @@ class InteractionConfig:
 
     Attributes:
         mode: `anticipate` (the robot may start on its prediction) or `wait` (it waits for the
-            indication). The cell does not anticipate yet: it plays `wait` in both modes.
+            indication). `evaluate --cell` plays `wait` in both modes.
         interface: `pointer`, `gesture` or `touch` (the paper's section 5).
         delay: the indication delay; left out, the interface's default (our assumption, see
             `DEFAULT_DELAYS`).

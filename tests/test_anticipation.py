@@ -1,0 +1,105 @@
+"""The robot moves on its prediction: it starts on the task it commits to while the operator's
+indication is on its way, and turns when the indication names another task."""
+
+import numpy as np
+
+from hrc_drake.cell.run import build_closed_loop
+from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+from hrc_drake.cell.slot_monitor import PartStatus
+from hrc_drake.cell.supervisor import Mode
+from hrc_drake.robot_models import UR3
+
+
+def _loop(scenario: str, *texts: str):
+    return build_closed_loop(load_cell_scenario(scenario, [LEAN, *texts]))
+
+
+def _arm_speeds(loop, until: float = 120.0) -> list[tuple[float, float]]:
+    """(time, the arm's fastest joint speed) every 0.05 s of a run to its end."""
+    plant, station = loop.station.plant, loop.station
+    speeds, t = [], 0.0
+    while loop.advance_to(t) not in (Mode.DONE, Mode.FAILED) and t < until:
+        context = plant.GetMyContextFromRoot(loop.root_context)
+        v = plant.GetVelocities(context, station.instances[UR3])
+        speeds.append((t, float(np.abs(v).max())))
+        t += 0.05
+    return speeds
+
+
+def test_the_robot_starts_on_its_commitment_before_the_indication():
+    loop = _loop("row1-optimal")
+    speeds = _arm_speeds(loop)
+    result = loop.result()
+    assert result.done and result.interaction == "anticipate"
+    first = result.tasks[0]
+    assert first.committed == "F1" and first.indicated == "F1"
+    assert not first.retargeted and not first.swapped
+    # The indication comes about 2 s after the prompt (the pointer's delay); the arm is moving
+    # well before it.
+    assert first.indicated_at > 1.0
+    assert max(v for t, v in speeds if t < first.indicated_at) > 0.1
+    step = result.to_json()["steps"][0]
+    assert step["committed"] == "F1" and step["indicated_at"] == round(first.indicated_at, 3)
+
+
+def test_in_wait_mode_the_robot_holds_still_until_the_indication():
+    loop = _loop("row1-optimal", "{interaction: {mode: wait}}")
+    speeds = _arm_speeds(loop)
+    result = loop.result()
+    assert result.done and result.interaction == "wait"
+    first = result.tasks[0]
+    assert first.committed is None and first.indicated_at > 1.0
+    assert max(v for t, v in speeds if t < first.indicated_at) < 1e-3
+    # Waiting costs the indication's delay at every boundary: the same row anticipating ends
+    # sooner.
+    assert result.sim_time > _loop("row1-optimal").run().sim_time + 3.0
+
+
+def test_a_wrong_seat_is_retargeted_with_the_part_in_the_gripper():
+    # Row 8: the robot starts on F1; the operator indicates F3 (the same kind of part, another
+    # seat) while the flange is being lifted. The robot carries it on to F3 without letting go.
+    loop = _loop("row8-forces-4-then-8")
+    held = []  # the flange's status from the indication to the place
+    t = 0.0
+    while loop.advance_to(t) not in (Mode.DONE, Mode.FAILED) and t < 120:
+        status = loop.status
+        if status.step == 1 and status.indicated_at is not None and status.bolted is False:
+            plan = status.plan
+            if plan is None or status.plan_time(t) < plan.t_in_place:
+                held.append(loop.cell.configuration(loop.root_context).status("oval_flange_1"))
+        t += 0.05
+    result = loop.result()
+    assert result.done and [t.observed for t in result.tasks] == ["F3", "S12", "F01"]
+    first = result.tasks[0]
+    assert (first.committed, first.indicated, first.retargeted, first.swapped) == (
+        "F1",
+        "F3",
+        True,
+        False,
+    )
+    assert any("turns to F3 (retarget)" in e for e in result.events)
+    # From the indication to the place the flange stays in the gripper.
+    assert held and set(held) == {PartStatus.HELD}
+    assert not result.collisions
+
+
+def test_a_wrong_part_is_put_back_in_the_tray_and_the_indicated_one_fetched():
+    # The robot commits to F1 (an oval flange); the operator indicates S12 (the square one).
+    loop = _loop("row1-optimal", "{operator: {deviations: [{step: 1, task: S12}]}}")
+    seen_back = False
+    t = 0.0
+    while loop.advance_to(t) not in (Mode.DONE, Mode.FAILED) and t < 120:
+        status = loop.status
+        fetching = status.plan is not None and status.plan.instance == "square_flange"
+        if status.step == 1 and fetching and not seen_back:
+            config = loop.cell.configuration(loop.root_context)
+            seen_back = config.status("oval_flange_1") == PartStatus.TRAY
+        t += 0.05
+    result = loop.result()
+    assert result.done, result.error
+    first = result.tasks[0]
+    assert (first.committed, first.indicated, first.observed) == ("F1", "S12", "S12")
+    assert first.swapped and not first.retargeted and first.part == "square_flange"
+    assert any("turns to S12 (return)" in e for e in result.events)
+    assert seen_back  # the oval flange was read home in the tray before the square one went
+    assert not result.collisions
