@@ -44,6 +44,9 @@ OBSTACLE_MASS = 0.5  # kg
 _CARRIAGE_MASS = 0.05  # kg
 # Where the box waits out of the work: under the 40 mm table top, beside the robot.
 OBSTACLE_PARK = (0.25, 0.0, -0.30)
+# Where the debris waits: high above the work, so that it comes down into its pocket from above
+# (from below it would pass through a host part under the pocket, which it must stop).
+DEBRIS_PARK = (0.25, 0.0, 0.80)
 # The cell sees a box whose bottom is above this height [m] (the table top is at 0): a parked
 # box is not in the work.
 OBSTACLE_SEEN_ABOVE = -0.05
@@ -78,7 +81,8 @@ def add_mounted_obstacle(plant: MultibodyPlant, name: str = OBSTACLE):
     parent = plant.world_body()
     links = [plant.AddRigidBody(f"{name}_{axis}_carriage", model, carriage) for axis in "xy"]
     links.append(_add_box_body(plant, model, name))
-    for axis_name, link, axis, park in zip("xyz", links, np.eye(3), OBSTACLE_PARK, strict=True):
+    parked = OBSTACLE_PARK if name == OBSTACLE else DEBRIS_PARK
+    for axis_name, link, axis, park in zip("xyz", links, np.eye(3), parked, strict=True):
         joint = plant.AddJoint(
             PrismaticJoint(
                 f"{name}_{axis_name}", parent.body_frame(), link.body_frame(), axis, -2.0, 2.0
@@ -108,6 +112,7 @@ def far_below() -> RigidTransform:
 __all__ = [
     "DEBRIS",
     "DEBRIS_MASS",
+    "DEBRIS_PARK",
     "DEBRIS_SIZE",
     "OBSTACLE",
     "OBSTACLE_MASS",

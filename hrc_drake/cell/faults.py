@@ -34,7 +34,7 @@ from hrc_drake.cell.gripper import STALL_GAP, stopped_short
 from hrc_drake.cell.obstacle import SeatPositions
 from hrc_drake.hri.faults import FaultConfig, FaultKind
 from hrc_drake.hri.messages import Prompt, PromptKind
-from hrc_drake.obstacle_models import OBSTACLE_PARK, obstacle_pose_over
+from hrc_drake.obstacle_models import DEBRIS_PARK, OBSTACLE_PARK, obstacle_pose_over
 
 # The fingers count as standing still below this rate (they close at about 0.5 m/s).
 STILL_RATE = 0.005  # m/s
@@ -172,11 +172,11 @@ class FaultInjector(LeafSystem):
         output.SetFromVector(np.concatenate([where, np.zeros(3)]))
 
     def _calc_debris(self, context, output) -> None:
-        where = np.array(OBSTACLE_PARK, dtype=float)
+        where = np.array(DEBRIS_PARK, dtype=float)
         for fault, injection in self._active(context, FaultKind.NO_SEAT):
             if fault.obstacle and injection.target:
                 since = context.get_time() - injection.injected_at
-                where[:2] = injection.target[:2]  # under the table, below its pocket
+                where[:2] = injection.target[:2]  # high above its pocket
                 if since >= OBSTACLE_RISE_DELAY:
                     where[2] = injection.target[2]
         output.SetFromVector(np.concatenate([where, np.zeros(3)]))

@@ -3,16 +3,14 @@ the debris of a `no-seat` fault with `obstacle: true` (`hrc_drake.obstacle_model
 
 Each rides an x-y-z carriage servoed by the plant's PD actuators; the fault injector sets its
 target. The box touches only the robot and what the robot carries: it is there to be in the
-robot's way, not to move parts. The debris touches the robot and the parts that are placed on
-something, not the plate, tray, table or host parts (it lies in a pocket's floor, on the plate
-or on a host, and rises to it through them). Where they go: over, or into the pocket of, the
-seat of the task the robot proposes, so that the task the operator then confirms has no path
-until the box is taken away, or its part lands on the debris.
+robot's way, not to move parts. The debris touches only the parts (it comes down into its
+pocket from above, past the arm, and lies on the pocket's floor, in the plate or in a host
+part). Where they go: over, or into the pocket of, the seat of the task the robot proposes, so
+that the task the operator then confirms has no path until the box is taken away, or its part
+lands on the debris.
 """
 
 from __future__ import annotations
-
-from collections.abc import Iterable
 
 import numpy as np
 from pydrake.geometry import CollisionFilterDeclaration, GeometrySet
@@ -55,17 +53,16 @@ def mount_obstacle(plant: MultibodyPlant, name: str):
     return model
 
 
-def filter_obstacle_contacts(
-    plant: MultibodyPlant, scene_graph, name: str, hosts: Iterable[str] = ()
-) -> None:
+def filter_obstacle_contacts(plant: MultibodyPlant, scene_graph, name: str) -> None:
     """What the box or debris does not touch (after Finalize): the box, anything but the robot;
-    the debris, the plate, tray, table and the `hosts` (host part instances)."""
+    the debris, the plate, tray, table and the robot."""
     model = plant.GetModelInstanceByName(name)
     if name == OBSTACLE:
         keep = {plant.GetModelInstanceByName(n) for n in (UR3, GRIPPER)} | {model}
         passes = [m for m in _instances(plant) if m not in keep]
     else:
-        passes = [plant.GetModelInstanceByName(n) for n in (PLATE, TRAY, TABLE, *hosts)]
+        names = (PLATE, TRAY, TABLE, UR3, GRIPPER)
+        passes = [plant.GetModelInstanceByName(n) for n in names]
     scene_graph.collision_filter_manager().Apply(
         CollisionFilterDeclaration().ExcludeBetween(
             GeometrySet(_geometries(plant, [model])), GeometrySet(_geometries(plant, passes))

@@ -304,7 +304,7 @@ def _add_plant(builder: DiagramBuilder, scenario: Scenario, design: CellDesign):
         instances[name] = mount_obstacle(plant, name)
     plant.Finalize()
     for name in obstacles:
-        filter_obstacle_contacts(plant, scene_graph, name, design.host_tags)
+        filter_obstacle_contacts(plant, scene_graph, name)
     bolts = Bolts.of(plant, instances, design)
     frames = read_cell_frames(plant, scene_graph, plant.CreateDefaultContext(), design)
     layout = {p: IN_TRAY for p in design.instance_names}

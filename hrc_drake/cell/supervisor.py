@@ -24,6 +24,11 @@ sees an obstacle waits for it to move or go, planning again each time it does, f
 `run.path_timeout`. Each is recorded as a `Detection` (what the run
 reports of the scenario's faults, `hrc_drake.cell.fault_report`).
 
+In `anticipate` mode it does not wait at step 3: it starts on the placement its policy commits
+to and turns when the indication names another task (`hrc_drake.cell.anticipation`). The fault
+handling is `hrc_drake.cell.recovery`; the Supervisor's values (its mode, state, records and
+limits) are `hrc_drake.cell.supervisor_state`.
+
 The robot follows its plan in plan time `tau`, which advances at the speed scale s ∈ [0, 1] that
 the separation monitor allows on the optional `speed_limit` input: the robot slows down by
 scaling its trajectory's time, stops with s = 0 and resumes as s ramps back, never faster than
@@ -33,18 +38,27 @@ the start of the plan's hold; the operator's `bolted` moves it to the release.
 
 from __future__ import annotations
 
-import enum
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from hrc_drake.cell.anticipation import Turn, same_part, turn_at, wait_point
+from hrc_drake.cell.anticipation import Anticipation, wait_point
 from hrc_drake.cell.intent import MotionIntent
+from hrc_drake.cell.recovery import FaultRecovery
 from hrc_drake.cell.slot_monitor import CellConfiguration, PartStatus
+from hrc_drake.cell.supervisor_state import (
+    N_JOINTS,
+    Detection,
+    Mode,
+    SupervisorError,
+    SupervisorLimits,
+    SupervisorStatus,
+    TaskRecord,
+)
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
 from hrc_drake.motion.plan import Plan, Stage
 from hrc_drake.motion.service import PlanFailure, PlanRequest, PlanService
@@ -53,191 +67,8 @@ from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.policy import Policy
 from hrc_drake.tasks.tokens import UNDO
 
-N_JOINTS = len(UR3_JOINTS)
-# After the fingers close, this long for them to stall on the part before the grasp is checked;
-# and a grasp that looks lost must stay so this long (a jolt of the carry is not a loss).
-GRIP_SETTLE = 0.1  # s
-# A part that slips out of the fingers falls at most about 0.3 m (0.25 s) and rattles to rest.
-PART_FALL_TIME = 1.0  # s
 
-
-class Mode(enum.Enum):
-    """What the Supervisor is doing."""
-
-    DECIDE = "decide"  # at a task boundary
-    ASK = "ask"  # the proposal is shown; waiting for the operator's indication
-    PLAN = "plan"  # waiting for the planner (the arm holds still)
-    BLOCKED = "blocked"  # no path past an obstacle: waiting for it to move or go
-    EXECUTE = "execute"  # following a plan (holding the part while the operator bolts it)
-    SETTLE = "settle"  # plan done; let the parts come to rest before reading the cell
-    RECOVER = "recover"  # a part lost or not seated: it comes to rest, then is picked again
-    DONE = "done"  # a terminal state is reached
-    FAILED = "failed"  # cannot go on (the reason is in `error`)
-
-
-@dataclass(frozen=True)
-class TaskRecord:
-    """One task as it happened."""
-
-    step: int
-    state: tuple[str, ...]
-    proposed: str
-    indicated: str  # the task the operator confirmed or indicated instead
-    observed: str  # the task the cell shows was done (from contact), or "undo"
-    next_state: tuple[str, ...]
-    part: str
-    start_time: float
-    end_time: float
-    idle: float = 0.0  # wall seconds the robot waited for the planner after the indication
-    plan_ready: bool = False  # the plan was made ahead of the indication
-    committed: str | None = None  # the task the robot started on before the indication
-    indicated_at: float | None = None  # when the indication came [s]
-    retargeted: bool = False  # the robot turned to another seat for the same kind of part
-    swapped: bool = False  # the robot turned to another part (putting a carried one back)
-
-
-@dataclass(frozen=True)
-class Detection:
-    """Something the Supervisor found wrong from its measurements, and what came of it.
-
-    `cause`: `stop` (the protective-stop input), `silence` (no indication within the timeout),
-    `tracking` (a joint off its command), `grip` (the fingers do not hold the part), `release`
-    (the fingers do not open), `seat` (a part let go does not sit in its seat), `plan` (no
-    plan), `configuration` (the cell shows what no task explains). `recovery`: `resume`, `ask`,
-    `regrasp`, `replace` (the cell went on by itself), or `operator` (the task is handed
-    over)."""
-
-    cause: str
-    step: int
-    at: float
-    resolved_at: float | None = None
-    recovery: str = ""
-
-    @property
-    def recovered(self) -> bool:
-        """The cell itself recovered and went on."""
-        return self.resolved_at is not None and self.recovery != "operator"
-
-
-@dataclass(frozen=True)
-class SupervisorStatus:
-    """The Supervisor's abstract state (one value, replaced at every update)."""
-
-    mode: Mode = Mode.DECIDE
-    state: tuple[str, ...] = ()
-    step: int = 0
-    prompt: Prompt = field(default_factory=Prompt)
-    request: PlanRequest | None = None
-    requested_wall: float = 0.0  # perf_counter() when the plan was asked for
-    plan_ready: bool = False
-    plan: Plan | None = None
-    plan_start: float = 0.0
-    pending: tuple[str, str, str] | None = None  # (proposed, indicated, part) of the task
-    tokens_before: frozenset[str] = frozenset()
-    settle_until: float = 0.0
-    bolted: bool = False
-    planned_ahead: bool = False
-    q_hold: tuple[float, ...] = ()
-    opening_hold: float = 0.0
-    history: tuple[TaskRecord, ...] = ()
-    error: str | None = None
-    events: tuple[str, ...] = ()
-    tau: float = 0.0  # plan time at `tau_time` (simulated time)
-    tau_time: float = 0.0
-    rate: float = 1.0  # d tau / dt from `tau_time` on
-    speed: float = 1.0  # the speed scale s the robot runs at (1: the plan's own speed)
-    idle: float = 0.0  # wall seconds waited on the planner for the current task
-    grip_lost_at: float | None = None  # when the grasp (or the release) started to look wrong
-    asked_at: float = 0.0  # when the operator was last asked to choose
-    blocked_at: float = 0.0  # when the task's path was found blocked
-    committed: str | None = None  # anticipating: the task the robot started on
-    awaiting: bool = False  # started on `committed`; the indication is not in yet
-    indicated_at: float | None = None
-    change: str | None = None  # the indicated task the robot is stopping to turn to
-    retargeted: bool = False
-    swapped: bool = False
-    returning: bool = False  # carrying the committed part back to its tray (a swap)
-    recovering: str = ""  # "regrasp" or "replace" while the task's part is picked again
-    recoveries: int = 0  # how often the task's part was picked again
-    stopped: bool = False  # the protective-stop input is on
-    detections: tuple[Detection, ...] = ()
-
-    def __deepcopy__(self, memo) -> SupervisorStatus:
-        # Drake copies abstract values at every update and output evaluation; this value is
-        # immutable (its plan's trajectories are never modified), so the copy is itself.
-        return self
-
-    def plan_time(self, now: float) -> float:
-        """The plan time `tau` at simulated time `now` (clamped to the plan)."""
-        tau = self.tau + self.rate * (now - self.tau_time)
-        return float(np.clip(tau, 0.0, self.plan.duration)) if self.plan is not None else tau
-
-    def holding_for_bolts(self, tau: float) -> bool:
-        """Whether the robot holds the placed part still, waiting for the operator's bolts."""
-        plan = self.plan
-        return (
-            plan is not None
-            and plan.task != UNDO
-            and not self.bolted
-            and plan.t_in_place <= tau < plan.t_release
-        )
-
-    def command(self, now: float) -> tuple[np.ndarray, np.ndarray, float]:
-        """(joint positions, joint velocities, gripper opening) commanded at `now`."""
-        if self.mode != Mode.EXECUTE or self.plan is None:
-            q = np.asarray(self.q_hold, dtype=float)
-            return q, np.zeros(len(q)), self.opening_hold
-        tau = self.plan_time(now)
-        q = self.plan.trajectory.value(tau).ravel()
-        v = self.plan.trajectory.EvalDerivative(tau, 1).ravel() * self.rate
-        if tau >= self.plan.duration:
-            v = np.zeros_like(v)
-        return q, v, self.plan.gripper_opening(tau)
-
-    @property
-    def visited(self) -> list[tuple[str, ...]]:
-        """The MDP states visited, from the start."""
-        return [(), *(r.next_state for r in self.history)]
-
-
-# An obstacle counts as moved (worth planning again) past this distance [m].
-OBSTACLE_MOVED = 0.005
-
-
-def _moved(planned: tuple[float, ...] | None, seen: tuple[float, ...]) -> bool:
-    """Whether the obstacle seen differs from the one planned against (or came or went)."""
-    if not planned or not seen:
-        return bool(planned) != bool(seen)
-    return float(np.linalg.norm(np.subtract(planned[:3], seen[:3]))) > OBSTACLE_MOVED
-
-
-class SupervisorError(RuntimeError):
-    """The supervisor cannot go on; `cause` is the Detection cause it reports."""
-
-    def __init__(self, message: str, cause: str = "configuration"):
-        super().__init__(message)
-        self.cause = cause
-
-
-@dataclass(frozen=True)
-class SupervisorLimits:
-    """Timing and checks of the Supervisor (from the scenario's `run:` and `station:`)."""
-
-    period: float = 0.02
-    settle_time: float = 0.3
-    max_steps: int = 30
-    joint_acceleration: float = 5.0
-    tracking_tolerance: float = 0.05
-    grip_tolerance: float = 0.004
-    grip_force: float = 20.0
-    plan_ahead: bool = True
-    indication_timeout: float = 10.0
-    recover_tries: int = 2
-    path_timeout: float = 10.0
-    anticipate: bool = False  # start on the policy's commitment before the indication
-
-
-class Supervisor(LeafSystem):
+class Supervisor(FaultRecovery, Anticipation, LeafSystem):
     """Task-level state machine of the cell (see the module docstring).
 
     Input ports: `configuration` (CellConfiguration), `hri.indication` (Indication),
@@ -479,14 +310,6 @@ class Supervisor(LeafSystem):
         s = replace(s, pending=(proposal, committed, ""), events=(*s.events, event))
         return self._request(s, committed, config, now)
 
-    def _commit(self, state: tuple[str, ...], proposal: str) -> str | None:
-        """The placement the policy bets on (its `commit`; a policy without one bets on its
-        proposal when that is a placement)."""
-        commit = getattr(self._policy, "commit", None)
-        if commit is not None:
-            return commit(state, proposal)
-        return None if proposal == UNDO else proposal
-
     def _request(self, s: SupervisorStatus, task: str, config: CellConfiguration, now: float):
         """Ask the planner for `task` from the boundary's layout (the arm at home)."""
         last = s.state[-1] if s.state else None
@@ -503,13 +326,20 @@ class Supervisor(LeafSystem):
             plan_ready=ready,
         )
 
-    def _take_indication(self, s: SupervisorStatus, context, now: float):
-        """Once the operator indicates a task: check it, then ask the planner for it."""
+    def _indicated(self, s: SupervisorStatus, context, now: float):
+        """(status, the task the operator indicated, checked feasible) once the answer to the
+        prompt is in; (status noting any silence, None) before."""
         indication: Indication = self._indication_port.Eval(context)
         if not indication.answers(s.prompt):
-            return self._note_silence(s, now)
+            return self._note_silence(s, now), None
         s = self._resolve(s, "silence", now, "ask")
-        indicated = self._feasible(s, indication.task)
+        return s, self._feasible(s, indication.task)
+
+    def _take_indication(self, s: SupervisorStatus, context, now: float):
+        """Once the operator indicates a task: check it, then ask the planner for it."""
+        s, indicated = self._indicated(s, context, now)
+        if indicated is None:
+            return s
         event = f"{now:.2f}: step {s.step} proposes {s.prompt.proposal}, operator indicates "
         s = replace(
             s,
@@ -529,89 +359,6 @@ class Supervisor(LeafSystem):
                 f"{list(s.state)} (feasible: {sorted(feasible)})"
             )
         return indicated
-
-    def _await_indication(self, s: SupervisorStatus, context, now: float):
-        """Moving on its commitment: take the indication when it comes; another task than
-        the committed one is turned to (`_turn`) once the robot can."""
-        indication: Indication = self._indication_port.Eval(context)
-        if not indication.answers(s.prompt):
-            return self._note_silence(s, now)
-        s = self._resolve(s, "silence", now, "ask")
-        indicated = self._feasible(s, indication.task)
-        event = f"{now:.2f}: step {s.step}: operator indicates {indicated}"
-        s = replace(s, awaiting=False, indicated_at=now, events=(*s.events, event))
-        if indicated == s.committed:
-            return s
-        proposed, _, part = s.pending
-        same = same_part(self._space.spec, s.committed, indicated)
-        return replace(
-            s,
-            change=indicated,
-            pending=(proposed, indicated, part),
-            retargeted=same,
-            swapped=not same,
-        )
-
-    def _watch_obstacle(self, s: SupervisorStatus, config: CellConfiguration, now: float):
-        """An obstacle seen that the plan did not know (it came after the plan was made): stop
-        on the path and plan the task again from there (`_turn` to the same task)."""
-        if not config.obstacle or not _moved(s.request.obstacle, config.obstacle):
-            return s
-        task, tau = s.pending[1], s.plan_time(now)
-        if turn_at(s.plan, tau, self._space.spec, task) == Turn.TOO_LATE:
-            return s  # placing: the part is where it goes
-        event = f"{now:.2f}: an obstacle appears: stops to plan {task} again"
-        return replace(s, change=task, events=(*s.events, event))
-
-    def _stopping_to_turn(self, s: SupervisorStatus, now: float) -> bool:
-        """Whether the robot decelerates to turn to another task (not while its fingers
-        close on the part or lift it)."""
-        if s.change is None or s.mode != Mode.EXECUTE or s.plan is None:
-            return False
-        return turn_at(s.plan, s.plan_time(now), self._space.spec, s.change) != Turn.LATER
-
-    def _turn(self, s: SupervisorStatus, config: CellConfiguration, now: float):
-        """Turn to the indicated task `s.change`: before the robot moves, ask for its plan
-        instead; once it stands still on its path, plan from there (with the part it holds:
-        on to the indicated seat, or back to its tray home). None while it cannot yet."""
-        indicated, last = s.change, (s.state[-1] if s.state else None)
-        if s.mode in (Mode.PLAN, Mode.BLOCKED):
-            return self._request(replace(s, change=None), indicated, config, now)
-        if s.mode != Mode.EXECUTE or s.speed > 0.0:
-            return None
-        plan, tau = s.plan, s.plan_time(now)
-        turn = turn_at(plan, tau, self._space.spec, indicated)
-        if turn == Turn.LATER:
-            return None
-        if turn == Turn.TOO_LATE:
-            raise SupervisorError(
-                f"step {s.step}: the operator indicated {indicated} after {plan.instance} was "
-                "placed; the task is handed over"
-            )
-        q = tuple(float(x) for x in plan.trajectory.value(tau).ravel())
-        if turn == Turn.REPLAN:
-            layout, keywords = config.layout(), {"start": q}
-        else:
-            layout = {i: t for i, t in config.layout().items() if i != plan.instance}
-            keywords = {"instance": plan.instance, "start": q, "held": True}
-        task = UNDO if turn == Turn.RETURN else indicated
-        request = PlanRequest.of(
-            s.tokens_before, task, last, layout, obstacle=config.obstacle, **keywords
-        )
-        self._plans.request(request)
-        event = f"{now:.2f}: turns to {indicated} ({turn.value}) at {tau:.2f} s into its plan"
-        return replace(
-            s,
-            mode=Mode.PLAN,
-            plan=None,
-            request=request,
-            requested_wall=time.perf_counter(),
-            q_hold=q,
-            opening_hold=plan.gripper_opening(tau),
-            change=None,
-            returning=turn == Turn.RETURN,
-            events=(*s.events, event),
-        )
 
     def _take_plan(self, s: SupervisorStatus, config: CellConfiguration, now: float):
         """Once the planner answers: start the plan (the arm held still until then)."""
@@ -695,182 +442,6 @@ class Supervisor(LeafSystem):
         return replace(
             s, bolted=True, tau=s.plan.t_release, tau_time=now, events=(*s.events, event)
         )
-
-    def _check_grip(self, s: SupervisorStatus, context, now: float) -> SupervisorStatus:
-        """Between the grasp and the release the fingers must stand at the part's width,
-        stalled on it (closed past it, the gripper holds nothing); after the release they must
-        have left it (standing at it, the gripper does not open)."""
-        plan, tau = s.plan, s.plan_time(now)
-        opening = float(self._gripper_port.Eval(context)[0])
-        width = plan.grip_width
-        if plan.segment(Stage.GRASP).end + GRIP_SETTLE <= tau < plan.t_release:
-            gripped = self._grip_port.Eval(context)[0] > 0.5
-            ok = gripped and abs(opening - width) <= self._limits.grip_tolerance
-            cause, what = (
-                "grip",
-                (
-                    f"({'stalled' if gripped else 'no grip detected'}) where {plan.instance} is "
-                    f"{width * 1000:.1f} mm wide: it does not hold the part"
-                ),
-            )
-        elif plan.segment(Stage.RELEASE).end + GRIP_SETTLE <= tau < plan.duration:
-            ok = opening > width + 2 * self._limits.grip_tolerance
-            cause, what = (
-                "release",
-                (
-                    f"after the release, on {plan.instance} ({width * 1000:.1f} mm): the gripper "
-                    "does not open and may still hold the part"
-                ),
-            )
-        else:
-            return replace(s, grip_lost_at=None)
-        if ok:
-            return replace(s, grip_lost_at=None)
-        if s.grip_lost_at is None or now - s.grip_lost_at < GRIP_SETTLE:
-            return replace(s, grip_lost_at=now if s.grip_lost_at is None else s.grip_lost_at)
-        # Closed past the part's width (to the command's squeeze): nothing between the fingers.
-        slipped = cause == "grip" and opening < width
-        if slipped and s.recoveries < self._limits.recover_tries:
-            return self._lose_part(s, context, now, "grip", "regrasp")
-        raise SupervisorError(
-            f"step {s.step}: the gripper stands at {opening * 1000:.1f} mm {what}; the task is "
-            "stopped",
-            cause=cause,
-        )
-
-    def _lose_part(self, s: SupervisorStatus, context, now: float, cause: str, recovery: str):
-        """The task's part is out of the gripper where it should not be (slipped during the
-        carry, or let go out of its seat): hold the arm where it is measured (a part wedged
-        against it must not be pushed into), open the fingers a little (to let go of anything
-        caught between them), withdraw any prompt (nobody should reach
-        in to bolt now), and let the part come to rest before it is picked again from where it
-        lies."""
-        part = s.pending[2]
-        q = self._arm_port.Eval(context)[:N_JOINTS]
-        wait = PART_FALL_TIME if cause == "grip" else 0.0
-        what = "is not in the gripper" if cause == "grip" else "does not sit in its seat"
-        event = f"{now:.2f}: {part} {what}: {recovery} once it rests"
-        return replace(
-            s,
-            mode=Mode.RECOVER,
-            plan=None,
-            q_hold=tuple(float(x) for x in q),
-            opening_hold=float(self._gripper_port.Eval(context)[0]) + 0.02,
-            settle_until=now + max(wait, self._limits.settle_time),
-            recovering=recovery,
-            recoveries=s.recoveries + 1,
-            grip_lost_at=None,
-            prompt=replace(s.prompt, kind=PromptKind.NONE),
-            detections=(*s.detections, Detection(cause, s.step, now)),
-            events=(*s.events, event),
-        )
-
-    def _pick_again(self, s: SupervisorStatus, config: CellConfiguration, now: float):
-        """Ask the planner to pick the task's part from where the configuration sensor reads
-        it and place it where the operator indicated, starting from where the arm holds."""
-        _proposed, indicated, part = s.pending
-        placement = config.placement(part)
-        if not placement.pose or placement.status == PartStatus.HELD:
-            raise SupervisorError(f"step {s.step}: {part} cannot be found", cause="grip")
-        layout = {i: t for i, t in config.layout().items() if i != part}
-        if frozenset(layout.values()) != s.tokens_before:
-            raise SupervisorError(
-                f"step {s.step}: while {part} was out of the gripper the cell changed to "
-                f"{sorted(layout.values())}; the task is handed over",
-                cause="configuration",
-            )
-        last = s.state[-1] if s.state else None
-        request = PlanRequest.of(
-            s.tokens_before,
-            indicated,
-            last,
-            layout,
-            instance=part,
-            source_pose=tuple(placement.pose),
-            start=s.q_hold,
-            obstacle=config.obstacle,
-        )
-        self._plans.request(request)
-        event = f"{now:.2f}: plans to pick {part} from where it lies ({placement.status.value})"
-        return replace(
-            s,
-            mode=Mode.PLAN,
-            request=request,
-            requested_wall=time.perf_counter(),
-            events=(*s.events, event),
-        )
-
-    def _blocked(self, s: SupervisorStatus, failure: PlanFailure, now: float):
-        """No path while an obstacle is in the cell: hold still and wait for it to move."""
-        if any(d.cause == "plan" and d.resolved_at is None for d in s.detections):
-            return replace(s, mode=Mode.BLOCKED)  # planned again, still blocked
-        event = f"{now:.2f}: step {s.step}: an obstacle blocks the path ({failure.reason}); waits"
-        return replace(
-            s,
-            mode=Mode.BLOCKED,
-            blocked_at=now,
-            detections=(*s.detections, Detection("plan", s.step, now)),
-            events=(*s.events, event),
-        )
-
-    def _wait_for_path(self, s: SupervisorStatus, config: CellConfiguration, now: float):
-        """Plan again once the obstacle has moved or gone; hand over after `path_timeout`."""
-        timeout = self._limits.path_timeout
-        if now - s.blocked_at > timeout:
-            raise SupervisorError(
-                f"step {s.step}: an obstacle has blocked the path for {timeout:g} s "
-                "(run.path_timeout): clear the cell; the task is handed over",
-                cause="plan",
-            )
-        if not _moved(s.request.obstacle, config.obstacle):
-            return s
-        request = replace(s.request, obstacle=config.obstacle or None)
-        self._plans.request(request)
-        event = f"{now:.2f}: the obstacle " + ("moved" if config.obstacle else "is gone")
-        return replace(
-            s,
-            mode=Mode.PLAN,
-            request=request,
-            requested_wall=time.perf_counter(),
-            events=(*s.events, f"{event}: plans again"),
-        )
-
-    def _note_stop(self, s: SupervisorStatus, stop: bool, now: float) -> SupervisorStatus:
-        """Note the protective-stop input turning on (the robot stops on its path) and off
-        (it resumes where it stopped, the task state untouched)."""
-        if stop == s.stopped or s.mode in (Mode.DONE, Mode.FAILED):
-            return s
-        if stop:
-            event = f"{now:.2f}: protective stop: the robot stops on its path"
-            found = Detection("stop", s.step, now)
-            return replace(
-                s, stopped=True, detections=(*s.detections, found), events=(*s.events, event)
-            )
-        s = replace(s, stopped=False, events=(*s.events, f"{now:.2f}: stop cleared: resumes"))
-        return self._resolve(s, "stop", now, "resume")
-
-    def _note_silence(self, s: SupervisorStatus, now: float) -> SupervisorStatus:
-        """No answer within the timeout: the robot holds still where it is and asks again
-        (the prompt stays up; the wait starts over)."""
-        timeout = self._limits.indication_timeout
-        if now - s.asked_at < timeout:
-            return s
-        event = f"{now:.2f}: no indication for step {s.step} in {timeout:g} s: asks again"
-        open_ = any(d.cause == "silence" and d.resolved_at is None for d in s.detections)
-        detections = s.detections if open_ else (*s.detections, Detection("silence", s.step, now))
-        return replace(s, asked_at=now, detections=detections, events=(*s.events, event))
-
-    @staticmethod
-    def _resolve(s: SupervisorStatus, cause: str | None, now: float, recovery: str):
-        """Mark the open detections of `cause` (None: every cause) recovered by `recovery` at
-        `now`."""
-        detections = tuple(
-            replace(d, resolved_at=now, recovery=recovery)
-            if cause in (None, d.cause) and d.resolved_at is None
-            else d
-            for d in s.detections
-        )
-        return replace(s, detections=detections)
 
     def _plan_ahead_after(self, s: SupervisorStatus, config: CellConfiguration) -> None:
         """While the operator bolts: plan what the policy will propose once this task is done

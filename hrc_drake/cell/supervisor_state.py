@@ -1,0 +1,213 @@
+"""The Supervisor's values: its mode, its abstract state, what it records and its limits (no
+Drake systems; `hrc_drake.cell.supervisor` runs them)."""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hrc_drake.hri.messages import Prompt
+from hrc_drake.motion.plan import Plan
+from hrc_drake.motion.service import PlanRequest
+from hrc_drake.robot_models import UR3_JOINTS
+from hrc_drake.tasks.tokens import UNDO
+
+N_JOINTS = len(UR3_JOINTS)
+# After the fingers close, this long for them to stall on the part before the grasp is checked;
+# and a grasp that looks lost must stay so this long (a jolt of the carry is not a loss).
+GRIP_SETTLE = 0.1  # s
+# A part that slips out of the fingers falls at most about 0.3 m (0.25 s) and rattles to rest.
+PART_FALL_TIME = 1.0  # s
+
+
+class Mode(enum.Enum):
+    """What the Supervisor is doing."""
+
+    DECIDE = "decide"  # at a task boundary
+    ASK = "ask"  # the proposal is shown; waiting for the operator's indication
+    PLAN = "plan"  # waiting for the planner (the arm holds still)
+    BLOCKED = "blocked"  # no path past an obstacle: waiting for it to move or go
+    EXECUTE = "execute"  # following a plan (holding the part while the operator bolts it)
+    SETTLE = "settle"  # plan done; let the parts come to rest before reading the cell
+    RECOVER = "recover"  # a part lost or not seated: it comes to rest, then is picked again
+    DONE = "done"  # a terminal state is reached
+    FAILED = "failed"  # cannot go on (the reason is in `error`)
+
+
+@dataclass(frozen=True)
+class TaskRecord:
+    """One task as it happened."""
+
+    step: int
+    state: tuple[str, ...]
+    proposed: str
+    indicated: str  # the task the operator confirmed or indicated instead
+    observed: str  # the task the cell shows was done (from contact), or "undo"
+    next_state: tuple[str, ...]
+    part: str
+    start_time: float
+    end_time: float
+    idle: float = 0.0  # wall seconds the robot waited for the planner after the indication
+    plan_ready: bool = False  # the plan was made ahead of the indication
+    committed: str | None = None  # the task the robot started on before the indication
+    indicated_at: float | None = None  # when the indication came [s]
+    retargeted: bool = False  # the robot turned to another seat for the same kind of part
+    swapped: bool = False  # the robot turned to another part (putting a carried one back)
+
+
+@dataclass(frozen=True)
+class Detection:
+    """Something the Supervisor found wrong from its measurements, and what came of it.
+
+    `cause`: `stop` (the protective-stop input), `silence` (no indication within the timeout),
+    `tracking` (a joint off its command), `grip` (the fingers do not hold the part), `release`
+    (the fingers do not open), `seat` (a part let go does not sit in its seat), `plan` (no
+    plan), `configuration` (the cell shows what no task explains). `recovery`: `resume`, `ask`,
+    `regrasp`, `replace` (the cell went on by itself), or `operator` (the task is handed
+    over)."""
+
+    cause: str
+    step: int
+    at: float
+    resolved_at: float | None = None
+    recovery: str = ""
+
+    @property
+    def recovered(self) -> bool:
+        """The cell itself recovered and went on."""
+        return self.resolved_at is not None and self.recovery != "operator"
+
+
+@dataclass(frozen=True)
+class SupervisorStatus:
+    """The Supervisor's abstract state (one value, replaced at every update)."""
+
+    mode: Mode = Mode.DECIDE
+    state: tuple[str, ...] = ()
+    step: int = 0
+    prompt: Prompt = field(default_factory=Prompt)
+    request: PlanRequest | None = None
+    requested_wall: float = 0.0  # perf_counter() when the plan was asked for
+    plan_ready: bool = False
+    plan: Plan | None = None
+    plan_start: float = 0.0
+    pending: tuple[str, str, str] | None = None  # (proposed, indicated, part) of the task
+    tokens_before: frozenset[str] = frozenset()
+    settle_until: float = 0.0
+    bolted: bool = False
+    planned_ahead: bool = False
+    q_hold: tuple[float, ...] = ()
+    opening_hold: float = 0.0
+    history: tuple[TaskRecord, ...] = ()
+    error: str | None = None
+    events: tuple[str, ...] = ()
+    tau: float = 0.0  # plan time at `tau_time` (simulated time)
+    tau_time: float = 0.0
+    rate: float = 1.0  # d tau / dt from `tau_time` on
+    speed: float = 1.0  # the speed scale s the robot runs at (1: the plan's own speed)
+    idle: float = 0.0  # wall seconds waited on the planner for the current task
+    grip_lost_at: float | None = None  # when the grasp (or the release) started to look wrong
+    asked_at: float = 0.0  # when the operator was last asked to choose
+    blocked_at: float = 0.0  # when the task's path was found blocked
+    committed: str | None = None  # anticipating: the task the robot started on
+    awaiting: bool = False  # started on `committed`; the indication is not in yet
+    indicated_at: float | None = None
+    change: str | None = None  # the indicated task the robot is stopping to turn to
+    retargeted: bool = False
+    swapped: bool = False
+    returning: bool = False  # carrying the committed part back to its tray (a swap)
+    recovering: str = ""  # "regrasp" or "replace" while the task's part is picked again
+    recoveries: int = 0  # how often the task's part was picked again
+    stopped: bool = False  # the protective-stop input is on
+    detections: tuple[Detection, ...] = ()
+
+    def __deepcopy__(self, memo) -> SupervisorStatus:
+        # Drake copies abstract values at every update and output evaluation; this value is
+        # immutable (its plan's trajectories are never modified), so the copy is itself.
+        return self
+
+    def plan_time(self, now: float) -> float:
+        """The plan time `tau` at simulated time `now` (clamped to the plan)."""
+        tau = self.tau + self.rate * (now - self.tau_time)
+        return float(np.clip(tau, 0.0, self.plan.duration)) if self.plan is not None else tau
+
+    def holding_for_bolts(self, tau: float) -> bool:
+        """Whether the robot holds the placed part still, waiting for the operator's bolts."""
+        plan = self.plan
+        return (
+            plan is not None
+            and plan.task != UNDO
+            and not self.bolted
+            and plan.t_in_place <= tau < plan.t_release
+        )
+
+    def command(self, now: float) -> tuple[np.ndarray, np.ndarray, float]:
+        """(joint positions, joint velocities, gripper opening) commanded at `now`."""
+        if self.mode != Mode.EXECUTE or self.plan is None:
+            q = np.asarray(self.q_hold, dtype=float)
+            return q, np.zeros(len(q)), self.opening_hold
+        tau = self.plan_time(now)
+        q = self.plan.trajectory.value(tau).ravel()
+        v = self.plan.trajectory.EvalDerivative(tau, 1).ravel() * self.rate
+        if tau >= self.plan.duration:
+            v = np.zeros_like(v)
+        return q, v, self.plan.gripper_opening(tau)
+
+    @property
+    def visited(self) -> list[tuple[str, ...]]:
+        """The MDP states visited, from the start."""
+        return [(), *(r.next_state for r in self.history)]
+
+
+# An obstacle counts as moved (worth planning again) past this distance [m].
+OBSTACLE_MOVED = 0.005
+
+
+def obstacle_moved(planned: tuple[float, ...] | None, seen: tuple[float, ...]) -> bool:
+    """Whether the obstacle seen differs from the one planned against (or came or went)."""
+    if not planned or not seen:
+        return bool(planned) != bool(seen)
+    return float(np.linalg.norm(np.subtract(planned[:3], seen[:3]))) > OBSTACLE_MOVED
+
+
+class SupervisorError(RuntimeError):
+    """The supervisor cannot go on; `cause` is the Detection cause it reports."""
+
+    def __init__(self, message: str, cause: str = "configuration"):
+        super().__init__(message)
+        self.cause = cause
+
+
+@dataclass(frozen=True)
+class SupervisorLimits:
+    """Timing and checks of the Supervisor (from the scenario's `run:` and `station:`)."""
+
+    period: float = 0.02
+    settle_time: float = 0.3
+    max_steps: int = 30
+    joint_acceleration: float = 5.0
+    tracking_tolerance: float = 0.05
+    grip_tolerance: float = 0.004
+    grip_force: float = 20.0
+    plan_ahead: bool = True
+    indication_timeout: float = 10.0
+    recover_tries: int = 2
+    path_timeout: float = 10.0
+    anticipate: bool = False  # start on the policy's commitment before the indication
+
+
+__all__ = [
+    "GRIP_SETTLE",
+    "N_JOINTS",
+    "OBSTACLE_MOVED",
+    "PART_FALL_TIME",
+    "Detection",
+    "Mode",
+    "SupervisorError",
+    "SupervisorLimits",
+    "SupervisorStatus",
+    "TaskRecord",
+    "obstacle_moved",
+]
