@@ -62,3 +62,33 @@ def test_ctrl_c_during_a_headless_run_keeps_what_ran(tmp_path):
     finally:
         run.kill()
     assert data["sim_time"] > 0 and data["names"][0] == "1"
+
+
+def test_ctrl_c_ends_a_run_started_with_sigint_ignored(tmp_path):
+    """A shell that starts a job in the background hands it SIGINT ignored (and Python would
+    keep it so): `simulate` takes Ctrl-C back, so a SIGINT still ends the run."""
+    import os
+    import signal
+    import subprocess
+    import time
+
+    from simulate_process import hrc_drake_command
+
+    args = [*hrc_drake_command(), "simulate", "--lean", "--json"]
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    with subprocess.Popen(
+        args,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),
+    ) as run:
+        deadline = time.monotonic() + TIMEOUT
+        line = ""
+        while "cell row1-optimal: sim s" not in line and time.monotonic() < deadline:
+            line = run.stderr.readline()
+        run.send_signal(signal.SIGINT)
+        out, err = run.communicate(timeout=TIMEOUT)
+    assert run.returncode == 130, err[-300:]
+    assert json.loads(out)["interrupted"] is True

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import signal
 import socket
 import sys
+import threading
 from pathlib import Path
 
 from hrc_drake.cell.run import run_scenario, scenario_policy
@@ -132,6 +134,10 @@ def simulate_command(args) -> int:
     Ctrl-C ends it with one line: during the simulation, once the recording and the summary
     (or `--json`) of what ran are written, marked interrupted; before it, with nothing
     written."""
+    # A shell that starts a job in the background hands it SIGINT ignored, and Python then
+    # leaves it ignored: Ctrl-C (or a SIGINT sent on purpose) would not end the run.
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         return _simulate(args)
     except KeyboardInterrupt:
