@@ -21,8 +21,9 @@ import argparse
 import multiprocessing
 import platform
 import sys
-import time
 from pathlib import Path
+
+from cell_pool import pooled_loop, run_pool
 
 from hrc_drake.atomic import atomic_write_text
 
@@ -37,25 +38,15 @@ MODES = ("anticipate", "wait")
 REPORT = Path(__file__).parent / "reports" / "anticipation_cell.md"
 
 
-_PLANNERS: dict = {}
-
-
 def one_run(job: tuple[str, str, str, bool]) -> dict:
-    """One run of a cell in a mode over an interface: its figures. (A pool's worker cannot
-    start a planning worker of its own: it plans in-process, one planner per cell.)"""
-    from hrc_drake.cell.run import build_closed_loop, shared_planner
-    from hrc_drake.cell.scenario import LEAN, cell_design, load_cell_scenario, motion_options
-    from hrc_drake.tasks.spec import load_spec
+    """One run of a cell in a mode over an interface: its figures."""
+    from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 
     cell, interface, mode, lean = job
     name, text = CELLS[cell]
     texts = [t for t in (text, LEAN if lean else "") if t]
     texts.append(f"{{interaction: {{mode: {mode}, interface: {interface}}}}}")
-    scenario = load_cell_scenario(name, texts)
-    if cell not in _PLANNERS:
-        design = cell_design(scenario, load_spec(scenario.assembly_path))
-        _PLANNERS[cell] = shared_planner(motion_options(scenario), design)
-    result = build_closed_loop(scenario, motion_planner=_PLANNERS[cell]).run()
+    result = pooled_loop(load_cell_scenario(name, texts), cell).run()
     delay, prompt = 0.0, 0.0
     for task in result.tasks:  # each prompt comes as the task before ends
         delay += task.indicated_at - prompt
@@ -136,16 +127,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--lean", action="store_true", help="0.5 s holds: a quick look")
     args = parser.parse_args(argv)
     jobs = [(c, i, m, args.lean) for c in CELLS for i in INTERFACES for m in MODES]
-    start = time.perf_counter()
-    runs = []
-    context = multiprocessing.get_context("spawn")
-    with context.Pool(min(args.workers, len(jobs))) as pool:
-        for k, run in enumerate(pool.imap(one_run, jobs), 1):
-            runs.append(run)
-            elapsed = time.perf_counter() - start
-            print(f"\r{k}/{len(jobs)} runs ({elapsed:.0f} s)", end="", file=sys.stderr, flush=True)
-    print(file=sys.stderr)
-    text = report(runs, args, time.perf_counter() - start)
+    runs, wall = run_pool(one_run, jobs, args.workers)
+    text = report(runs, args, wall)
     if args.lean:
         print(text)
     else:

@@ -20,10 +20,10 @@ import argparse
 import multiprocessing
 import platform
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
+from cell_pool import pooled_loop, run_pool
 
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.hri.faults import SIMULATED, FaultKind
@@ -102,25 +102,13 @@ def run_tasks(cell: str, lean: bool) -> int:
     return len(decisions)
 
 
-_PLANNERS: dict = {}
-
-
 def one_run(job: tuple[str, str, int, str, bool]) -> dict:
-    """One faulted run; its fault record and the run's figures. (A pool's worker cannot start
-    a planning worker of its own: it plans in-process, one planner per cell, its plans
-    cached.)"""
-    from hrc_drake.cell.run import build_closed_loop, shared_planner
-    from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
-    from hrc_drake.tasks.spec import load_spec
+    """One faulted run; its fault record and the run's figures."""
+    from hrc_drake.cell.scenario import load_cell_scenario
 
     cell, kind, seed, entry, lean = job
     texts = [*_texts(cell, lean), f"{{faults: [{entry}]}}"]
-    scenario = load_cell_scenario(CELLS[cell], texts)
-    if cell not in _PLANNERS:
-        design = cell_design(scenario, load_spec(scenario.assembly_path))
-        _PLANNERS[cell] = shared_planner(motion_options(scenario), design)
-    loop = build_closed_loop(scenario, motion_planner=_PLANNERS[cell])
-    result = loop.run()
+    result = pooled_loop(load_cell_scenario(CELLS[cell], texts), cell).run()
     (record,) = result.faults
     safety = result.safety
     return {
@@ -195,20 +183,7 @@ def main(argv: list[str] | None = None) -> int:
         for case in CASES:
             for seed in range(args.seeds):
                 jobs.append((cell, case, seed, fault_entry(case, seed, tasks), args.lean))
-    start = time.perf_counter()
-    runs = []
-    context = multiprocessing.get_context("spawn")
-    with context.Pool(min(args.workers, len(jobs))) as pool:
-        for k, run in enumerate(pool.imap(one_run, jobs), 1):
-            runs.append(run)
-            print(
-                f"\r{k}/{len(jobs)} runs ({time.perf_counter() - start:.0f} s)",
-                end="",
-                file=sys.stderr,
-                flush=True,
-            )
-    print(file=sys.stderr)
-    wall = time.perf_counter() - start
+    runs, wall = run_pool(one_run, jobs, args.workers)
     text = report(runs, args, wall)
     if args.lean:
         print(text)  # a quick look: the report keeps the full settings' figures

@@ -1,0 +1,39 @@
+"""Closed-loop cell runs spread over a process pool, shared by the cell benchmarks."""
+
+from __future__ import annotations
+
+import multiprocessing
+import sys
+import time
+from collections.abc import Callable, Sequence
+
+_PLANNERS: dict = {}
+
+
+def pooled_loop(scenario, key: str):
+    """The closed loop of `scenario` in a pool's worker. A pool's worker cannot start a
+    planning worker of its own: it plans in-process, one planner per `key` (a cell), its plans
+    cached across the worker's runs."""
+    from hrc_drake.cell.run import build_closed_loop, shared_planner
+    from hrc_drake.cell.scenario import cell_design, motion_options
+    from hrc_drake.tasks.spec import load_spec
+
+    if key not in _PLANNERS:
+        design = cell_design(scenario, load_spec(scenario.assembly_path))
+        _PLANNERS[key] = shared_planner(motion_options(scenario), design)
+    return build_closed_loop(scenario, motion_planner=_PLANNERS[key])
+
+
+def run_pool(one_run: Callable, jobs: Sequence, workers: int) -> tuple[list, float]:
+    """(`one_run` of every job in order, wall seconds), over `workers` spawned processes, with
+    a progress line on stderr."""
+    start = time.perf_counter()
+    runs = []
+    context = multiprocessing.get_context("spawn")
+    with context.Pool(min(workers, len(jobs))) as pool:
+        for k, run in enumerate(pool.imap(one_run, jobs), 1):
+            runs.append(run)
+            elapsed = time.perf_counter() - start
+            print(f"\r{k}/{len(jobs)} runs ({elapsed:.0f} s)", end="", file=sys.stderr, flush=True)
+    print(file=sys.stderr)
+    return runs, time.perf_counter() - start
