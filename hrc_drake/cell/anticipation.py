@@ -21,7 +21,6 @@ above the predicted seat.
 from __future__ import annotations
 
 import enum
-import time
 from dataclasses import replace
 
 from hrc_drake.cell.slot_monitor import CellConfiguration
@@ -75,8 +74,8 @@ def same_part(spec: AssemblySpec, committed: str, indicated: str) -> bool:
 
 class Anticipation:
     """The Supervisor's anticipation: commit, take the indication while moving, turn. A mixin
-    of `hrc_drake.cell.supervisor.Supervisor` (its `_policy`, `_space`, `_plans`,
-    `_indicated`, `_request`)."""
+    of `hrc_drake.cell.supervisor.Supervisor` (its `_policy`, `_space`, `_indicated`,
+    `_request`, `_ask`)."""
 
     def _commit(self, state: tuple[str, ...], proposal: str) -> str | None:
         """The placement the policy bets on (its `commit`; a policy without one bets on its
@@ -141,14 +140,11 @@ class Anticipation:
         request = PlanRequest.of(
             s.tokens_before, task, last, layout, obstacle=config.obstacle, **keywords
         )
-        self._plans.request(request)
         event = f"{now:.2f}: turns to {indicated} ({turn.value}) at {tau:.2f} s into its plan"
-        return replace(
+        return self._ask(
             s,
-            mode=Mode.PLAN,
+            request,
             plan=None,
-            request=request,
-            requested_wall=time.perf_counter(),
             q_hold=q,
             opening_hold=plan.gripper_opening(tau),
             change=None,

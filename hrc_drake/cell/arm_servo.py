@@ -13,7 +13,17 @@ from __future__ import annotations
 
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import JointActuatorIndex
 from pydrake.systems.framework import BasicVector, LeafSystem
+
+
+def servo_actuators(plant: MultibodyPlant, model) -> list:
+    """The joint actuators of model instance `model`, in the plant's order (also before
+    Finalize, when `GetJointActuatorIndices(model)` is still empty)."""
+    actuators = [
+        plant.get_joint_actuator(JointActuatorIndex(i)) for i in range(plant.num_actuators())
+    ]
+    return [a for a in actuators if a.model_instance() == model]
 
 
 class GravityCompensation(LeafSystem):
@@ -41,4 +51,4 @@ class GravityCompensation(LeafSystem):
         output.SetFromVector(-np.asarray(weight)[self._dofs])
 
 
-__all__ = ["GravityCompensation"]
+__all__ = ["GravityCompensation", "servo_actuators"]

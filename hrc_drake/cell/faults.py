@@ -70,6 +70,23 @@ def _window(fault: FaultConfig, injection: Injection, now: float) -> bool:
     return start <= now < start + fault.duration_seconds
 
 
+def _carriage_state(park, placed, now: float) -> np.ndarray:
+    """The desired state (x, y, z, three zero rates) of the box's or the debris's carriage:
+    at `park` until a fault of `placed` ((injection, seconds it lasts) pairs) strikes; then at
+    its target's x, y (under the table for the box, high above for the debris), and at the
+    target itself OBSTACLE_RISE_DELAY s later, until it has lasted."""
+    where = np.array(park, dtype=float)
+    for injection, lasts in placed:
+        if not injection.target:
+            continue
+        since = now - injection.injected_at
+        if since < lasts:
+            where[:2] = injection.target[:2]
+        if OBSTACLE_RISE_DELAY <= since < lasts:
+            where[2] = injection.target[2]
+    return np.concatenate([where, np.zeros(3)])
+
+
 class FaultInjector(LeafSystem):
     """Carries out `faults` (see the module docstring).
 
@@ -159,27 +176,12 @@ class FaultInjector(LeafSystem):
         output.SetFromVector(torque)
 
     def _calc_obstacle(self, context, output) -> None:
-        now = context.get_time()
-        where = np.array(OBSTACLE_PARK, dtype=float)
-        for fault, injection in self._active(context, FaultKind.NO_PATH):
-            if not injection.target:
-                continue
-            since = now - injection.injected_at
-            if since < fault.duration_seconds:
-                where[:2] = injection.target[:2]  # under the table, below its seat
-            if OBSTACLE_RISE_DELAY <= since < fault.duration_seconds:
-                where[2] = injection.target[2]
-        output.SetFromVector(np.concatenate([where, np.zeros(3)]))
+        boxes = ((i, f.duration_seconds) for f, i in self._active(context, FaultKind.NO_PATH))
+        output.SetFromVector(_carriage_state(OBSTACLE_PARK, boxes, context.get_time()))
 
     def _calc_debris(self, context, output) -> None:
-        where = np.array(DEBRIS_PARK, dtype=float)
-        for fault, injection in self._active(context, FaultKind.NO_SEAT):
-            if fault.obstacle and injection.target:
-                since = context.get_time() - injection.injected_at
-                where[:2] = injection.target[:2]  # high above its pocket
-                if since >= OBSTACLE_RISE_DELAY:
-                    where[2] = injection.target[2]
-        output.SetFromVector(np.concatenate([where, np.zeros(3)]))
+        debris = ((i, np.inf) for f, i in self._active(context, FaultKind.NO_SEAT) if f.obstacle)
+        output.SetFromVector(_carriage_state(DEBRIS_PARK, debris, context.get_time()))
 
     # --- what happened -------------------------------------------------------------------
     def _update(self, context, state) -> None:

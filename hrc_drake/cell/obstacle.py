@@ -16,8 +16,10 @@ import numpy as np
 from pydrake.geometry import CollisionFilterDeclaration, GeometrySet
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import BodyIndex, JointActuatorIndex, PdControllerGains
+from pydrake.multibody.tree import PdControllerGains
 
+from hrc_drake.cell.arm_servo import servo_actuators
+from hrc_drake.cell.contacts import geometry_owners
 from hrc_drake.cell_models import PLATE, POCKET_DEPTH, SEAT_GAP, TABLE, TRAY
 from hrc_drake.hri.faults import FaultKind
 from hrc_drake.hri.messages import Prompt
@@ -45,10 +47,8 @@ def mount_obstacle(plant: MultibodyPlant, name: str):
     """Add the box or the debris on its carriage (before Finalize): servoed, without weight (its
     servo holds it like a hand, or as stuck in the pocket); returns its model instance."""
     model = add_mounted_obstacle(plant, name)
-    for index in range(plant.num_actuators()):
-        actuator = plant.get_joint_actuator(JointActuatorIndex(index))
-        if actuator.model_instance() == model:
-            actuator.set_controller_gains(PdControllerGains(p=_KP, d=_KD))
+    for actuator in servo_actuators(plant, model):
+        actuator.set_controller_gains(PdControllerGains(p=_KP, d=_KD))
     plant.set_gravity_enabled(model, False)
     return model
 
@@ -56,32 +56,17 @@ def mount_obstacle(plant: MultibodyPlant, name: str):
 def filter_obstacle_contacts(plant: MultibodyPlant, scene_graph, name: str) -> None:
     """What the box or debris does not touch (after Finalize): the box, anything but the robot;
     the debris, the plate, tray, table and the robot."""
-    model = plant.GetModelInstanceByName(name)
+    owners = geometry_owners(plant)
     if name == OBSTACLE:
-        keep = {plant.GetModelInstanceByName(n) for n in (UR3, GRIPPER)} | {model}
-        passes = [m for m in _instances(plant) if m not in keep]
+        touches = {UR3, GRIPPER, name}
+        passes = [g for g, owner in owners.items() if owner.model not in touches]
     else:
-        names = (PLATE, TRAY, TABLE, UR3, GRIPPER)
-        passes = [plant.GetModelInstanceByName(n) for n in names]
+        names = {PLATE, TRAY, TABLE, UR3, GRIPPER}
+        passes = [g for g, owner in owners.items() if owner.model in names]
+    mine = [g for g, owner in owners.items() if owner.model == name]
     scene_graph.collision_filter_manager().Apply(
-        CollisionFilterDeclaration().ExcludeBetween(
-            GeometrySet(_geometries(plant, [model])), GeometrySet(_geometries(plant, passes))
-        )
+        CollisionFilterDeclaration().ExcludeBetween(GeometrySet(mine), GeometrySet(passes))
     )
-
-
-def _instances(plant: MultibodyPlant) -> set:
-    return {plant.get_body(BodyIndex(i)).model_instance() for i in range(plant.num_bodies())}
-
-
-def _geometries(plant: MultibodyPlant, models) -> list:
-    models = set(models)
-    return [
-        g
-        for i in range(plant.num_bodies())
-        if (body := plant.get_body(BodyIndex(i))).model_instance() in models
-        for g in plant.GetCollisionGeometriesForBody(body)
-    ]
 
 
 class SeatPositions:

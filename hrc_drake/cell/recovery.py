@@ -1,13 +1,12 @@
 """How the Supervisor finds faults and survives them: a lost or unseated part picked again from
 where it lies, a path blocked by an obstacle waited out, a protective stop and an operator's
 silence noted (each a `Detection`). A mixin of `hrc_drake.cell.supervisor.Supervisor`: it uses
-the Supervisor's ports (`_arm_port`, `_gripper_port`, `_grip_port`), planner (`_plans`),
-limits (`_limits`) and task space (`_space`).
+the Supervisor's ports (`_arm_port`, `_gripper_port`, `_grip_port`), its `_ask` of the
+planner, limits (`_limits`) and task space (`_space`).
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import replace
 
 from hrc_drake.cell.anticipation import Turn, turn_at
@@ -124,19 +123,12 @@ class FaultRecovery:
             start=s.q_hold,
             obstacle=config.obstacle,
         )
-        self._plans.request(request)
         event = f"{now:.2f}: plans to pick {part} from where it lies ({placement.status.value})"
-        return replace(
-            s,
-            mode=Mode.PLAN,
-            request=request,
-            requested_wall=time.perf_counter(),
-            events=(*s.events, event),
-        )
+        return self._ask(s, request, events=(*s.events, event))
 
     def _blocked(self, s: SupervisorStatus, failure: PlanFailure, now: float):
         """No path while an obstacle is in the cell: hold still and wait for it to move."""
-        if any(d.cause == "plan" and d.resolved_at is None for d in s.detections):
+        if s.open_detection("plan"):
             return replace(s, mode=Mode.BLOCKED)  # planned again, still blocked
         event = f"{now:.2f}: step {s.step}: an obstacle blocks the path ({failure.reason}); waits"
         return replace(
@@ -159,15 +151,8 @@ class FaultRecovery:
         if not obstacle_moved(s.request.obstacle, config.obstacle):
             return s
         request = replace(s.request, obstacle=config.obstacle or None)
-        self._plans.request(request)
         event = f"{now:.2f}: the obstacle " + ("moved" if config.obstacle else "is gone")
-        return replace(
-            s,
-            mode=Mode.PLAN,
-            request=request,
-            requested_wall=time.perf_counter(),
-            events=(*s.events, f"{event}: plans again"),
-        )
+        return self._ask(s, request, events=(*s.events, f"{event}: plans again"))
 
     def _watch_obstacle(self, s: SupervisorStatus, config: CellConfiguration, now: float):
         """An obstacle seen that the plan did not know (it came after the plan was made): stop
@@ -201,8 +186,8 @@ class FaultRecovery:
         if now - s.asked_at < timeout:
             return s
         event = f"{now:.2f}: no indication for step {s.step} in {timeout:g} s: asks again"
-        open_ = any(d.cause == "silence" and d.resolved_at is None for d in s.detections)
-        detections = s.detections if open_ else (*s.detections, Detection("silence", s.step, now))
+        found = Detection("silence", s.step, now)
+        detections = s.detections if s.open_detection("silence") else (*s.detections, found)
         return replace(s, asked_at=now, detections=detections, events=(*s.events, event))
 
     @staticmethod

@@ -49,14 +49,14 @@ from pydrake.multibody.plant import (
     CoulombFriction,
     MultibodyPlant,
 )
-from pydrake.multibody.tree import BodyIndex, JointActuatorIndex, PdControllerGains
+from pydrake.multibody.tree import BodyIndex, PdControllerGains
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantValueSource, Multiplexer
 from pydrake.systems.sensors import CameraConfig, RgbdSensor
 
 from hrc_drake.atomic import atomic_write_text
-from hrc_drake.cell.arm_servo import GravityCompensation
+from hrc_drake.cell.arm_servo import GravityCompensation, servo_actuators
 from hrc_drake.cell.contacts import geometry_owners, owner_pairs
 from hrc_drake.cell.faults import FaultInjector, SilentOperator
 from hrc_drake.cell.gripper import add_gripper_ports
@@ -243,25 +243,18 @@ def check_station_scenario(scenario: Scenario, design: CellDesign) -> None:
             raise ValueError(f"station.ur3.{key}: give {len(UR3_JOINTS)} joint positions [rad]")
 
 
-def _actuators(plant: MultibodyPlant, model) -> list:
-    # GetJointActuatorIndices(model) is empty before Finalize.
-    actuators = [
-        plant.get_joint_actuator(JointActuatorIndex(i)) for i in range(plant.num_actuators())
-    ]
-    return [a for a in actuators if a.model_instance() == model]
-
-
 def _set_servo_gains(plant: MultibodyPlant, instances, scenario: Scenario) -> None:
     arm, gripper = scenario.station.ur3, scenario.station.rg2
-    joints = tuple(a.joint().name() for a in _actuators(plant, instances[UR3]))
+    joints = tuple(a.joint().name() for a in servo_actuators(plant, instances[UR3]))
     if joints != UR3_JOINTS:
         raise ValueError(
             f"ur3 actuators are ordered {list(joints)}, expected {list(UR3_JOINTS)}: the "
             "`ur3.position` port is documented in UR3_JOINTS order; fix the URDF transmissions"
         )
-    for actuator, kp, kd in zip(_actuators(plant, instances[UR3]), arm.kp, arm.kd, strict=True):
+    arm_actuators = servo_actuators(plant, instances[UR3])
+    for actuator, kp, kd in zip(arm_actuators, arm.kp, arm.kd, strict=True):
         actuator.set_controller_gains(PdControllerGains(p=kp, d=kd))
-    for actuator in _actuators(plant, instances[GRIPPER]):
+    for actuator in servo_actuators(plant, instances[GRIPPER]):
         actuator.set_controller_gains(PdControllerGains(p=gripper.kp, d=gripper.kd))
     # The arm's servo compensates its links' weight (`hrc_drake.cell.arm_servo`), as a UR
     # controller does; the gripper's fingers are servoed without a weight model. Held parts

@@ -197,7 +197,7 @@ class Supervisor(FaultRecovery, Anticipation, LeafSystem):
         (a part in it stays held)."""
         q = self._arm_port.Eval(context)[:N_JOINTS]
         opening = s.command(now)[2]
-        if not any(d.resolved_at is None for d in s.detections):
+        if not s.open_detection():
             s = replace(s, detections=(*s.detections, Detection(err.cause, s.step, now)))
         s = self._resolve(s, None, now, "operator")
         return replace(
@@ -316,14 +316,14 @@ class Supervisor(FaultRecovery, Anticipation, LeafSystem):
         request = PlanRequest.of(
             s.tokens_before, task, last, config.layout(), obstacle=config.obstacle
         )
-        ready = self._plans.is_cached(request)
+        return self._ask(s, request, plan_ready=self._plans.is_cached(request))
+
+    def _ask(self, s: SupervisorStatus, request: PlanRequest, **changes) -> SupervisorStatus:
+        """Ask the planner for `request`; the arm holds still until it answers (Mode.PLAN).
+        `changes`: other fields of the status to set."""
         self._plans.request(request)
         return replace(
-            s,
-            mode=Mode.PLAN,
-            request=request,
-            requested_wall=time.perf_counter(),
-            plan_ready=ready,
+            s, mode=Mode.PLAN, request=request, requested_wall=time.perf_counter(), **changes
         )
 
     def _indicated(self, s: SupervisorStatus, context, now: float):

@@ -160,6 +160,10 @@ class SupervisorStatus:
         """The MDP states visited, from the start."""
         return [(), *(r.next_state for r in self.history)]
 
+    def open_detection(self, cause: str | None = None) -> bool:
+        """Whether a detection of `cause` (None: of any cause) is not resolved yet."""
+        return any(d.resolved_at is None and cause in (None, d.cause) for d in self.detections)
+
 
 # An obstacle counts as moved (worth planning again) past this distance [m].
 OBSTACLE_MOVED = 0.005
