@@ -18,6 +18,11 @@ Run on demand (not part of pytest); the machine is shared, so real-time factors 
    (moves less than 1 mm relative to the tcp), up, along the pads and across them.
 3. What the carry asks: the largest tcp acceleration along row 1's plans (the
    collaborative-speed plans every Table 2 row uses), from the plans' trajectories.
+4. A part pressed onto a pocket's rim, per hydroelastic modulus: the 4-slot cell's closed loop
+   with the `no-seat` fault on its square flange (the part slid 8.3, 10.9 and 11.2 mm in the
+   fingers, so the robot lowers it onto the rim while it still holds it): whether the run
+   completes, its collisions, the largest finger contact force while the part is held, and
+   how the run ended.
 
 Writes benchmarks/reports/contact.md.
 """
@@ -80,8 +85,9 @@ SETTINGS = (
         "{physics: {time_step: 0.005, contact: {hydroelastic_modulus: 2.0e7, "
         "relaxation_time: 0.1, margin: 0.0}}}",
     ),
-    Setting("5 ms, E 1e7 Pa, τ 1 ms, margin 0.1 mm", "{physics: {time_step: 0.005}}"),
-    Setting("default: 10 ms, E 1e7 Pa, τ 1 ms, margin 0.1 mm"),
+    Setting("5 ms, E 5e6 Pa, τ 1 ms, margin 0.1 mm", "{physics: {time_step: 0.005}}"),
+    Setting("default: 10 ms, E 5e6 Pa, τ 1 ms, margin 0.1 mm"),
+    Setting("10 ms, E 1e7 Pa", "{physics: {contact: {hydroelastic_modulus: 1.0e7}}}"),
     Setting("10 ms, τ 10 ms", "{physics: {contact: {relaxation_time: 0.01}}}"),
     Setting("10 ms, τ 0.1 s", "{physics: {contact: {relaxation_time: 0.1}}}"),
     Setting("10 ms, no margin", "{physics: {contact: {margin: 0.0}}}"),
@@ -344,8 +350,87 @@ def main(argv: list[str] | None = None) -> int:
         print(f"grip {force} N", limits, flush=True)
     carry = carry_accelerations()
     print("carry", carry, flush=True)
-    atomic_write_text(args.out, _report(args, rows, grips, carry, grip))
+    pinch = {modulus: rim_pinch(modulus) for modulus in PINCH_MODULI}
+    print("pinch", pinch, flush=True)
+    atomic_write_text(args.out, _report(args, rows, grips, carry, grip) + _pinch_report(pinch))
     return 0
+
+
+PINCH_MODULI = (1.0e7, 5.0e6)  # Pa: Drake's default, ours
+PINCH_OFFSETS = (0.0083, 0.0109, 0.0112)  # m, seeds 1, 4 and 0 of bench_faults on the 4-slot cell
+PINCH_END = 120.0  # s, simulated: past the end of every run
+
+
+def rim_pinch(modulus: float) -> list[dict]:
+    """The 4-slot closed loop, its square flange (task 2) slid `PINCH_OFFSETS` in the fingers,
+    at hydroelastic `modulus`: per offset, whether the run completed, its collisions, the
+    largest contact force on a finger, and how it ended."""
+    from hrc_drake.cell.run import build_closed_loop
+    from hrc_drake.cell.supervisor import Mode
+
+    runs = []
+    for offset in PINCH_OFFSETS:
+        texts = [
+            "{assembly: four-slot, name: four-slot}",
+            f"{{faults: [{{kind: no-seat, task: 2, offset: {offset}}}]}}",
+            f"{{physics: {{contact: {{hydroelastic_modulus: {modulus:g}}}}}}}",
+        ]
+        loop = build_closed_loop(load_cell_scenario(None, texts))
+        largest, t = 0.0, 0.0
+        while loop.advance_to(t) not in (Mode.DONE, Mode.FAILED) and t < PINCH_END:
+            largest = max(largest, _finger_force(loop))
+            t += loop.station.plant.time_step()
+        result = loop.result()
+        runs.append(
+            {
+                "offset": offset,
+                "done": result.done,
+                "collisions": len(result.collisions),
+                "finger_force": max(largest),
+                "end": result.error or "done",
+            }
+        )
+    return runs
+
+
+def _finger_force(loop) -> float:
+    """The largest contact force on a finger of the gripper now [N]."""
+    plant = loop.station.plant
+    context = plant.GetMyContextFromRoot(loop.root_context)
+    results = plant.get_contact_results_output_port().Eval(context)
+    inspector = plant.get_geometry_query_input_port().Eval(context).inspector()
+    largest = 0.0
+    for i in range(results.num_hydroelastic_contacts()):
+        info = results.hydroelastic_contact_info(i)
+        surface = info.contact_surface()
+        names = [
+            plant.GetBodyFromFrameId(inspector.GetFrameId(g)).name()
+            for g in (surface.id_M(), surface.id_N())
+        ]
+        if any(name.endswith("finger") for name in names):
+            largest = max(largest, float(np.linalg.norm(info.F_Ac_W().translational())))
+    return largest
+
+
+def _pinch_report(pinch: dict[float, list[dict]]) -> str:
+    lines = [
+        "## 4. A part pressed onto a pocket's rim",
+        "",
+        "The 4-slot cell with the `no-seat` fault on its square flange (task 2): the part slid "
+        "in the fingers, so the robot lowers it onto the pocket's rim while it still holds it. "
+        "Default settings but the hydroelastic modulus. *finger force*: the largest contact "
+        "force on a finger in the run.",
+        "",
+        "| modulus [Pa] | offset [mm] | completed | collisions | finger force [N] | end |",
+        "|---|---|---|---|---|---|",
+    ]
+    for modulus, runs in pinch.items():
+        for r in runs:
+            lines.append(
+                f"| {modulus:g} | {r['offset'] * 1000:.1f} | {'yes' if r['done'] else 'no'} | "
+                f"{r['collisions']} | {r['finger_force']:.0f} | {r['end'][:120]} |"
+            )
+    return "\n".join([*lines, ""])
 
 
 def _fmt(x: float | None, unit: str = "") -> str:

@@ -119,10 +119,11 @@ class ContactConfig:
     benchmarks/reports/contact.md (`benchmarks/bench_contact.py`).
 
     Attributes:
-        hydroelastic_modulus: Pa, of compliant geometry (the parts, the arm's links). 1e7 is
-            Drake's default, chosen to approximate rigid contact with sub-millimetre
-            penetrations for household-sized objects ("Default Contact Parameters"; the
-            hydroelastic user guide: values of 1e8 and above are seldom used).
+        hydroelastic_modulus: Pa, of compliant geometry (the parts, the arm's links). Half of
+            Drake's default 1e7 ("Default Contact Parameters": sub-millimetre penetrations for
+            household-sized objects; the hydroelastic user guide: 1e8 and above seldom used):
+            at 1e7 and 10 ms a part pressed by the rigid fingers onto a pocket's rim bursts
+            out of the grasp (docs/station.md, "Contact settings").
         resolution_hint: m, the mesh size of compliant geometry that needs one (cylinders,
             capsules; boxes ignore it).
         margin: m, Drake's hydroelastic margin (its recommended 1e-4): speculative contact
@@ -136,7 +137,7 @@ class ContactConfig:
         static_friction, dynamic_friction: Coulomb friction coefficients.
     """
 
-    hydroelastic_modulus: float = 1.0e7
+    hydroelastic_modulus: float = 5.0e6
     resolution_hint: float = 0.01
     margin: float = 1.0e-4
     relaxation_time: float = 0.001
@@ -353,7 +354,7 @@ class InteractionConfig:
 
     Attributes:
         mode: `anticipate` (the robot may start on its prediction) or `wait` (it waits for the
-            indication). `evaluate --cell` plays `wait` in both modes.
+            indication). `evaluate --cell` plays `--interaction` over it.
         interface: `pointer`, `gesture` or `touch` (the paper's section 5).
         delay: the indication delay; left out, the interface's default (our assumption, see
             `DEFAULT_DELAYS`).
