@@ -13,8 +13,8 @@ seeds of `evaluate`: operator answers and indication delays in their own streams
    priced in. The oracle's gain over `exact` bounds what any decider can gain; targets: mpc kept
    within 1 % of the oracle, and at least 5 % faster than exact on habitual.
 
-These are task-level figures: the cell does not anticipate yet (its robot waits for the
-indication), so the cell-level comparison is still to come.
+These are task-level figures; the cell's own, on the same scenarios run both ways, are in
+`benchmarks/reports/anticipation_cell.md` (with the task level's timeline beside each run).
 
 Usage: ``python benchmarks/bench_interaction.py [--runs 10000] [--seed 0] [--section N]``; with
 ``--section`` only that section is run and printed (the report is written by a full run only).

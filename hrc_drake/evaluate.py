@@ -22,10 +22,11 @@ Time figures (mean, p95, worst) are over the completed runs.
 At cell level (``--cell``) each run is a closed-loop simulation of the physical cell: times are
 the cell's simulated seconds, and the robot's idle time at a boundary is the wall time it waited
 for the planner after the operator's answer (``plan_ready_rate``: the share of boundaries whose
-plan was made ahead, while the operator bolted). The deciders bet at task level only: a cell run
-plays ``wait`` whatever the mode asked (the report says so), its robot waiting for the
-indication, which the simulated operator gives after the interface's delay
-(`DelayedIndications`); `simulate` runs the cell's anticipation. This module does not know
+plan was made ahead, while the operator bolted). A cell run plays the evaluation's interaction:
+its Supervisor asks the decider's bet (`commit`) at each boundary and starts on it, or waits; the
+simulated operator indicates after the interface's delay (`DelayedIndications`), drawn from the
+same seeded stream as the task level's, so a run's delays are the same at both levels. This
+module does not know
 the cell: `Setup.cell` is an object that plays cell runs
 (`CellRuns`; `hrc_drake.cell.evaluate.CellOptions`), so the dependency goes one way, from the
 cell to here. The command line is
@@ -52,7 +53,6 @@ from hrc_drake.tasks.costs import CostTable, operator_seconds
 from hrc_drake.tasks.deciders import DECIDERS, commit_to_proposal, make_decider
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.interaction import (
-    WAIT,
     DelayedIndications,
     Interaction,
     InteractionCosts,
@@ -224,6 +224,9 @@ class CellRuns(Protocol):
     def play(self, prepared: Any, space: StateSpace, decider, operator) -> RunResult:
         """One run; the decider is not reset."""
 
+    def playing(self, mode: str) -> CellRuns:
+        """The same cell playing the interaction `mode` (`anticipate`, `wait`)."""
+
     def describe(self, space: StateSpace) -> dict[str, Any]:
         """The report's keys naming what ran (the scenario, its overrides)."""
 
@@ -272,9 +275,11 @@ def _play(run: int) -> RunResult:
     seed = run_seed(setup.seed, run)
     operator = make_operator_model(setup.operator_model, setup.space, seed=seed, **setup.params)
     if setup.cell is not None:
-        # The cell's robot waits for the indication; its simulated operator gives it late.
-        operator = DelayedIndications(operator, setup.interaction.delay, seed)
-        return setup.cell.play(_WORKER["cell"], setup.space, decider, operator)
+        # The simulated operator indicates after the delays the task level would draw.
+        delays = DelayedIndications(
+            operator, setup.interaction.delay, rng=delay_generator(setup.seed, run)
+        )
+        return setup.cell.play(_WORKER["cell"], setup.space, decider, delays)
     delays = delay_generator(setup.seed, run)
     return simulate_run(setup.space, setup.costs, decider, operator, _WORKER["timeline"], delays)
 
@@ -397,11 +402,9 @@ def evaluate(
             "--keep-model: one operator's assemblies follow each other, each learning from the "
             "last; they run in one process: drop --workers and --ray"
         )
-    asked = setup.interaction.mode
-    if setup.cell is not None and setup.interaction.anticipates:
-        # Cell runs play wait (`hrc_drake.cell.evaluate.evaluation_scenario`): the decider
-        # prices waiting.
-        setup = replace(setup, interaction=replace(setup.interaction, mode=WAIT))
+    if setup.cell is not None:
+        # The cell plays the interaction the deciders price.
+        setup = replace(setup, cell=setup.cell.playing(setup.interaction.mode))
     # Fail fast, in this process, on a bad decider, model, parameter or cost table.
     operator = make_operator_model(setup.operator_model, setup.space, seed=0, **setup.params)
     if setup.decider not in DECIDERS:
@@ -440,8 +443,6 @@ def evaluate(
                     progress(done, runs)
     wall = time.perf_counter() - start
     report = summarise(setup, results)
-    if setup.cell is not None:
-        report["interaction_asked"] = asked
     report["wall_seconds"] = round(wall, 3)
     report["wall_runs_per_second"] = round(runs / wall, 3) if wall > 0 else None
     report["workers"] = workers
@@ -497,9 +498,7 @@ def summarise(setup: Setup, results: list[RunResult]) -> dict[str, Any]:
         errors = sorted({r.error for r in results if r.error and not r.completed})
         report.update(
             {
-                # The cell's robot waits for every indication (`evaluate` plays wait there);
-                # the simulated operator draws the delays, which the cell does not report.
-                "mean_indication_delay": None,
+                # How long the arm stood still for an indication the cell does not measure.
                 "mean_indication_wait": None,
                 "collisions": int(sum(r.collisions for r in results)),
                 **setup.cell.describe(setup.space),

@@ -237,17 +237,10 @@ def cmd_evaluate(args) -> int:
     costs = _cost_table(args, space)
     if cell is not None:
         _check_cell_runs(runs, workers, cell_run_estimate(space, costs, scenario, delay))
-    if cell is None:
-        try:
-            InteractionCosts(space, costs, interaction)  # the table has what the mode needs
-        except CostTableError as err:
-            raise UsageError(str(err)) from None
-    elif interaction.anticipates:
-        print(
-            "note: evaluate --cell plays wait: its robot waits for every indication, which "
-            f"comes after the {interaction.interface}'s delay (simulate runs anticipation)",
-            file=sys.stderr,
-        )
+    try:
+        InteractionCosts(space, costs, interaction)  # the table has what the mode needs
+    except CostTableError as err:
+        raise UsageError(str(err)) from None
     setup = Setup(
         space, costs, args.decider, args.operator_model, params, args.seed,
         interaction=interaction, keep_model=args.keep_model, cell=cell,
@@ -336,9 +329,7 @@ def add_evaluate_parser(add) -> None:
     p.add_argument(
         "--param", action="append", default=None, help="operator model parameter KEY=VALUE"
     )
-    add_interaction_flags(
-        p, "; with --cell the cell plays wait in both modes (simulate runs anticipation)"
-    )
+    add_interaction_flags(p, "; with --cell, over the scenario's `interaction.mode`")
     p.add_argument(
         "--keep-model",
         action="store_true",

@@ -1,7 +1,10 @@
 """The robot moves on its prediction: it starts on the task it commits to while the operator's
 indication is on its way, and turns when the indication names another task."""
 
+import dataclasses
+
 import numpy as np
+import pytest
 
 from hrc_drake.cell.run import build_closed_loop
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
@@ -57,9 +60,12 @@ def test_in_wait_mode_the_robot_holds_still_until_the_indication():
 
 def test_a_wrong_seat_is_retargeted_with_the_part_in_the_gripper():
     # Row 8: the robot starts on F1; the operator indicates F3 (the same kind of part, another
-    # seat) while the flange is being lifted. The robot carries it on to F3 without letting go.
+    # seat) while the flange is being lifted. The robot carries it on to F3 without letting go,
+    # and without slowing down: it turns at the lift's end, where the plan's own motions meet.
     loop = _loop("row8-forces-4-then-8")
+    plant, station = loop.station.plant, loop.station
     held = []  # the flange's status from the indication to the place
+    moving = []  # (the speed scale, the arm's fastest joint speed) over the same stretch
     t = 0.0
     while loop.advance_to(t) not in (Mode.DONE, Mode.FAILED) and t < 120:
         status = loop.status
@@ -67,7 +73,10 @@ def test_a_wrong_seat_is_retargeted_with_the_part_in_the_gripper():
             plan = status.plan
             if plan is None or status.plan_time(t) < plan.t_in_place:
                 held.append(loop.cell.configuration(loop.root_context).status("oval_flange_1"))
-        t += 0.05
+                context = plant.GetMyContextFromRoot(loop.root_context)
+                v = plant.GetVelocities(context, station.instances[UR3])
+                moving.append((status.speed, float(np.abs(v).max())))
+        t += 0.02
     result = loop.result()
     assert result.done and [t.observed for t in result.tasks] == ["F3", "S12", "F01"]
     first = result.tasks[0]
@@ -77,9 +86,12 @@ def test_a_wrong_seat_is_retargeted_with_the_part_in_the_gripper():
         True,
         False,
     )
-    assert any("turns to F3 (retarget)" in e for e in result.events)
-    # From the indication to the place the flange stays in the gripper.
+    assert any("re-targets to F3 at the lift's end" in e for e in result.events)
+    # From the indication to the place the flange stays in the gripper, the robot never slows
+    # down, and the arm is still only for a moment where the lift ends and the carry starts.
     assert held and set(held) == {PartStatus.HELD}
+    assert min(scale for scale, _ in moving) == 1.0
+    assert _longest_run(speed < 0.05 for _, speed in moving) * 0.02 <= 0.1
     assert not result.collisions
 
 
@@ -103,3 +115,51 @@ def test_a_wrong_part_is_put_back_in_the_tray_and_the_indicated_one_fetched():
     assert any("turns to S12 (return)" in e for e in result.events)
     assert seen_back  # the oval flange was read home in the tray before the square one went
     assert not result.collisions
+
+
+def test_task_level_and_cell_timelines_agree_on_a_scripted_run():
+    # Row 8 at full holds: the robot bets on F1, the operator indicates F3 (a re-target), then
+    # follows. The task level plays the same run from a cost table of the edges and the bet the
+    # run took, planned by the motion layer, with the same delay draws.
+    from hrc_drake.cell.costs import bet_seconds, compute_cost_table, timing_planner
+    from hrc_drake.cell.evaluate import task_level_run
+    from hrc_drake.cell.run import run_scenario
+    from hrc_drake.cell.scenario import motion_options
+    from hrc_drake.tasks.costs import uniform_bets
+    from hrc_drake.tasks.graph import generate_states
+    from hrc_drake.tasks.spec import load_spec
+
+    scenario = load_cell_scenario("row8-forces-4-then-8", ["{body: {enabled: false}}"])
+    space = generate_states(load_spec(scenario.assembly_path))
+    cell = run_scenario(scenario)
+    assert cell.done and [t.retargeted for t in cell.tasks] == [True, False, False]
+    planner = timing_planner(space, motion_options(scenario))
+    edges = {(t.state, task) for t in cell.tasks for task in (t.observed, t.committed)}
+    table = compute_cost_table(space, planner, edges=sorted(edges))
+    bets = uniform_bets(space, retarget=0.0, swap=0.0)  # only the run's own bet is played
+    first = cell.tasks[0]
+    bets[(), first.committed, first.observed] = bet_seconds(
+        planner, space, (), first.committed, first.observed
+    )
+    task = task_level_run(scenario, space, dataclasses.replace(table, bets=bets))
+    assert task.completed and (task.commits, task.retargets, task.swaps) == (3, 1, 0)
+    # The same delays (the cell's indication comes a few 20 ms periods later: the prompt, the
+    # operator and the Supervisor each act on their next update), and the cell's time within 5 %
+    # of the task level's (the cell adds the parts' settling and those periods).
+    delays = [t.indicated_at - start for t, start in zip(cell.tasks, _prompts(cell), strict=True)]
+    assert 0.0 < sum(delays) - task.indication_delay < 0.1 * len(delays)
+    assert cell.sim_time == pytest.approx(task.seconds, rel=0.05)
+
+
+def _longest_run(flags) -> int:
+    """The length of the longest run of true values."""
+    longest = current = 0
+    for flag in flags:
+        current = current + 1 if flag else 0
+        longest = max(longest, current)
+    return longest
+
+
+def _prompts(result) -> list[float]:
+    """When each task's prompt appeared: at the start, then as the task before ended."""
+    return [0.0, *(t.end_time for t in result.tasks[:-1])]

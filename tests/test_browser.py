@@ -25,6 +25,7 @@ import pytest
 from simulate_process import SimulateProcess, free_port
 
 from hrc_drake.hri.controls import is_safe_control_name
+from hrc_drake.hri.live import ON_ITS_WAY
 from hrc_drake.hri.operator import ScriptedOperator
 from hrc_drake.tasks.decide import run_decisions
 from hrc_drake.tasks.graph import generate_states
@@ -205,7 +206,10 @@ def _drive_live_run(chromium, tmp_path, frames, scenario, clicks, script, screen
             run.wait_for_line(
                 f"^step {decision.step}: the robot proposes {proposal}\\b", STEP_TIMEOUT
             )
-            labels = page.wait_for_panel(first=f"{proposal} - robot proposal")
+            # The robot starts on its proposal (a placement) while the buttons are up, and
+            # the proposal's button says so.
+            first = f"{proposal} - robot proposal" + ("" if proposal == UNDO else ON_ITS_WAY)
+            labels = page.wait_for_panel(first=first)
             _check_panel(space, state, proposal, labels)
             assert page.buttons_out_of_view() == [], f"step {decision.step}: {labels}"
             mark = ["operator_choices", "undo" if proposal == UNDO else "proposal", "ghost"]
@@ -238,7 +242,7 @@ def _check_panel(space, state, proposal, labels) -> None:
     Meshcat."""
     assert all(is_safe_control_name(label) for label in labels), labels
     feasible = [t for t, _ in space.tasks(space.index(state))]
-    assert labels[0] == f"{proposal} - robot proposal"
+    assert labels[0].startswith(f"{proposal} - robot proposal")
     for task in feasible:
         if task == proposal:
             continue
@@ -265,6 +269,9 @@ def test_a_person_overrides_makes_a_mistake_and_undoes_it(chromium, tmp_path, fl
     )
     assert data["names"] == ["1", "4", "8", "12", "8", "11"]
     assert [s["operator"] for s in data["steps"]][2:4] == ["F02", UNDO]
+    # The click "F3 instead" came while the robot was on its way with F1: it re-targeted.
+    first = data["steps"][0]
+    assert first["committed"] == "F1" and first["retargeted"] and first["indicated_at"] > 0
 
 
 def test_a_recording_plays_from_file_in_the_browser(chromium, tmp_path, flange_frames, capsys):

@@ -95,8 +95,11 @@ def test_the_next_plan_is_ready_when_the_operator_answers():
     # an empty plan cache.
     fresh = load_cell_scenario("row4-forces-4", [LEAN, "{motion: {hold_time: 0.55}}"])
     ahead = run_scenario(fresh)
-    # Step 1 the operator overrides F1 with F3: that plan was not foreseen; later ones were.
-    assert ahead.done and list(ahead.plan_ready) == [False, True, True]
+    # Step 1 the operator overrides F1 with F3 while the robot is on its way with F1: the
+    # re-target to F3 from the lift's end was asked with the commitment; later ones while the
+    # operator bolted.
+    assert ahead.done and list(ahead.plan_ready) == [True, True, True]
+    assert ahead.tasks[0].committed == "F1" and ahead.tasks[0].retargeted
     # Another fresh worker, without planning ahead: no plan is ready at any boundary.
     cold = load_cell_scenario(
         "row4-forces-4", [LEAN, "{run: {plan_ahead: false}, motion: {hold_time: 0.6}}"]

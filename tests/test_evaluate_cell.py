@@ -39,15 +39,15 @@ def _keys(report, *names):
 DECISIONS = ("runs", "completed", "completion_rate", "mean_tasks", "mean_undos", "mean_deviations")
 
 
+INTERACTION = ("interaction", "commit_rate", "mean_retargets", "mean_swaps")
+
+
 @pytest.mark.slow
 def test_cell_runs_play_the_task_level_runs_and_are_independent(flange_space, toy_costs):
-    # The cell does not anticipate yet: its robot waits for the indication, as at task level in
-    # `wait` mode (asked to anticipate, `evaluate` plays wait in the cell and says so).
+    # `wait`: the robot waits for each indication, at task level and in the cell.
     wait = make_interaction(WAIT)
     task = Setup(flange_space, toy_costs, "mpc", "mistake-prone", {"p": "0.5"}, SEED, wait)
-    cell = dataclasses.replace(
-        task, interaction=make_interaction(), cell=CellOptions(overrides=(LEAN, NO_BODY))
-    )
+    cell = dataclasses.replace(task, cell=CellOptions(overrides=(LEAN, NO_BODY)))
     expected = evaluate(task, 2)
     assert expected["mean_deviations"] == 0.5  # the seed does exercise a mistake
     report = evaluate(cell, 2)
@@ -55,8 +55,10 @@ def test_cell_runs_play_the_task_level_runs_and_are_independent(flange_space, to
     # are those of the task level, run for run.
     assert _keys(report, *DECISIONS) == _keys(expected, *DECISIONS)
     assert report["level"] == "cell" and report["collisions"] == 0 and report["errors"] == []
-    assert report["interaction"] == WAIT and report["interaction_asked"] == ANTICIPATE
-    assert report["commit_rate"] == 0.0
+    assert _keys(report, *INTERACTION) == _keys(expected, *INTERACTION)
+    assert report["interaction"] == WAIT and report["commit_rate"] == 0.0
+    # The simulated operator waited the delays the task level drew for the same runs.
+    assert report["mean_indication_delay"] == expected["mean_indication_delay"] > 3.0
     # Simulated seconds of the cell: three lean tasks take well over 15 s, five over 25 s, and
     # before each the robot waits for the indication (the pointer's delay, about 2 s).
     assert 20.0 < min(report["times"]) < 35.0 < max(report["times"]) < 75.0
@@ -67,6 +69,26 @@ def test_cell_runs_play_the_task_level_runs_and_are_independent(flange_space, to
     alone = summarise(cell, [_play(1)])
     assert alone["times"] == report["times"][1:]
     assert alone["mean_tasks"] == 5.0 and alone["mean_undos"] == 1.0
+
+
+@pytest.mark.slow
+def test_cell_runs_anticipate_as_the_task_level_does(flange_space, toy_costs):
+    # `anticipate`: at each boundary the decider bets (or waits) in the cell as at task level,
+    # and the cell re-targets or swaps where the task level's timeline does.
+    bets = make_interaction(ANTICIPATE)
+    task = Setup(flange_space, toy_costs, "mpc", "mistake-prone", {"p": "0.5"}, SEED, bets)
+    cell = dataclasses.replace(task, cell=CellOptions(overrides=(LEAN, NO_BODY)))
+    expected = evaluate(task, 2)
+    report = evaluate(cell, 2)
+    assert _keys(report, *DECISIONS) == _keys(expected, *DECISIONS)
+    assert _keys(report, *INTERACTION) == _keys(expected, *INTERACTION)
+    assert report["interaction"] == ANTICIPATE and report["commit_rate"] > 0.5
+    assert report["collisions"] == 0 and report["errors"] == []
+    assert report["mean_indication_delay"] == expected["mean_indication_delay"]
+    # The robot moves while the operator indicates: the runs are shorter than waiting's.
+    waited = evaluate(dataclasses.replace(cell, interaction=make_interaction(WAIT)), 2)
+    for anticipating, waiting in zip(report["times"], waited["times"], strict=True):
+        assert anticipating < waiting - 1.0
 
 
 def test_decider_policy_proposes_predicts_and_learns(flange_space, toy_costs):

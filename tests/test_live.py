@@ -10,7 +10,7 @@ from pydrake.geometry import Meshcat
 from pydrake.math import RigidTransform
 
 from hrc_drake.hri.controls import control_name, is_safe_control_name
-from hrc_drake.hri.live import LiveOperator, describe_task, panel_buttons
+from hrc_drake.hri.live import ON_ITS_WAY, LiveOperator, describe_task, panel_buttons
 from hrc_drake.resources import models_dir
 from hrc_drake.tasks.graph import StateKind, generate_states
 from hrc_drake.tasks.spec import load_spec
@@ -106,31 +106,52 @@ def test_an_undo_proposal_shows_its_own_marker_and_the_buttons_go_after_the_clic
 
 
 @pytest.mark.slow
-def test_a_live_run_follows_the_clicks_to_a_terminal_state(tmp_path):
-    """Row 4 clicked by hand: F3 instead of the proposed F1 at step 1, then the robot's
-    proposals; the run ends on the minimum-effort column, and the recording shows the
-    choices."""
+def test_a_live_run_follows_the_clicks_to_a_terminal_state(tmp_path, monkeypatch):
+    """Row 4 clicked by hand: F3 instead of the proposed F1 at step 1, a second after the
+    buttons came up, while the robot is already on its way with F1 (it re-targets); then the
+    robot's proposals at once. The run ends on the minimum-effort column, and the recording
+    shows the choices."""
     from hrc_drake.cell.run import run_scenario
     from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 
     row = load_cell_scenario("row4-forces-4", LEAN)
     clicks = {1: "F3"}
     prompts = []
+    later = []  # (simulated time, Meshcat, message) of a click still to come
 
     def click(prompt):
         prompts.append(prompt)
         name = prompt.button_for(clicks.get(prompt.step, prompt.proposal))
         message = umsgpack.packb({"type": "button", "name": name})
-        prompt.meshcat._InjectWebsocketMessage(message)
+        # The live run goes on while the buttons are up: the first click comes a second
+        # later (Meshcat takes injected messages on the simulation's thread only, so it is
+        # pressed at the operator's first look after that; a browser's click comes any time).
+        wait = 1.0 if prompt.step == 1 else 0.0
+        later.append((prompt.sim_time + wait, prompt.meshcat, message))
+
+    def poll(operator, prompt):
+        for due, meshcat, message in list(later):
+            if operator.clock() >= due:
+                later.remove((due, meshcat, message))
+                meshcat._InjectWebsocketMessage(message)
+        return poll_now(operator, prompt)
+
+    poll_now = LiveOperator.poll
+    monkeypatch.setattr(LiveOperator, "poll", poll)
 
     result = run_scenario(row, live=True, on_prompt=click, record=tmp_path / "live.html")
     assert result.error is None and result.done and not result.interrupted
     assert result.names == list(row.minimum_effort)
     assert [t.indicated for t in result.tasks] == ["F3", "S12", "F01"]
     assert [t.observed for t in result.tasks] == ["F3", "S12", "F01"]
-    # The panel offered the proposal first, the other feasible tasks, and the spec's mistake.
+    # The robot started on F1 with the buttons up, and the click re-targeted it on its way.
+    first_task = result.tasks[0]
+    assert first_task.committed == "F1" and first_task.retargeted
+    assert first_task.indicated_at > 0.5
+    # The panel offered the proposal first, saying the robot is on its way with it, the other
+    # feasible tasks, and the spec's mistake.
     first = prompts[0]
-    assert first.proposal == "F1" and next(iter(first.buttons)) == "F1 - robot proposal"
+    assert next(iter(first.buttons)) == "F1 - robot proposal" + ON_ITS_WAY
     assert {"F1", "F2", "F3", "S12", "S23"} <= set(first.buttons.values())
     assert prompts[2].mistake_button == "mistake: F01 lands in F02"
     # Choices are drawn into the recording (the panel is not part of it).

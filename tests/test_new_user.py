@@ -394,6 +394,9 @@ class InstantCell:
     def describe(self, space):
         return {"scenario": f"instant {space.spec.name}"}
 
+    def playing(self, mode):
+        return self
+
 
 def test_cell_runs_over_processes_report_every_run(flange_space, toy_costs):
     """The task-level evaluation plays cell runs through `Setup.cell` alone (before, it imported

@@ -4,18 +4,21 @@ the operator indicates, and how (`turn_at`; the `Anticipation` mixin of
 
 In ``anticipate`` mode (`hrc_drake.tasks.interaction`) the Supervisor starts, at a boundary, on
 the placement its policy commits to, while the operator's indication is still on its way. When
-the indication names another task, the robot decelerates along its path and, once still, turns:
+the indication names another task:
 
-- before the fingers close on the part, it plans the indicated task from where the arm stands
-  (the part it went for stays in the tray);
-- while the fingers close and the part is lifted, it goes on: it turns once the part is clear
-  (the lift's end);
-- carrying, it plans from where the arm stands with the part in the gripper: to the indicated
-  seat when that task places the same kind of part (a *re-target*), else back to the part's tray
-  home (a *swap*), after which it does the indicated task from home.
+- for the same kind of part on another seat (a *re-target*), the robot does not slow down: it
+  goes on along its plan, picking the part if it has not yet, to the plan's next rest point —
+  the lift's end, or once past it the pre-place pose — and there starts on a plan that carries
+  the part on to the indicated seat. That plan is asked for the moment the indication comes,
+  from the rest point's posture, and made while the arm moves there (`turn_point`);
+- for another part (a *swap*), the robot decelerates along its path and, once still, turns:
+  before the fingers close on the part it plans the indicated task from where the arm stands
+  (the part it went for stays in the tray); while the fingers close and the part is lifted it
+  goes on to the lift's end; carrying, it plans from where it stands back to the part's tray
+  home, after which it does the indicated task from home.
 
 A robot that reaches the pre-place pose before the indication waits there, holding the part
-above the predicted seat.
+above the predicted seat; an indication that comes then turns from there.
 """
 
 from __future__ import annotations
@@ -36,9 +39,15 @@ class Turn(enum.Enum):
 
     REPLAN = "replan"  # nothing in the gripper yet: plan the indicated task from here
     LATER = "later"  # the fingers are closing or lifting the part: turn at the lift's end
-    RETARGET = "retarget"  # carrying: on to the indicated seat with the same part
+    RETARGET = "retarget"  # the same part: on to the indicated seat from the next rest point
     RETURN = "return"  # carrying: back to the tray home, then the indicated task
-    TOO_LATE = "too-late"  # the part is placed: nothing to turn
+    TOO_LATE = "too-late"  # the part is going down onto its seat: nothing to turn
+
+
+TAU_EPS = 1e-9  # s of plan time: a robot held at a plan time is at it, not past it
+# Re-targets asked ahead at a commitment (each a held plan, about 0.3 s of planning here:
+# benchmarks/reports/retarget.md).
+RETARGETS_AHEAD = 2
 
 
 def lift_end(plan: Plan) -> float:
@@ -55,14 +64,26 @@ def wait_point(plan: Plan) -> float:
 
 
 def turn_at(plan: Plan, tau: float, spec: AssemblySpec, indicated: str) -> Turn:
-    """How the robot at plan time `tau` turns from `plan` to the `indicated` task."""
+    """How the robot at plan time `tau` turns from `plan` to the `indicated` task (another
+    one: a plan turned to its own task, after an obstacle appeared, is a `REPLAN`, `LATER`
+    or `RETURN` by where the robot is)."""
+    if tau > wait_point(plan) + TAU_EPS:
+        return Turn.TOO_LATE
+    if indicated != plan.task and same_part(spec, plan.task, indicated):
+        return Turn.RETARGET
     if tau < plan.segment(Stage.GRASP).start:
         return Turn.REPLAN
     if tau < lift_end(plan):
         return Turn.LATER
-    if tau >= wait_point(plan):
-        return Turn.TOO_LATE
-    return Turn.RETARGET if same_part(spec, plan.task, indicated) else Turn.RETURN
+    return Turn.RETURN
+
+
+def turn_point(plan: Plan, tau: float) -> float:
+    """The plan time at which a robot at `tau` re-targets: the plan's next rest point, where
+    its motions meet and the arm is still — the lift's end (the part clear of the tray), or
+    once past it the pre-place pose."""
+    end = lift_end(plan)
+    return end if tau <= end + TAU_EPS else wait_point(plan)
 
 
 def same_part(spec: AssemblySpec, committed: str, indicated: str) -> bool:
@@ -107,10 +128,11 @@ class Anticipation:
 
     def _stopping_to_turn(self, s: SupervisorStatus, now: float) -> bool:
         """Whether the robot decelerates to turn to another task (not while its fingers
-        close on the part or lift it)."""
+        close on the part or lift it, nor on its way to a re-target's rest point)."""
         if s.change is None or s.mode != Mode.EXECUTE or s.plan is None:
             return False
-        return turn_at(s.plan, s.plan_time(now), self._space.spec, s.change) != Turn.LATER
+        turn = turn_at(s.plan, s.plan_time(now), self._space.spec, s.change)
+        return turn not in (Turn.LATER, Turn.RETARGET)
 
     def _turn(self, s: SupervisorStatus, config: CellConfiguration, now: float):
         """Turn to the indicated task `s.change`: before the robot moves, ask for its plan
@@ -119,17 +141,19 @@ class Anticipation:
         indicated, last = s.change, (s.state[-1] if s.state else None)
         if s.mode in (Mode.PLAN, Mode.BLOCKED):
             return self._request(replace(s, change=None), indicated, config, now)
-        if s.mode != Mode.EXECUTE or s.speed > 0.0:
+        if s.mode != Mode.EXECUTE:
             return None
         plan, tau = s.plan, s.plan_time(now)
         turn = turn_at(plan, tau, self._space.spec, indicated)
-        if turn == Turn.LATER:
-            return None
         if turn == Turn.TOO_LATE:
             raise SupervisorError(
                 f"step {s.step}: the operator indicated {indicated} after {plan.instance} was "
                 "placed; the task is handed over"
             )
+        if turn == Turn.RETARGET:
+            return self._retarget_on_the_way(s, config, now)
+        if turn == Turn.LATER or s.speed > 0.0:
+            return None
         q = tuple(float(x) for x in plan.trajectory.value(tau).ravel())
         if turn == Turn.REPLAN:
             layout, keywords = config.layout(), {"start": q}
@@ -152,5 +176,90 @@ class Anticipation:
             events=(*s.events, event),
         )
 
+    def _retarget_request(
+        self, s: SupervisorStatus, turn: float, task: str, config: CellConfiguration
+    ) -> PlanRequest:
+        """The plan of a re-target to `task` from plan time `turn` of the committed plan, with
+        its part in the gripper (the cell as it is but that part)."""
+        plan = s.plan
+        q = tuple(float(x) for x in plan.trajectory.value(turn).ravel())
+        layout = {i: t for i, t in config.layout().items() if i != plan.instance}
+        return PlanRequest.of(
+            s.tokens_before,
+            task,
+            s.state[-1] if s.state else None,
+            layout,
+            obstacle=config.obstacle,
+            instance=plan.instance,
+            start=q,
+            held=True,
+        )
 
-__all__ = ["Anticipation", "Turn", "lift_end", "same_part", "turn_at", "wait_point"]
+    def _plan_retargets(self, s: SupervisorStatus, config: CellConfiguration):
+        """Starting on a commitment: ask ahead for the re-targets from the lift's end to the
+        other seats the same part may be indicated to (`RETARGETS_AHEAD`, the policy's
+        predictions first; none when the run does not plan ahead), so that a re-target
+        indicated before the lift's end finds its plan ready there. One indicated later, while
+        carrying, is planned during the carry. Returns the status noting what was asked."""
+        if not self._limits.plan_ahead:
+            return s
+        committed, space = s.plan.task, self._space
+        feasible = [t for t, _ in space.tasks(space.index(s.state))]
+        predict = getattr(self._policy, "predicted_tasks", None)
+        likely = list(predict(s.state)) if predict is not None else []
+        others = [
+            t
+            for t in dict.fromkeys([*likely, *feasible])
+            if t in feasible and t != committed and same_part(space.spec, committed, t)
+        ]
+        asked = set()
+        for task in others[:RETARGETS_AHEAD]:
+            try:
+                request = self._retarget_request(s, lift_end(s.plan), task, config)
+                self._plans.request(request)
+            except ValueError:
+                continue  # a layout this task cannot be planned in: asked at the indication
+            asked.add(request.key())
+        return replace(s, retargets_ahead=frozenset(asked))
+
+    def _retarget_on_the_way(self, s: SupervisorStatus, config: CellConfiguration, now: float):
+        """The same part to another seat: ask now for the plan from the next rest point of the
+        committed plan (`turn_point`) on to the indicated seat, with the part in the gripper,
+        and go on there; at the rest point, start on it (the arm still, as the plan's own
+        motions leave it there)."""
+        plan, tau = s.plan, s.plan_time(now)
+        if s.turn_tau is None:
+            turn = turn_point(plan, tau)
+            request = self._retarget_request(s, turn, s.change, config)
+            self._plans.request(request)  # made while the arm goes on (or asked ahead)
+            where = "the lift's end" if turn < wait_point(plan) else "the pre-place pose"
+            event = (
+                f"{now:.2f}: re-targets to {s.change} at {where} ({turn:.2f} s into its plan), "
+                "without slowing down"
+            )
+            return replace(s, turn_tau=turn, turn_request=request, events=(*s.events, event))
+        if tau < s.turn_tau - TAU_EPS:
+            return s
+        q = tuple(float(x) for x in plan.trajectory.value(s.turn_tau).ravel())
+        return self._ask(
+            s,
+            s.turn_request,
+            plan_ready=s.turn_request.key() in s.retargets_ahead,
+            plan=None,
+            q_hold=q,
+            opening_hold=plan.gripper_opening(s.turn_tau),
+            change=None,
+            turn_tau=None,
+            turn_request=None,
+        )
+
+
+__all__ = [
+    "Anticipation",
+    "Turn",
+    "lift_end",
+    "same_part",
+    "turn_at",
+    "turn_point",
+    "wait_point",
+]

@@ -9,10 +9,12 @@ independent and the same seeds give the same report however the runs are spread 
 or machines (Drake diagrams do not pickle, so each worker builds its own anyway).
 
 What a cell run reports, beside the task-level figures: its time is the cell's simulated time
-(motion, bolting holds and the parts settling); a deviation adds nothing to it (the cell's robot
-waits for the operator's answer before it moves); the robot's idle time at each boundary is the
-wall time it waited for the planner after the answer (0 when the task was planned ahead while the
-operator bolted), and whether that plan was ready is recorded per boundary.
+(motion, bolting holds, the parts settling, and what the interaction adds: the indication's
+delay where the robot waits for it, a re-target or a swap where its bet was wrong); the
+boundaries where the robot started on the decider's bet, re-targeted and swapped, as the
+Supervisor recorded them; the robot's idle time at each boundary is the wall time it waited for
+the planner after the answer (0 when the task was planned ahead while the operator bolted), and
+whether that plan was ready is recorded per boundary.
 
 `CellOptions` is what `hrc_drake.evaluate.Setup.cell` holds: the task-level evaluation calls its
 methods and never imports this module; this module imports it (one way).
@@ -25,10 +27,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from hrc_drake.evaluate import RunResult, predicted_tasks
+from hrc_drake.evaluate import RunResult, predicted_tasks, simulate_run
 from hrc_drake.paths import UsageError
 from hrc_drake.tasks.graph import StateKind, StateSpace
-from hrc_drake.tasks.interaction import WAIT
+from hrc_drake.tasks.interaction import MODES, InteractionCosts, operator_delays
 from hrc_drake.tasks.policy import PolicyFileError
 from hrc_drake.tasks.spec import AssemblySpec
 from hrc_drake.tasks.tokens import UNDO
@@ -74,11 +76,17 @@ class DeciderPolicy:
 
 @dataclass(frozen=True)
 class CellOptions:
-    """Which cell runs an evaluation: a base scenario and YAML overrides (picklable); the
-    `hrc_drake.evaluate.CellRuns` of `Setup.cell`."""
+    """Which cell runs an evaluation: a base scenario, YAML overrides and the interaction mode
+    the cell plays (None: the scenario's) (picklable); the `hrc_drake.evaluate.CellRuns` of
+    `Setup.cell`."""
 
     scenario: str = DEFAULT_BASE_SCENARIO
     overrides: tuple[str, ...] = ()
+    mode: str | None = None
+
+    def __post_init__(self):
+        if self.mode is not None and self.mode not in MODES:
+            raise UsageError(f"interaction mode {self.mode!r}: use one of {', '.join(MODES)}")
 
     def prepare(self, space: StateSpace):
         """The scenario every run plays (`evaluation_scenario`)."""
@@ -91,6 +99,10 @@ class CellOptions:
     def play(self, scenario, space: StateSpace, decider, operator) -> RunResult:
         """One run through the cell (`play_cell_run`)."""
         return play_cell_run(scenario, space, decider, operator)
+
+    def playing(self, mode: str) -> CellOptions:
+        """These options with the cell playing the interaction `mode`."""
+        return dataclasses.replace(self, mode=mode)
 
     def describe(self, space: StateSpace) -> dict[str, Any]:
         """What ran: the base scenario's settings with the evaluated assembly (when it is not
@@ -109,16 +121,46 @@ class CellOptions:
 
 
 def evaluation_scenario(options: CellOptions, spec: AssemblySpec):
-    """The base scenario with the overrides, for the assembly `spec` (its source file)."""
+    """The base scenario with the overrides, for the assembly `spec` (its source file), playing
+    the options' interaction mode."""
     from hrc_drake.cell.scenario import load_cell_scenario
 
     scenario = load_cell_scenario(options.scenario, list(options.overrides))
     if spec.source and Path(spec.source).is_file():
         scenario = dataclasses.replace(scenario, assembly=str(spec.source))
-    # `evaluate` prices waiting in the cell (its deciders bet at task level only): the robot
-    # waits for every indication.
-    waiting = dataclasses.replace(scenario.interaction, mode=WAIT)
-    return dataclasses.replace(scenario, interaction=waiting)
+    if options.mode is None:
+        return scenario
+    interaction = dataclasses.replace(scenario.interaction, mode=options.mode)
+    return dataclasses.replace(scenario, interaction=interaction)
+
+
+class _PolicyDecider:
+    """A scenario's policy as a task-level decider: it proposes, learns nothing and bets on
+    its proposal (as the Supervisor does with a policy that has no `commit`)."""
+
+    def __init__(self, policy):
+        self.policy = policy
+
+    def propose(self, state: tuple[str, ...]) -> str:
+        return self.policy.next_task(state)
+
+    def observe(self, state, proposal, observed) -> None:
+        pass
+
+
+def task_level_run(scenario, space: StateSpace, costs) -> RunResult:
+    """The scenario's run played at task level from the cost table `costs`: its policy
+    proposes (and, anticipating, starts on its proposal), its operator answers after the delays
+    the simulated station waits (the same seeded draws, step by step), and each task takes
+    the table's seconds plus what the interaction adds (`hrc_drake.evaluate.simulate_run`).
+    What the cell's run of the scenario should take, if the task level mirrors the cell."""
+    from hrc_drake.cell.run import scenario_policy
+
+    operator = scenario.operator_for(space)
+    timeline = InteractionCosts(space, costs, scenario.interaction_model())
+    decider = _PolicyDecider(scenario_policy(scenario, space))
+    delays = operator_delays(scenario.operator.seed)
+    return simulate_run(space, costs, decider, operator, timeline, delays)
 
 
 def check_cell_operator(operator, model_name: str) -> None:
@@ -135,7 +177,8 @@ def check_cell_operator(operator, model_name: str) -> None:
 
 def play_cell_run(scenario, space: StateSpace, decider, operator):
     """One run of `decider` against `operator` through the cell; the decider is not reset.
-    Returns an `hrc_drake.evaluate.RunResult` with the cell's idle times."""
+    Returns an `hrc_drake.evaluate.RunResult` with the cell's idle times and interaction (the
+    delays the operator drew, when it draws them: `DelayedIndications`)."""
     from hrc_drake.cell.run import run_scenario
     from hrc_drake.cell.scenario import cell_design, motion_options
     from hrc_drake.motion.planner import MotionPlanner
@@ -156,4 +199,8 @@ def play_cell_run(scenario, space: StateSpace, decider, operator):
         plan_ready=tuple(bool(x) for x in result.plan_ready[: len(tasks)]),
         error=result.error,
         collisions=len(result.collisions),
+        commits=sum(t.committed is not None for t in tasks),
+        retargets=sum(bool(t.retargeted) for t in tasks),
+        swaps=sum(bool(t.swapped) for t in tasks),
+        indication_delay=float(getattr(operator, "total_delay", lambda: 0.0)()),
     )

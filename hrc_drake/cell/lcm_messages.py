@@ -64,6 +64,7 @@ struct lcmt_hri_prompt {
     string state[num_state];  // the tasks done so far
     string proposal;        // the robot's proposal
     string part;            // the part instance moved ("" until known)
+    string committed;       // the task the robot started on before the answer ("": it waits)
 }
 
 // The operator's latest indication (hrc_drake.hri.messages.Indication).
@@ -471,6 +472,7 @@ def prompt_message(stamp: int, prompt: Prompt):
         state=list(prompt.state),
         proposal=prompt.proposal,
         part=prompt.part,
+        committed=prompt.committed,
     )
 
 
@@ -480,7 +482,8 @@ def prompt_value(message) -> tuple[Prompt]:
         kind = PromptKind(message.kind)
     except ValueError:
         raise LcmDecodeError(f"a prompt of unknown kind {message.kind!r}") from None
-    return (Prompt(message.step, kind, tuple(message.state), message.proposal, message.part),)
+    state = tuple(message.state)
+    return (Prompt(message.step, kind, state, message.proposal, message.part, message.committed),)
 
 
 def indication_message(stamp: int, indication: Indication):

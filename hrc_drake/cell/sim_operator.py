@@ -2,8 +2,9 @@
 
 On a real cell a person reads the interface, points at a target, bolts the part the robot holds
 and says so. In the simulated station `SimulatedOperator` does that: it hands each `CHOOSE`
-prompt to an operator model (a script, a population model, or a person clicking in the browser;
-any `hrc_drake.tasks.decide.Operator` callable) and publishes the answer as an `Indication`,
+prompt to an operator model (a script, a population model: any `hrc_drake.tasks.decide.Operator`
+callable; or a person clicking in the browser, asked without blocking at every update, so the
+robot moves while they choose) and publishes the answer as an `Indication`,
 after the operator's `indication_delay(step)` when it has one (the interface's delay);
 on a `BOLT` prompt it bolts the held part for `bolt_time` seconds (its body reaches in, see
 `hrc_drake.cell.operator_body`) and says it is bolted; the bolts take once the robot has let
@@ -103,12 +104,14 @@ class SimulatedOperator(LeafSystem):
         activity = context.get_abstract_state(self._activity).get_value()
         bolts = context.get_abstract_state(self._bolts).get_value()
         pending = context.get_abstract_state(self._pending).get_value()
+        task = None
         if (
             prompt.kind == PromptKind.CHOOSE
             and indication.step < prompt.step
             and now >= self._due(context, state, prompt.step, now)
         ):
-            task = self._operator(prompt.step, prompt.state, prompt.proposal)
+            task = self._answer(prompt)
+        if task is not None:
             indication = Indication(prompt.step, task, False, now)
             activity = replace(activity, answered_step=prompt.step, answered_at=now)
             if task == UNDO and prompt.state:
@@ -137,6 +140,15 @@ class SimulatedOperator(LeafSystem):
         state.get_mutable_abstract_state(self._activity).set_value(activity)
         state.get_mutable_abstract_state(self._bolts).set_value(bolts)
         state.get_mutable_abstract_state(self._pending).set_value(pending)
+
+    def _answer(self, prompt: Prompt) -> str | None:
+        """The operator's answer to a `CHOOSE` prompt: at once from an operator callable, or,
+        from one that is asked without blocking (`poll`: a person clicking in the browser),
+        None until it has one."""
+        poll = getattr(self._operator, "poll", None)
+        if poll is not None:
+            return poll(prompt)
+        return self._operator(prompt.step, prompt.state, prompt.proposal)
 
     def _due(self, context, state, step: int, now: float) -> float:
         """When the answer to the prompt of `step` is due: `indication_delay(step)` seconds after

@@ -217,8 +217,9 @@ class Supervisor(FaultRecovery, Anticipation, LeafSystem):
             status = self._watch_obstacle(status, self._config_port.Eval(context), now)
         if status.change is not None:
             turned = self._turn(status, self._config_port.Eval(context), now)
-            if turned is not None:
+            if turned is not None and turned.mode != Mode.EXECUTE:
                 return turned
+            status = turned or status  # executing: on its way to where it turns
         mode = status.mode
         if mode == Mode.DECIDE:
             return self._decide(status, self._config_port.Eval(context), now)
@@ -287,8 +288,8 @@ class Supervisor(FaultRecovery, Anticipation, LeafSystem):
         if s.step == 0:
             self._plan_ahead(s.state, config.layout())
         proposal = self._policy.next_task(s.state)
-        prompt = Prompt(s.step + 1, PromptKind.CHOOSE, s.state, proposal)
         committed = self._commit(s.state, proposal) if self._limits.anticipate else None
+        prompt = Prompt(s.step + 1, PromptKind.CHOOSE, s.state, proposal, committed=committed or "")
         s = replace(
             s,
             mode=Mode.ASK,
@@ -385,7 +386,7 @@ class Supervisor(FaultRecovery, Anticipation, LeafSystem):
                 f"step {step}: {plan.instance} should be {expected.value} for {indicated}, the "
                 f"cell shows it {placement.status.value}"
             )
-        return replace(
+        started = replace(
             s,
             mode=Mode.EXECUTE,
             plan=plan,
@@ -398,6 +399,9 @@ class Supervisor(FaultRecovery, Anticipation, LeafSystem):
             planned_ahead=s.returning,  # a part put back: nothing to plan ahead for yet
             idle=time.perf_counter() - s.requested_wall,
         )
+        if started.awaiting and plan.task == started.committed:
+            return self._plan_retargets(started, config)
+        return started
 
     def _execute(self, s: SupervisorStatus, context, now: float):
         """Follow the plan: check the grasp, prompt for the bolts and wait for them, plan the

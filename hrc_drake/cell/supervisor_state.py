@@ -115,6 +115,11 @@ class SupervisorStatus:
     awaiting: bool = False  # started on `committed`; the indication is not in yet
     indicated_at: float | None = None
     change: str | None = None  # the indicated task the robot is stopping to turn to
+    # Re-targeting on the way: the plan time of the rest point of the plan (the lift's end, the
+    # pre-place pose) where the arm turns to `turn_request`, asked for while it goes there.
+    turn_tau: float | None = None
+    turn_request: PlanRequest | None = None
+    retargets_ahead: frozenset = frozenset()  # the keys of the re-targets asked ahead
     retargeted: bool = False
     swapped: bool = False
     returning: bool = False  # carrying the committed part back to its tray (a swap)
@@ -129,8 +134,11 @@ class SupervisorStatus:
         return self
 
     def plan_time(self, now: float) -> float:
-        """The plan time `tau` at simulated time `now` (clamped to the plan)."""
+        """The plan time `tau` at simulated time `now` (clamped to the plan, and to the turn
+        point of a re-target on the way)."""
         tau = self.tau + self.rate * (now - self.tau_time)
+        if self.turn_tau is not None:
+            tau = min(tau, self.turn_tau)
         return float(np.clip(tau, 0.0, self.plan.duration)) if self.plan is not None else tau
 
     def holding_for_bolts(self, tau: float) -> bool:

@@ -1,11 +1,15 @@
 """A person as the operator, in the browser: Meshcat buttons at every task boundary.
 
-`LiveOperator` is an operator callable (`hrc_drake.tasks.decide.Operator`) for the cell's
-Supervisor. At a task boundary it shows the robot's proposal in the scene and puts one button per
-choice in Meshcat's control panel (the paper's touch menu), and blocks the Supervisor's decision
-until one is clicked:
+`LiveOperator` is the operator for the cell's simulated station. At a task boundary it shows the
+robot's proposal in the scene and puts one button per choice in Meshcat's control panel (the
+paper's touch menu). In the cell it is asked without blocking (`poll`, once per station update):
+the simulation goes on in real time while the buttons are up, so a robot that anticipates moves
+on its commitment, and the click is the indication whenever it comes. (Called as an operator
+callable, `hrc_drake.tasks.decide.Operator`, it blocks until a click.) The buttons:
 - the proposal's button first, "F1 - robot proposal" (names are made safe for Meshcat's
   JavaScript by `hrc_drake.hri.controls`, which drops the apostrophe of "robot's");
+- the button of the task the robot has already started on, if any, says so: "F1 - robot
+  proposal, robot on its way" (the prompt's `committed`);
 - "F2 instead" for every other feasible task;
 - "mistake: F03 lands in F02" when the spec lists a mistake for the proposal (the part goes to
   the mistaken alternative, the other row);
@@ -35,6 +39,7 @@ from pydrake.geometry import Box, Meshcat, MeshcatCone, Rgba, Sphere
 from pydrake.math import RigidTransform, RotationMatrix
 
 from hrc_drake.hri.controls import add_button, control_name
+from hrc_drake.hri.messages import Prompt, PromptKind
 from hrc_drake.hri.operator import StochasticOperator
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.tokens import UNDO
@@ -82,16 +87,24 @@ class PanelPrompt:
         return next((name for name in self.buttons if name.startswith("mistake")), None)
 
 
-def panel_buttons(space: StateSpace, state: tuple[str, ...], proposal: str) -> dict[str, str]:
+ON_ITS_WAY = ", robot on its way"  # the label's end on the task the robot started on
+
+
+def panel_buttons(
+    space: StateSpace, state: tuple[str, ...], proposal: str, committed: str = ""
+) -> dict[str, str]:
     """Button name -> task for a task boundary, in the panel's order: the proposal first, the
-    other feasible tasks, the proposal's mistaken alternative (the spec's `mistakes`), undo.
-    Every name is made safe for Meshcat (`control_name`); ValueError if two choices would get
-    the same name."""
+    other feasible tasks, the proposal's mistaken alternative (the spec's `mistakes`), undo; the
+    task the robot has started on (`committed`, "" for none) says so. Every name is made safe
+    for Meshcat (`control_name`); ValueError if two choices would get the same name."""
     feasible = [t for t, _ in space.tasks(space.index(state))]
     labelled: list[tuple[str, str]] = []
     if proposal in feasible:
         labelled.append((f"{proposal} - robot proposal", proposal))
     labelled += [(f"{t} instead", t) for t in feasible if t not in (proposal, UNDO)]
+    labelled = [
+        (label + ON_ITS_WAY if task == committed else label, task) for label, task in labelled
+    ]
     alternatives = StochasticOperator(space, 0.0, 0.0).alternatives(state, proposal)
     if alternatives:
         labelled.append((f"mistake: {proposal} lands in {alternatives[0]}", alternatives[0]))
@@ -127,8 +140,20 @@ def live_banner(url: str) -> str:
     """What the terminal says when a live run starts: where the page and its buttons are."""
     return (
         f"live: open {url} in a web browser; at every task boundary the robot shows its "
-        f"proposal in the scene and waits for your click under {WHERE_THE_BUTTONS_ARE}"
+        "proposal in the scene (and, anticipating, starts on it) and takes your click under "
+        f"{WHERE_THE_BUTTONS_ARE} as the target"
     )
+
+
+@dataclass
+class _Shown:
+    """The buttons up for a step: name -> task, each button's clicks before it was shown, and
+    the proposal's marker in the scene (None: nothing shown)."""
+
+    step: int
+    buttons: dict[str, str]
+    clicks: dict[str, int]
+    marker: str | None
 
 
 class LiveOperator:
@@ -159,41 +184,80 @@ class LiveOperator:
         say: Callable[[str], None] | None = None,
     ):
         self.meshcat, self.space, self.place, self.clock = meshcat, space, place, clock
-        self.on_prompt, self.after_answer, self.poll = on_prompt, after_answer, poll
+        self.on_prompt, self.after_answer, self.poll_period = on_prompt, after_answer, poll
+        self._shown: _Shown | None = None  # the step whose buttons are up
         self.say = say or (lambda text: print(text, file=sys.stderr, flush=True))
         self.answers: list[tuple[int, str, str]] = []  # (step, proposal, task chosen)
         _add_marker(meshcat, PROPOSAL_MARK, GHOST, POINTER)
         _add_marker(meshcat, UNDO_MARK, UNDO_GHOST, UNDO_POINTER)
 
-    def buttons(self, state: tuple[str, ...], proposal: str) -> dict[str, str]:
+    def buttons(self, state: tuple[str, ...], proposal: str, committed: str = "") -> dict[str, str]:
         """Button name -> task for a boundary (`panel_buttons`)."""
-        return panel_buttons(self.space, state, proposal)
+        return panel_buttons(self.space, state, proposal, committed)
 
     def __call__(self, step: int, state: tuple[str, ...], proposal: str) -> str:
         """Show the proposal and the buttons; block until a click; return the task chosen."""
-        now = self.clock()
-        buttons = self.buttons(state, proposal)
-        shown = self._show_proposal(state, proposal, now)
-        base = {}
+        prompt = Prompt(step, PromptKind.CHOOSE, state, proposal)
         try:
-            for text in buttons:
-                name = add_button(self.meshcat, text)
-                base[name] = self.meshcat.GetButtonClicks(name)
-            self.say(self.prompt_text(step, state, proposal, buttons))
-            if self.on_prompt is not None:
-                self.on_prompt(PanelPrompt(step, state, proposal, dict(buttons), now, self.meshcat))
-            chosen = self._wait_for_click(buttons, base)
+            while (chosen := self.poll(prompt)) is None:
+                time.sleep(self.poll_period)
         finally:
-            # Also when the run is interrupted: no button of a finished run stays in the panel.
-            for name in base:
-                self.meshcat.DeleteButton(name)
-        if shown is not None:
-            self.meshcat.SetProperty(shown, "visible", False, now)
-        self._draw_choice(step, state, proposal, chosen, now)
-        self.answers.append((step, proposal, chosen))
+            self.close()
         if self.after_answer is not None:
             self.after_answer()
         return chosen
+
+    def poll(self, prompt: Prompt) -> str | None:
+        """The task clicked for `prompt` (a `CHOOSE`), or None while no button is clicked: the
+        first call of a step shows the proposal and the buttons, and the one that finds a click
+        takes them down."""
+        if self._shown is None or self._shown.step != prompt.step:
+            self.close()
+            self._show(prompt)
+        shown = self._shown
+        for name, task in shown.buttons.items():
+            if self.meshcat.GetButtonClicks(name) > shown.clicks[name]:
+                chosen = task
+                self._answered(prompt, chosen)
+                return chosen
+        return None
+
+    def close(self) -> None:
+        """Take down the buttons of a step still unanswered (a run that ends or is stopped
+        leaves none in the panel)."""
+        if self._shown is not None:
+            for name in self._shown.clicks:
+                self.meshcat.DeleteButton(name)
+            self._shown = None
+
+    def _show(self, prompt: Prompt) -> None:
+        now = self.clock()
+        buttons = self.buttons(prompt.state, prompt.proposal, prompt.committed)
+        mark = self._show_proposal(prompt.state, prompt.proposal, now)
+        base = {}
+        for text in buttons:
+            name = add_button(self.meshcat, text)
+            base[name] = self.meshcat.GetButtonClicks(name)
+        self._shown = _Shown(prompt.step, buttons, base, mark)
+        text = self.prompt_text(prompt.step, prompt.state, prompt.proposal, buttons)
+        if prompt.committed:
+            text += f"; the robot is already on its way with {prompt.committed}"
+        self.say(text)
+        if self.on_prompt is not None:
+            self.on_prompt(
+                PanelPrompt(
+                    prompt.step, prompt.state, prompt.proposal, dict(buttons), now, self.meshcat
+                )
+            )
+
+    def _answered(self, prompt: Prompt, chosen: str) -> None:
+        """The click's marks: the proposal's marker goes, the choice's stays."""
+        mark = self._shown.marker
+        self.close()
+        if mark is not None:
+            self.meshcat.SetProperty(mark, "visible", False, self.clock())
+        self._draw_choice(prompt.step, prompt.state, prompt.proposal, chosen, self.clock())
+        self.answers.append((prompt.step, prompt.proposal, chosen))
 
     def prompt_text(
         self, step: int, state: tuple[str, ...], proposal: str, buttons: dict[str, str]
@@ -206,13 +270,6 @@ class LiveOperator:
             f"step {step}: the robot proposes {describe_task(self.space, proposal, state)} "
             f"({marker} marker in the scene); {agree} under {WHERE_THE_BUTTONS_ARE}"
         )
-
-    def _wait_for_click(self, buttons: dict[str, str], base: dict[str, int]) -> str:
-        while True:
-            for name in buttons:
-                if self.meshcat.GetButtonClicks(name) > base[name]:
-                    return buttons[name]
-            time.sleep(self.poll)
 
     def _show_proposal(self, state, proposal, now) -> str | None:
         """Put the proposal's marker in the scene from `now` on; returns its path (None: no
@@ -270,4 +327,11 @@ def _place_marker(
     meshcat.SetTransform(f"{path}/cone", X_W_cone, now)
 
 
-__all__ = ["LiveOperator", "PanelPrompt", "describe_task", "live_banner", "panel_buttons"]
+__all__ = [
+    "ON_ITS_WAY",
+    "LiveOperator",
+    "PanelPrompt",
+    "describe_task",
+    "live_banner",
+    "panel_buttons",
+]

@@ -31,14 +31,16 @@ class PromptKind(StrEnum):
 @dataclass(frozen=True)
 class Prompt:
     """What the interface shows: the step (decision steps count from 1), the kind of question,
-    the MDP state (the sequence of tasks so far), the robot's proposal and the part moved (the
-    part instance, once known)."""
+    the MDP state (the sequence of tasks so far), the robot's proposal, the part moved (the
+    part instance, once known) and, at a `CHOOSE`, the task the robot has already started on
+    while it waits for the answer ("": it waits, still)."""
 
     step: int = 0
     kind: PromptKind = PromptKind.NONE
     state: tuple[str, ...] = ()
     proposal: str = ""
     part: str = ""
+    committed: str = ""
 
     def __deepcopy__(self, memo) -> Prompt:
         return self  # immutable (Drake copies abstract values often)

@@ -307,14 +307,21 @@ class InteractionCosts:
 
 class DelayedIndications:
     """An operator (any `hrc_drake.tasks.decide.Operator`) whose indication at each decision
-    step comes after a delay drawn from `delay`, seeded: `indication_delay(step)` is what the
-    simulated station waits before it publishes the answer. Answers, and anything else the
-    operator offers (`bolt_scale`, ...), are the wrapped operator's."""
+    step comes after a delay drawn from `delay`, seeded (or drawn from `rng`, e.g. an
+    evaluation run's `delay_generator`): `indication_delay(step)` is what the simulated station
+    waits before it publishes the answer. Answers, and anything else the operator offers
+    (`bolt_scale`, ...), are the wrapped operator's."""
 
-    def __init__(self, operator, delay: IndicationDelay, seed: int = 0):
+    def __init__(
+        self,
+        operator,
+        delay: IndicationDelay,
+        seed: int = 0,
+        rng: np.random.Generator | None = None,
+    ):
         self.operator = operator
         self.delay = delay
-        self._rng = np.random.default_rng(np.random.SeedSequence([seed, DELAY_STREAM]))
+        self._rng = rng if rng is not None else operator_delays(seed)
         self._drawn: dict[int, float] = {}
 
     def __call__(self, step: int, state: tuple[str, ...], proposal: str) -> str:
@@ -326,6 +333,10 @@ class DelayedIndications:
         if step not in self._drawn:
             self._drawn[step] = self.delay.sample(self._rng)
         return self._drawn[step]
+
+    def total_delay(self) -> float:
+        """The seconds of every delay drawn so far (one per decision step answered)."""
+        return float(sum(self._drawn.values()))
 
     def __getattr__(self, name: str):
         if name == "operator":  # not set yet (unpickling): no recursion
@@ -358,6 +369,12 @@ def bet_summary(space: StateSpace, table: CostTable, interaction: Interaction) -
     return {**out, "bets": rows}
 
 
+def operator_delays(seed: int) -> np.random.Generator:
+    """The generator of the indication delays of an operator seeded `seed` (a scenario's
+    operator, `DelayedIndications`; its own stream: the answers draw from theirs)."""
+    return np.random.default_rng(np.random.SeedSequence([seed, DELAY_STREAM]))
+
+
 def delay_generator(seed: int, run: int = 0) -> np.random.Generator:
     """The generator of the indication delays of run `run` of an evaluation seeded `seed` (its
     own stream: the operator's answers draw from theirs)."""
@@ -382,4 +399,5 @@ __all__ = [
     "delay_generator",
     "extra_seconds",
     "make_interaction",
+    "operator_delays",
 ]
