@@ -386,7 +386,7 @@ def rim_pinch(modulus: float) -> list[dict]:
                 "offset": offset,
                 "done": result.done,
                 "collisions": len(result.collisions),
-                "finger_force": max(largest),
+                "finger_force": largest,
                 "end": result.error or "done",
             }
         )

@@ -8,10 +8,16 @@ predicts the cell's times. Populations whose runs are all alike (`follows`, `hab
 runs, the random ones more. `slow` is task level only (the cell's holds are fixed) and
 `random` is left out (its runs average 15 tasks, minutes of simulation each).
 
-Results are kept per pair in `benchmarks/reports/evaluate_cell.json`, so that
-``--deciders mpc`` re-runs one decider and the report and plot are rebuilt from all pairs.
+Each pair is played in one interaction mode (``--interaction``, default `anticipate`: the decider
+bets at each boundary, in the cell as at task level, and the simulated operator indicates after
+the pointer's delay, the same draws at both levels; `wait`: the robot waits for it).
 
-Usage: ``python benchmarks/bench_evaluate_cell.py [--runs 12] [--workers 2] [--deciders ...]``.
+Results are kept per pair and mode in `benchmarks/reports/evaluate_cell.json`, so that
+``--deciders mpc`` re-runs one decider and the report (a table per mode) and plot (anticipate)
+are rebuilt from all pairs.
+
+Usage: ``python benchmarks/bench_evaluate_cell.py [--runs 12] [--workers 2] [--deciders ...]
+[--interaction anticipate|wait]``.
 """
 
 from __future__ import annotations
@@ -28,7 +34,7 @@ from hrc_drake.cell.costs import default_cost_table
 from hrc_drake.cell.evaluate import CellOptions
 from hrc_drake.evaluate import Setup, evaluate
 from hrc_drake.tasks.graph import generate_states
-from hrc_drake.tasks.interaction import WAIT, make_interaction
+from hrc_drake.tasks.interaction import ANTICIPATE, MODES, WAIT, make_interaction
 from hrc_drake.tasks.spec import load_spec
 
 DECIDERS = ["paper-q", "time", "mpc"]
@@ -50,18 +56,33 @@ KEEP = (
     "mean_idle",
     "p95_idle",
     "plan_ready_rate",
+    "commit_rate",
+    "mean_retargets",
+    "mean_swaps",
     "collisions",
     "errors",
     "wall_seconds",
 )
 
 
-def run_pair(space, costs, decider: str, population: str, runs: int, seed: int, workers: int):
-    """The cell's and the task level's reports on the same seeded runs. The cell does not
-    anticipate yet: its robot waits for the indication, so the task level plays `wait` too."""
-    wait = make_interaction(WAIT)
-    task = Setup(space, costs, decider, population, {}, seed, wait)
-    cell = Setup(space, costs, decider, population, {}, seed, wait, cell=CellOptions())
+# Pairs kept from before the interaction was built (no mode in their key): the robot waited for
+# an answer that came at once.
+AT_ONCE = "answered at once"
+
+
+def key(decider: str, population: str, mode: str) -> str:
+    """A pair's key in the results."""
+    return f"{decider}|{population}" + ("" if mode == AT_ONCE else f"|{mode}")
+
+
+def run_pair(
+    space, costs, decider: str, population: str, runs: int, seed: int, workers: int, mode: str
+):
+    """The cell's and the task level's reports on the same seeded runs, in interaction `mode`
+    at both levels."""
+    interaction = make_interaction(mode)
+    task = Setup(space, costs, decider, population, {}, seed, interaction)
+    cell = Setup(space, costs, decider, population, {}, seed, interaction, cell=CellOptions())
     start = time.perf_counter()
     in_cell = evaluate(cell, runs, workers, progress=_progress(decider, population))
     print(f"  {time.perf_counter() - start:.0f} s", flush=True)
@@ -84,19 +105,21 @@ def plot(results: dict, path: Path) -> None:
     """Mean cell time per decider and population (bars; ticks: the task level's prediction)."""
     from hrc_drake.tasks.plots import plt, save_figure
 
-    deciders = [d for d in DECIDERS if any(f"{d}|{p}" in results for p in POPULATIONS)]
+    mode = next((m for m in (ANTICIPATE, WAIT) if any(k.endswith(m) for k in results)), AT_ONCE)
+    deciders = [d for d in DECIDERS if any(key(d, p, mode) in results for p in POPULATIONS)]
     fig, ax = plt.subplots(figsize=(8, 3.8))
     width = 0.8 / max(1, len(deciders))
     for k, d in enumerate(deciders):
         x = np.arange(len(POPULATIONS)) + (k - (len(deciders) - 1) / 2) * width
-        cell = [results.get(f"{d}|{p}", {}).get("cell", {}).get("mean_time") for p in POPULATIONS]
-        task = [results.get(f"{d}|{p}", {}).get("task", {}).get("mean_time") for p in POPULATIONS]
+        pairs = [results.get(key(d, p, mode), {}) for p in POPULATIONS]
+        cell = [r.get("cell", {}).get("mean_time") for r in pairs]
+        task = [r.get("task", {}).get("mean_time") for r in pairs]
         ax.bar(x, [c or 0.0 for c in cell], width, label=d)
         ax.scatter(x, [t or np.nan for t in task], marker="_", color="black", s=80, zorder=3)
     ax.set_xticks(np.arange(len(POPULATIONS)), POPULATIONS)
     ax.set_ylim(bottom=30.0)  # the differences are a few seconds of ~35-45 s
     ax.set_ylabel("assembly time [s], from 30 s\n(bar: cell, tick: task level)")
-    ax.set_title("flange case in the cell: the paper's Q-learning agent against ours")
+    ax.set_title(f"flange case in the cell ({mode}): the paper's Q-learning agent against ours")
     ax.legend(fontsize=8)
     save_figure(fig, path, dpi=110)
 
@@ -113,16 +136,38 @@ def report(results: dict, seed: int) -> str:
         "decider learns from what the cell observed; a fresh motion planner per run. The same "
         "seeded runs are also played at task level with the cell's cost table ('task' "
         "columns). Times are simulated seconds over the completed runs; idle is the wall time "
-        "the robot waited for the planner after the operator's answer, per boundary.",
+        "the robot waited for the planner after the operator's answer, per boundary; commits, "
+        "re-targets and swaps as the cell's Supervisor recorded them (per boundary, per run).",
+        "",
+    ]
+    for mode in (ANTICIPATE, WAIT, AT_ONCE):
+        if any(key(d, p, mode) in results for d in DECIDERS for p in POPULATIONS):
+            lines += _mode_table(results, mode)
+    lines += [
+        f"Plot: `docs/{PLOT.name}` (bars: cell mean; ticks: task-level mean on the same seeds).",
+        "'wall per run' is the wall time of a pair times its workers over its runs.",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def _mode_table(results: dict, mode: str) -> list[str]:
+    title = {
+        ANTICIPATE: "anticipate (pointer)",
+        WAIT: "wait (pointer)",
+        AT_ONCE: "answered at once (kept from a run before the indication delay was built)",
+    }[mode]
+    lines = [
+        f"## {title}",
         "",
         "| decider | operator | runs | completed | cell mean [s] | cell p95 [s] | task mean [s] |"
-        " cell / task | tasks | undos | deviations | plan ready | idle mean [s] | collisions |"
-        " wall per run [s] |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        " cell / task | tasks | undos | deviations | commits | re-targets | swaps | plan ready |"
+        " idle mean [s] | collisions | wall per run [s] |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for d in DECIDERS:
         for p in POPULATIONS:
-            r = results.get(f"{d}|{p}")
+            r = results.get(key(d, p, mode))
             if r is None:
                 continue
             c, t = r["cell"], r["task"]
@@ -131,19 +176,15 @@ def report(results: dict, seed: int) -> str:
                 f"| {d} | {p} | {c['runs']} | {c['completed']} | {c['mean_time']} | "
                 f"{c['p95_time']} | {t['mean_time']} | "
                 f"{'' if ratio is None else f'{ratio:.3f}'} | {c['mean_tasks']} | "
-                f"{c['mean_undos']} | {c['mean_deviations']} | {c['plan_ready_rate']} | "
+                f"{c['mean_undos']} | {c['mean_deviations']} | {c.get('commit_rate', 0.0)} | "
+                f"{c.get('mean_retargets', 0.0)} | {c.get('mean_swaps', 0.0)} | "
+                f"{c['plan_ready_rate']} | "
                 f"{c['mean_idle']} | {c['collisions']} | "
                 f"{c['wall_seconds'] * r['workers'] / c['runs']:.1f} |"
             )
             if c["errors"]:
                 lines.append(f"|  | errors: {'; '.join(c['errors'])} |")
-    lines += [
-        "",
-        f"Plot: `docs/{PLOT.name}` (bars: cell mean; ticks: task-level mean on the same seeds).",
-        "'wall per run' is the wall time of a pair times its workers over its runs.",
-        "",
-    ]
-    return "\n".join(lines)
+    return [*lines, ""]
 
 
 def main() -> None:
@@ -154,6 +195,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--deciders", nargs="*", default=DECIDERS, choices=DECIDERS)
     parser.add_argument("--populations", nargs="*", default=POPULATIONS, choices=POPULATIONS)
+    parser.add_argument("--interaction", default=ANTICIPATE, choices=MODES)
     parser.add_argument("--report-only", action="store_true", help="rebuild report and plot")
     args = parser.parse_args()
     if args.report_only:
@@ -164,7 +206,9 @@ def main() -> None:
     for d in args.deciders:
         for p in args.populations:
             runs = 2 if p in DETERMINISTIC else args.runs
-            results[f"{d}|{p}"] = run_pair(space, costs, d, p, runs, args.seed, args.workers)
+            results[key(d, p, args.interaction)] = run_pair(
+                space, costs, d, p, runs, args.seed, args.workers, args.interaction
+            )
             atomic_write_text(RESULTS, json.dumps(results, indent=1, sort_keys=True) + "\n")
     atomic_write_text(REPORT, report(results, args.seed))
     plot(results, PLOT)

@@ -32,6 +32,7 @@ import numpy as np
 
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.anticipation import RETARGETS_AHEAD, lift_end, same_part, wait_point
+from hrc_drake.cell_models import CellDesign
 from hrc_drake.motion.planner import MotionPlanner
 from hrc_drake.resources import models_dir
 from hrc_drake.tasks.costs import bet_pairs
@@ -63,7 +64,7 @@ def measure(cell: str) -> list[dict]:
     """Per re-target bet of `cell`: the committed plan's lift's end and pre-place times, and
     the held plans' planning seconds from each (the ones asked ahead in their order)."""
     space = generate_states(load_spec(models_dir() / "assemblies" / f"{cell}.yaml"))
-    planner = MotionPlanner()
+    planner = MotionPlanner(design=CellDesign.of(space.spec))
     rows = []
     for (state, committed), others in retarget_bets(space).items():
         configuration = space.configuration(space.index(state))

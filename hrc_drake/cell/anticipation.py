@@ -15,7 +15,8 @@ the indication names another task:
   before the fingers close on the part it plans the indicated task from where the arm stands
   (the part it went for stays in the tray); while the fingers close and the part is lifted it
   goes on to the lift's end; carrying, it plans from where it stands back to the part's tray
-  home, after which it does the indicated task from home.
+  home, after which it does the indicated task from above it (`back_above`), not by way of
+  home.
 
 A robot that reaches the pre-place pose before the indication waits there, holding the part
 above the predicted seat; an indication that comes then turns from there.
@@ -28,7 +29,7 @@ from dataclasses import replace
 
 from hrc_drake.cell.slot_monitor import CellConfiguration
 from hrc_drake.cell.supervisor_state import Mode, SupervisorError, SupervisorStatus
-from hrc_drake.motion.plan import Plan, Stage
+from hrc_drake.motion.plan import HOME_LEG, LIFT, Plan, Stage
 from hrc_drake.motion.service import PlanRequest
 from hrc_drake.tasks.spec import AssemblySpec
 from hrc_drake.tasks.tokens import UNDO
@@ -54,13 +55,21 @@ def lift_end(plan: Plan) -> float:
     """Plan time at which the part is clear of where it was picked (the carry's own motion
     starts); 0 for a plan that starts with the part held."""
     carry = plan.segment(Stage.CARRY)
-    lifts = [m for m in plan.motions if m.name == "lift"]
+    lifts = [m for m in plan.motions if m.name == LIFT]
     return carry.start + (lifts[0].duration if lifts else 0.0)
 
 
 def wait_point(plan: Plan) -> float:
     """Plan time at the pre-place pose, where a robot still without its indication waits."""
     return plan.segment(Stage.PLACE).start
+
+
+def back_above(plan: Plan) -> float:
+    """Plan time at which a plan that puts a part back in its tray has let it go and risen
+    above it (where its last motion, home, starts): a swap goes on from there to the indicated
+    task, not by way of home."""
+    homeward = [m for m in plan.motions if m.name == HOME_LEG]
+    return homeward[-1].start if homeward else plan.duration
 
 
 def turn_at(plan: Plan, tau: float, spec: AssemblySpec, indicated: str) -> Turn:
@@ -257,6 +266,7 @@ class Anticipation:
 __all__ = [
     "Anticipation",
     "Turn",
+    "back_above",
     "lift_end",
     "same_part",
     "turn_at",

@@ -28,6 +28,7 @@ from pathlib import Path
 
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.motion import MotionOptions, MotionPlanner, Plan, PlanningError, UnreachableError
+from hrc_drake.motion.plan import LIFT
 from hrc_drake.motion.planner import check_reach, resolve_task
 from hrc_drake.motion.scene import Layout
 from hrc_drake.motion.trajectory import free_path, retime
@@ -166,7 +167,7 @@ def bet_seconds(
     empty = Layout.of(move.before, None, opening)
     between = _free_seconds(planner, empty, a.positions(at_a), b.positions(at_b))
     # Lowered back (the lift run backwards), released, up again: at the committed pre-grasp.
-    put_back = 2.0 * _motion(a, "lift").duration + planner.options.gripper_time
+    put_back = 2.0 * _motion(a, LIFT).duration + planner.options.gripper_time
     return round(max(0.0, carry_milestones(a)[0] + put_back + between - at_b), 4)
 
 

@@ -46,7 +46,7 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from hrc_drake.cell.anticipation import Anticipation, wait_point
+from hrc_drake.cell.anticipation import Anticipation, back_above, wait_point
 from hrc_drake.cell.intent import MotionIntent
 from hrc_drake.cell.recovery import FaultRecovery
 from hrc_drake.cell.slot_monitor import CellConfiguration, PartStatus
@@ -311,11 +311,20 @@ class Supervisor(FaultRecovery, Anticipation, LeafSystem):
         s = replace(s, pending=(proposal, committed, ""), events=(*s.events, event))
         return self._request(s, committed, config, now)
 
-    def _request(self, s: SupervisorStatus, task: str, config: CellConfiguration, now: float):
-        """Ask the planner for `task` from the boundary's layout (the arm at home)."""
+    def _request(
+        self,
+        s: SupervisorStatus,
+        task: str,
+        config: CellConfiguration,
+        now: float,
+        start: tuple[float, ...] | None = None,
+    ):
+        """Ask the planner for `task` from the boundary's layout, the arm at home (or at rest
+        at `start`)."""
         last = s.state[-1] if s.state else None
+        where = {} if start is None else {"start": start}
         request = PlanRequest.of(
-            s.tokens_before, task, last, config.layout(), obstacle=config.obstacle
+            s.tokens_before, task, last, config.layout(), obstacle=config.obstacle, **where
         )
         return self._ask(s, request, plan_ready=self._plans.is_cached(request))
 
@@ -397,6 +406,8 @@ class Supervisor(FaultRecovery, Anticipation, LeafSystem):
             pending=(proposed, indicated, plan.instance),
             bolted=False,
             planned_ahead=s.returning,  # a part put back: nothing to plan ahead for yet
+            # Putting a part back, the arm stops above it, where the indicated task starts.
+            turn_tau=back_above(plan) if s.returning else None,
             idle=time.perf_counter() - s.requested_wall,
         )
         if started.awaiting and plan.task == started.committed:
@@ -416,10 +427,11 @@ class Supervisor(FaultRecovery, Anticipation, LeafSystem):
             self._plan_ahead_after(s, self._config_port.Eval(context))
         if s.holding_for_bolts(tau):
             return self._hold_for_bolts(s, context, now)
-        if tau >= plan.duration and s.returning:  # the part is back: the indicated task
-            q_end = tuple(float(x) for x in plan.trajectory.value(plan.duration).ravel())
-            s = replace(s, plan=None, q_hold=q_end, returning=False)
-            return self._request(s, s.pending[1], self._config_port.Eval(context), now)
+        if s.returning and tau >= back_above(plan):  # the part is back: the indicated task
+            q = tuple(float(x) for x in plan.trajectory.value(back_above(plan)).ravel())
+            s = replace(s, plan=None, q_hold=q, returning=False, turn_tau=None)
+            config = self._config_port.Eval(context)
+            return self._request(s, s.pending[1], config, now, start=q)
         if tau >= plan.duration:
             q_end = tuple(float(x) for x in plan.trajectory.value(plan.duration).ravel())
             return replace(

@@ -10,6 +10,10 @@ from pydrake.trajectories import PiecewisePolynomial, Trajectory
 
 from hrc_drake.motion.scene import Layout
 
+# Names of the arm motions a plan is made of that other layers look up (`Plan.motions`).
+LIFT = "lift"  # the part raised clear of where it was picked
+HOME_LEG = "pre-place to home"  # the last motion: from above the released part, home
+
 
 class Stage(StrEnum):
     """What the robot does during a segment of a task."""

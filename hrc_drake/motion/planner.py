@@ -12,7 +12,7 @@ from pydrake.trajectories import CompositeTrajectory, PiecewisePolynomial, Traje
 from hrc_drake.cell_models import TABLE, CellDesign, CellModelError
 from hrc_drake.motion.ik import UnreachableError, solve_ik
 from hrc_drake.motion.options import MotionOptions
-from hrc_drake.motion.plan import CheckPhase, MotionTiming, Plan, Segment, Stage
+from hrc_drake.motion.plan import HOME_LEG, LIFT, CheckPhase, MotionTiming, Plan, Segment, Stage
 from hrc_drake.motion.poses import (
     CellFrames,
     default_layout,
@@ -629,7 +629,7 @@ class MotionPlanner:
         line.stage(Stage.GRASP, t0)
 
         t0 = line.t
-        line.move("lift", descend.reversed())
+        line.move(LIFT, descend.reversed())
         line.phase(t0, carry.layout, pick.lift)
 
     def _place_into(self, line, configuration, move: TaskMove, measured, carry, q_from) -> Plan:
@@ -682,7 +682,7 @@ class MotionPlanner:
         line.move("retreat up", lowering.reversed())
         line.phase(t_release, placed.layout, release)
         t1 = line.t
-        line.move("pre-place to home", self._timed(placed, back[0]), back)
+        line.move(HOME_LEG, self._timed(placed, back[0]), back)
         line.phase(t1, placed.layout, ())
         line.stage(Stage.RETREAT, t0)
 
