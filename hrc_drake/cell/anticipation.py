@@ -46,8 +46,8 @@ class Turn(enum.Enum):
 
 
 TAU_EPS = 1e-9  # s of plan time: a robot held at a plan time is at it, not past it
-# Re-targets asked ahead at a commitment (each a held plan, about 0.3 s of planning here:
-# benchmarks/reports/retarget.md).
+# Re-targets asked ahead at a commitment (each a held plan, 0.16-0.19 s of planning on the
+# median here: benchmarks/reports/retarget.md; the lift's end comes 2.4 s into a plan).
 RETARGETS_AHEAD = 2
 
 
