@@ -1,0 +1,78 @@
+"""Where along a committed plan the robot turns to the task the operator indicates, and how
+(`hrc_drake.cell.anticipation`): on plans of the flange case, no simulation."""
+
+import numpy as np
+import pytest
+
+from hrc_drake.cell.anticipation import (
+    Turn,
+    back_above,
+    lift_end,
+    turn_at,
+    turn_point,
+    wait_point,
+)
+from hrc_drake.motion.plan import Stage
+from hrc_drake.tasks.tokens import UNDO
+
+
+@pytest.fixture(scope="module")
+def planner():
+    from hrc_drake.motion.planner import MotionPlanner
+
+    return MotionPlanner()
+
+
+@pytest.fixture(scope="module")
+def f1(planner, flange_space):
+    """The plan of F1 from the empty base: the robot's commitment in the tests below."""
+    return planner.plan_task(flange_space.configuration(0), "F1")
+
+
+def _speed(plan, tau: float) -> float:
+    return float(np.abs(plan.trajectory.EvalDerivative(tau, 1)).max())
+
+
+def test_rest_points_are_where_the_plans_motions_meet(f1):
+    grasp = f1.segment(Stage.GRASP).start
+    assert grasp < lift_end(f1) < wait_point(f1) < f1.t_in_place
+    # The arm is still there: a turn onto a plan that starts at rest keeps its speed continuous.
+    assert _speed(f1, lift_end(f1)) < 1e-6 and _speed(f1, wait_point(f1)) < 1e-6
+    assert _speed(f1, (lift_end(f1) + wait_point(f1)) / 2) > 0.05  # carrying in between
+
+
+def test_a_retarget_turns_at_the_next_rest_point(f1, flange_space):
+    spec = flange_space.spec
+    end, place = lift_end(f1), wait_point(f1)
+    # The same kind of part on another seat: a re-target wherever the part is not yet placing,
+    # before the grasp as well (the robot picks it and goes on).
+    for tau in (0.0, f1.segment(Stage.GRASP).start, end, (end + place) / 2, place):
+        assert turn_at(f1, tau, spec, "F3") == Turn.RETARGET, tau
+    assert turn_at(f1, place + 0.01, spec, "F3") == Turn.TOO_LATE
+    assert turn_point(f1, 0.0) == turn_point(f1, end) == end
+    assert turn_point(f1, end + 0.01) == turn_point(f1, place) == place
+
+
+def test_a_swap_turns_by_where_the_part_is(f1, flange_space):
+    spec = flange_space.spec
+    grasp, end, place = f1.segment(Stage.GRASP).start, lift_end(f1), wait_point(f1)
+    assert turn_at(f1, grasp - 0.01, spec, "S12") == Turn.REPLAN  # nothing in the fingers
+    assert turn_at(f1, (grasp + end) / 2, spec, "S12") == Turn.LATER  # closing or lifting
+    assert turn_at(f1, (end + place) / 2, spec, "S12") == Turn.RETURN  # carrying
+    assert turn_at(f1, place, spec, "S12") == Turn.RETURN  # waiting above the seat
+    assert turn_at(f1, place + 0.01, spec, "S12") == Turn.TOO_LATE
+    # A plan turned to its own task (an obstacle appeared) is re-planned by the same rules.
+    assert turn_at(f1, (end + place) / 2, spec, "F1") == Turn.RETURN
+
+
+def test_a_part_put_back_is_left_from_above_it(planner, f1, flange_space):
+    # The swap's return: the part carried from the lift's end back to its tray home; the robot
+    # goes on to the indicated task from above the part, before the plan's leg home.
+    q = f1.trajectory.value(lift_end(f1)).ravel()
+    back = planner.plan_task(
+        flange_space.configuration(0), UNDO, instance=f1.instance, q_start=q, held=True
+    )
+    above = back_above(back)
+    assert back.segment(Stage.RELEASE).end <= above < back.duration
+    assert _speed(back, above) < 1e-6
+    assert back.gripper_opening(above) > back.grip_width  # let go
