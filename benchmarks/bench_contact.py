@@ -365,6 +365,7 @@ def rim_pinch(modulus: float) -> list[dict]:
     """The 4-slot closed loop, its square flange (task 2) slid `PINCH_OFFSETS` in the fingers,
     at hydroelastic `modulus`: per offset, whether the run completed, its collisions, the
     largest contact force on a finger, and how it ended."""
+    from hrc_drake.cell.contacts import geometry_owners
     from hrc_drake.cell.run import build_closed_loop
     from hrc_drake.cell.supervisor import Mode
 
@@ -376,9 +377,10 @@ def rim_pinch(modulus: float) -> list[dict]:
             f"{{physics: {{contact: {{hydroelastic_modulus: {modulus:g}}}}}}}",
         ]
         loop = build_closed_loop(load_cell_scenario(None, texts))
+        owners = geometry_owners(loop.station.plant)
         largest, t = 0.0, 0.0
         while loop.advance_to(t) not in (Mode.DONE, Mode.FAILED) and t < PINCH_END:
-            largest = max(largest, _finger_force(loop))
+            largest = max(largest, _finger_force(loop, owners))
             t += loop.station.plant.time_step()
         result = loop.result()
         runs.append(
@@ -393,21 +395,18 @@ def rim_pinch(modulus: float) -> list[dict]:
     return runs
 
 
-def _finger_force(loop) -> float:
-    """The largest contact force on a finger of the gripper now [N]."""
+def _finger_force(loop, owners) -> float:
+    """The largest contact force on a finger of the gripper now [N] (`owners`: the plant's
+    `geometry_owners`)."""
     plant = loop.station.plant
     context = plant.GetMyContextFromRoot(loop.root_context)
     results = plant.get_contact_results_output_port().Eval(context)
-    inspector = plant.get_geometry_query_input_port().Eval(context).inspector()
     largest = 0.0
     for i in range(results.num_hydroelastic_contacts()):
         info = results.hydroelastic_contact_info(i)
         surface = info.contact_surface()
-        names = [
-            plant.GetBodyFromFrameId(inspector.GetFrameId(g)).name()
-            for g in (surface.id_M(), surface.id_N())
-        ]
-        if any(name.endswith("finger") for name in names):
+        bodies = [owners[g].body for g in (surface.id_M(), surface.id_N()) if g in owners]
+        if any(body.endswith("finger") for body in bodies):
             largest = max(largest, float(np.linalg.norm(info.F_Ac_W().translational())))
     return largest
 

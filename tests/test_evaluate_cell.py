@@ -42,15 +42,29 @@ DECISIONS = ("runs", "completed", "completion_rate", "mean_tasks", "mean_undos",
 INTERACTION = ("interaction", "commit_rate", "mean_retargets", "mean_swaps")
 
 
+@pytest.fixture(scope="module")
+def played(flange_space, toy_costs):
+    """mode -> (the cell's Setup, the task level's report, the cell's report) of mpc against a
+    mistake-prone operator, two seeded runs; each mode is played once for the module."""
+    reports = {}
+
+    def play(mode: str):
+        if mode not in reports:
+            interaction = make_interaction(mode)
+            task = Setup(flange_space, toy_costs, "mpc", "mistake-prone", {"p": "0.5"}, SEED)
+            task = dataclasses.replace(task, interaction=interaction)
+            cell = dataclasses.replace(task, cell=CellOptions(overrides=(LEAN, NO_BODY)))
+            reports[mode] = cell, evaluate(task, 2), evaluate(cell, 2)
+        return reports[mode]
+
+    return play
+
+
 @pytest.mark.slow
-def test_cell_runs_play_the_task_level_runs_and_are_independent(flange_space, toy_costs):
+def test_cell_runs_play_the_task_level_runs_and_are_independent(played):
     # `wait`: the robot waits for each indication, at task level and in the cell.
-    wait = make_interaction(WAIT)
-    task = Setup(flange_space, toy_costs, "mpc", "mistake-prone", {"p": "0.5"}, SEED, wait)
-    cell = dataclasses.replace(task, cell=CellOptions(overrides=(LEAN, NO_BODY)))
-    expected = evaluate(task, 2)
+    cell, expected, report = played(WAIT)
     assert expected["mean_deviations"] == 0.5  # the seed does exercise a mistake
-    report = evaluate(cell, 2)
     # The cell observes what the operator did, the decider learns from it, and the decisions
     # are those of the task level, run for run.
     assert _keys(report, *DECISIONS) == _keys(expected, *DECISIONS)
@@ -72,21 +86,17 @@ def test_cell_runs_play_the_task_level_runs_and_are_independent(flange_space, to
 
 
 @pytest.mark.slow
-def test_cell_runs_anticipate_as_the_task_level_does(flange_space, toy_costs):
+def test_cell_runs_anticipate_as_the_task_level_does(played):
     # `anticipate`: at each boundary the decider bets (or waits) in the cell as at task level,
     # and the cell re-targets or swaps where the task level's timeline does.
-    bets = make_interaction(ANTICIPATE)
-    task = Setup(flange_space, toy_costs, "mpc", "mistake-prone", {"p": "0.5"}, SEED, bets)
-    cell = dataclasses.replace(task, cell=CellOptions(overrides=(LEAN, NO_BODY)))
-    expected = evaluate(task, 2)
-    report = evaluate(cell, 2)
+    _cell, expected, report = played(ANTICIPATE)
     assert _keys(report, *DECISIONS) == _keys(expected, *DECISIONS)
     assert _keys(report, *INTERACTION) == _keys(expected, *INTERACTION)
     assert report["interaction"] == ANTICIPATE and report["commit_rate"] > 0.5
     assert report["collisions"] == 0 and report["errors"] == []
     assert report["mean_indication_delay"] == expected["mean_indication_delay"]
     # The robot moves while the operator indicates: the runs are shorter than waiting's.
-    waited = evaluate(dataclasses.replace(cell, interaction=make_interaction(WAIT)), 2)
+    _cell, _task, waited = played(WAIT)
     for anticipating, waiting in zip(report["times"], waited["times"], strict=True):
         assert anticipating < waiting - 1.0
 

@@ -322,9 +322,8 @@ class Supervisor(FaultRecovery, Anticipation, LeafSystem):
         """Ask the planner for `task` from the boundary's layout, the arm at home (or at rest
         at `start`)."""
         last = s.state[-1] if s.state else None
-        where = {} if start is None else {"start": start}
         request = PlanRequest.of(
-            s.tokens_before, task, last, config.layout(), obstacle=config.obstacle, **where
+            s.tokens_before, task, last, config.layout(), obstacle=config.obstacle, start=start
         )
         return self._ask(s, request, plan_ready=self._plans.is_cached(request))
 
@@ -427,8 +426,9 @@ class Supervisor(FaultRecovery, Anticipation, LeafSystem):
             self._plan_ahead_after(s, self._config_port.Eval(context))
         if s.holding_for_bolts(tau):
             return self._hold_for_bolts(s, context, now)
-        if s.returning and tau >= back_above(plan):  # the part is back: the indicated task
-            q = tuple(float(x) for x in plan.trajectory.value(back_above(plan)).ravel())
+        above = back_above(plan) if s.returning else None
+        if above is not None and tau >= above:  # the part is back: the indicated task
+            q = tuple(float(x) for x in plan.trajectory.value(above).ravel())
             s = replace(s, plan=None, q_hold=q, returning=False, turn_tau=None)
             config = self._config_port.Eval(context)
             return self._request(s, s.pending[1], config, now, start=q)
