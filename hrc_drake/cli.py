@@ -12,7 +12,11 @@ import os
 import sys
 from pathlib import Path
 
-from hrc_drake.evaluate_command import add_evaluate_parser, add_interaction_flags
+from hrc_drake.evaluate_command import (
+    add_evaluate_parser,
+    add_interaction_flags,
+    add_separation_flag,
+)
 from hrc_drake.hri.operator import OperatorScriptError, ScriptedOperator, parse_operator_script
 from hrc_drake.hri.scenario import ScenarioError, table2_scenarios
 from hrc_drake.paths import UsageError, check_output_path
@@ -446,6 +450,7 @@ def build_parser() -> argparse.ArgumentParser:
         "interface's delay, is on its way, and turns if it names another task; in wait mode it "
         "waits for it",
     )
+    add_separation_flag(p)
     p.add_argument(
         "--operator-profile",
         type=Path,

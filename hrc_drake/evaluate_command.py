@@ -111,9 +111,34 @@ def add_interaction_flags(p, cell_note: str = "") -> None:
     )
 
 
+def add_separation_flag(p, note: str = "") -> None:
+    """Register `--separation` on the parser `p`."""
+    p.add_argument(
+        "--separation",
+        default=None,
+        metavar="MODE",
+        help="predictive (the robot times its moves around where it forecasts the operator, "
+        "monitoring underneath) or reactive (speed and separation monitoring alone); default: "
+        f"the scenario's `safety.separation`, predictive{note}",
+    )
+
+
+def separation_from_flags(args) -> str | None:
+    """The `--separation` mode (None: the scenario's); UsageError naming the choices."""
+    from hrc_drake.hri.scenario import SEPARATION_MODES
+
+    mode = getattr(args, "separation", None)
+    if mode is not None and mode not in SEPARATION_MODES:
+        raise UsageError(
+            f"--separation: unknown mode {mode!r}; use {' or '.join(SEPARATION_MODES)}"
+        )
+    return mode
+
+
 def _check_flags(args) -> Path | None:
     """The checks that need nothing loaded; the `--plot` path."""
     interaction_from_flags(args)
+    separation_from_flags(args)
     plot = None
     if args.plot is not None:
         from hrc_drake.tasks.plots import FORMATS
@@ -129,7 +154,15 @@ def _check_flags(args) -> Path | None:
             f"{', '.join(unused)}: not used by evaluate (each decider has its own model); set "
             "the operator population's parameters with --param, e.g. --param p=0.3"
         )
-    cell_only = [f for f, v in (("--lean", args.lean), ("--scenario", args.scenario)) if v]
+    cell_only = [
+        f
+        for f, v in (
+            ("--lean", args.lean),
+            ("--scenario", args.scenario),
+            ("--separation", args.separation),
+        )
+        if v
+    ]
     if args.scenario_text:
         cell_only.append("--scenario-text")
     if cell_only and not args.cell:
@@ -152,7 +185,9 @@ def _cell_options(args, space: StateSpace, operator):
     from hrc_drake.cell.evaluate import DEFAULT_BASE_SCENARIO, CellOptions
     from hrc_drake.cell.scenario import LEAN
 
-    overrides = [t for t in (LEAN if args.lean else None, *(args.scenario_text or [])) if t]
+    separation = separation_from_flags(args)
+    mode = None if separation is None else f"{{safety: {{separation: {separation}}}}}"
+    overrides = [t for t in (LEAN if args.lean else None, *(args.scenario_text or []), mode) if t]
     cell = CellOptions(args.scenario or DEFAULT_BASE_SCENARIO, tuple(overrides))
     cell.check(operator, args.operator_model)
     return cell, cell.prepare(space)
@@ -330,6 +365,7 @@ def add_evaluate_parser(add) -> None:
         "--param", action="append", default=None, help="operator model parameter KEY=VALUE"
     )
     add_interaction_flags(p, "; with --cell, over the scenario's `interaction.mode`")
+    add_separation_flag(p, " (with --cell)")
     p.add_argument(
         "--keep-model",
         action="store_true",

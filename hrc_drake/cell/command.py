@@ -55,9 +55,13 @@ def _with_interaction(args, scenario: Scenario) -> Scenario:
     """`--interaction` and `--interface` set the scenario's interaction (a delay the scenario
     gives stays; left out, the interface's): in anticipate mode the robot starts on its
     commitment and turns if the indication names another task; in wait mode it waits for it."""
-    from hrc_drake.evaluate_command import interaction_from_flags
+    from hrc_drake.evaluate_command import interaction_from_flags, separation_from_flags
 
     interaction_from_flags(args)  # a bad mode or interface: one line, before anything is built
+    separation = separation_from_flags(args)
+    if separation is not None:
+        safety = dataclasses.replace(scenario.safety, separation=separation)
+        scenario = dataclasses.replace(scenario, safety=safety)
     mode, interface = getattr(args, "interaction", None), getattr(args, "interface", None)
     if mode is None and interface is None:
         return scenario

@@ -18,11 +18,21 @@ import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import Demultiplexer
 
-from hrc_drake.cell.separation import ControllerSeparationMonitor, SafetyLog
+from hrc_drake.cell.desk import OperatorForecast, desk_of
+from hrc_drake.cell.intent import MotionIntent
+from hrc_drake.cell.keep_clear import KeepClearSettings
+from hrc_drake.cell.operator_body import BodySpheres
+from hrc_drake.cell.separation import (
+    ControllerSeparationMonitor,
+    RobotEnvelope,
+    SafetyLog,
+    assess,
+)
 from hrc_drake.cell.supervisor import Supervisor, SupervisorLimits, TaskRecord
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.hri.scenario import Scenario
 from hrc_drake.motion.options import MotionOptions
+from hrc_drake.motion.scene import load_cell_frames
 from hrc_drake.motion.service import PlanService
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.policy import Policy
@@ -74,6 +84,44 @@ def supervisor_limits(scenario: Scenario, options: MotionOptions) -> SupervisorL
     )
 
 
+# Bounds for skipping the forecast monitor far from the body (ours, generous for a UR3 and
+# the parts it carries): a point of the robot lies within REACH_BOUND of some body origin of
+# its envelope, moves at most TCP_BOUND, and stops within STOP_BOUND.
+REACH_BOUND, TCP_BOUND, STOP_BOUND = 0.25, 1.0, 0.5  # m, m/s, s
+
+
+def keep_clear_settings(
+    scenario: Scenario, design: CellDesign, envelope: RobotEnvelope | None, options: MotionOptions
+) -> KeepClearSettings:
+    """Predictive separation's forecast and forecast monitor for `scenario`: with
+    `safety.separation: predictive` and an operator on a shared desk (`body.activity: desk`);
+    otherwise none (reactive: the monitor alone). The forecast assumes the scenario's person,
+    not the one each operator seed draws: the controller does not know who stands there."""
+    safety, body = scenario.safety, scenario.body
+    if safety.separation != "predictive" or envelope is None or body.activity != "desk":
+        return KeepClearSettings(max_wait=safety.max_wait, departure=safety.departure)
+    desk = desk_of(load_cell_frames(design), design.layout)
+    delay = scenario.interaction_model().delay
+    forecast = OperatorForecast(body.person(), desk, delay.median, delay.sigma)
+    acceleration = options.joint_acceleration_limit
+
+    reach = REACH_BOUND + max(
+        (safety.human_speed + TCP_BOUND) * (safety.reaction_time + STOP_BOUND), 0.0
+    )
+
+    def scale(q, qdot, carrying, centres, radii, velocities) -> float:
+        # Far from every sphere the monitor cannot limit: skip its full assessment.
+        wrist = envelope.pose(q, None)[1]
+        near = np.linalg.norm(centres[None, :, :] - wrist[:, None, :], axis=2) - radii[None]
+        if near.min() > reach + safety.slow_band + safety.human_uncertainty:
+            return 1.0
+        intent = MotionIntent(qdot=qdot, carrying=carrying, moving=True, rate=1.0)
+        spheres = BodySpheres(centres, radii, velocities)
+        return assess(envelope, q, qdot, spheres, intent, safety, acceleration).limit
+
+    return KeepClearSettings(forecast, scale, safety.max_wait, safety.departure)
+
+
 def make_controller(
     scenario: Scenario,
     design: CellDesign,
@@ -90,8 +138,10 @@ def make_controller(
     builder = DiagramBuilder()
     limits = supervisor_limits(scenario, options)
     opening = scenario.station.rg2.initial_opening
+    envelope = RobotEnvelope(design) if scenario.body.enabled else None
+    clear = keep_clear_settings(scenario, design, envelope, options)
     supervisor = builder.AddNamedSystem(
-        "supervisor", Supervisor(space, policy, plans, home, opening, limits, on_task)
+        "supervisor", Supervisor(space, policy, plans, home, opening, limits, on_task, clear)
     )
     for name in MEASURED:
         if name != "operator.body":
@@ -108,12 +158,17 @@ def make_controller(
         monitor = builder.AddNamedSystem(
             "separation_monitor",
             ControllerSeparationMonitor(
-                design, scenario.safety, options.joint_acceleration_limit, scenario.run.period
+                design,
+                scenario.safety,
+                options.joint_acceleration_limit,
+                scenario.run.period,
+                envelope,
             ),
         )
         builder.ConnectInput("ur3.state_estimated", monitor.GetInputPort("ur3.state_estimated"))
         builder.ConnectInput("rg2.state_measured", monitor.GetInputPort("rg2.state_measured"))
         builder.ExportInput(monitor.GetInputPort("operator.body"), "operator.body")
+        builder.ConnectInput("operator.body", supervisor.GetInputPort("operator.body"))
         builder.Connect(supervisor.GetOutputPort("intent"), monitor.GetInputPort("intent"))
         builder.Connect(
             monitor.GetOutputPort("speed_limit"), supervisor.GetInputPort("speed_limit")

@@ -117,6 +117,7 @@ class CellOptions:
             "scenario": f"{self.scenario} with {what} from the population model",
             "base_scenario": self.scenario,
             "scenario_overrides": list(self.overrides),
+            "separation": load_scenario(self.scenario, list(self.overrides)).safety.separation,
         }
 
 

@@ -33,6 +33,7 @@ from hrc_drake.atomic import atomic_write_bytes, atomic_write_text
 from hrc_drake.cell.contacts import Owner, geometry_owners, owner_pairs
 from hrc_drake.cell.controller import Controller, connect_controller
 from hrc_drake.cell.fault_report import fault_records
+from hrc_drake.cell.keep_clear import VIEW_TIMES
 from hrc_drake.cell.separation import SafetyLog
 from hrc_drake.cell.slot_monitor import CellConfiguration
 from hrc_drake.cell.station import CellStation
@@ -77,6 +78,12 @@ class RunResult:
     """The scenario's faults: when injected, detected, and what came of them."""
     interaction: str = ""
     """The interaction mode the robot ran in: `anticipate` or `wait`."""
+    separation: str = ""
+    """The separation mode: `predictive` or `reactive` (`SafetyConfig.separation`)."""
+    waited: float = 0.0
+    """Seconds the robot waited where it planned to, for the operator (predictive)."""
+    replans: int = 0
+    """Times the robot re-timed its plan because the body departed from its forecast."""
 
     @property
     def idle(self) -> tuple[float, ...]:
@@ -113,9 +120,20 @@ class RunResult:
             "wall_time": round(self.wall_time, 3),
             "real_time_factor": None if rtf is None else round(rtf, 3),
             "recording": str(self.recording) if self.recording else None,
-            "safety": self.safety.to_json() if self.safety is not None else None,
+            "safety": self._safety_json(),
             "faults": [f.to_json() for f in self.faults],
             "interaction": self.interaction,
+            "separation": self.separation,
+        }
+
+    def _safety_json(self) -> dict | None:
+        """The monitor's figures, and the planned waits and re-timings of predictive mode."""
+        if self.safety is None:
+            return None
+        return {
+            **self.safety.to_json(),
+            "planned_wait": round(self.waited, 3),
+            "replans": self.replans,
         }
 
 
@@ -249,6 +267,8 @@ class ClosedLoop:
             _StackLight(cell.meshcat) if setup.scenario.body.enabled else None,
             (still[0], Path(still[1])) if still is not None else None,
         )
+        if cell.meshcat is not None and setup.scenario.safety.separation == "predictive":
+            self.watch.forecast = _ForecastView(cell.meshcat, len(VIEW_TIMES))
         self.simulator.set_monitor(_monitor(self))
         self._started = False
 
@@ -395,6 +415,37 @@ class _StackLight:
             self.meshcat.SetProperty(f"/safety/{name}", "visible", name == state, now)
 
 
+class _ForecastView:
+    """With Meshcat (also in recordings): the controller's forecast of the operator's hand
+    over the next three seconds as translucent amber spheres, drawn each time the robot times
+    its plan around it (predictive separation), and the arm's planned wait marked by the
+    stack light's pole turning amber."""
+
+    RADIUS = 0.06  # m: the hand and the forecast's uncertainty
+
+    def __init__(self, meshcat, count: int):
+        from pydrake.geometry import Rgba, Sphere
+
+        self.meshcat, self.shown = meshcat, ()
+        for k in range(count):
+            meshcat.SetObject(f"/forecast/{k}", Sphere(self.RADIUS), Rgba(1.0, 0.6, 0.1, 0.25))
+            meshcat.SetProperty(f"/forecast/{k}", "visible", False, 0.0)
+
+    def show(self, status: SupervisorStatus, now: float) -> None:
+        """Draw the forecast of `status` when it changed (recorded at `now`)."""
+        from pydrake.math import RigidTransform
+
+        view = status.forecast_view if status.plan is not None else ()
+        if view == self.shown:
+            return
+        self.shown = view
+        for k, point in enumerate(view):
+            self.meshcat.SetTransform(f"/forecast/{k}", RigidTransform(list(point)), now)
+            self.meshcat.SetProperty(f"/forecast/{k}", "visible", True, now)
+        for k in range(len(view), len(VIEW_TIMES)):
+            self.meshcat.SetProperty(f"/forecast/{k}", "visible", False, now)
+
+
 @dataclass
 class _Watch:
     """What the loop's monitor keeps between calls."""
@@ -404,6 +455,7 @@ class _Watch:
     still: tuple[float, Path] | None
     next_check: float = 0.0
     welds: frozenset = frozenset()  # the welds applied last
+    forecast: _ForecastView | None = None
 
 
 def _monitor(loop: ClosedLoop):
@@ -424,6 +476,8 @@ def _monitor(loop: ClosedLoop):
             watch.contacts.check(cell.touching(context), handled or None, now)
         if watch.lights is not None:
             watch.lights.show(status, now)
+        if watch.forecast is not None:
+            watch.forecast.show(status, now)
         if watch.still is not None and now >= watch.still[0]:
             cell.save_still(context, watch.still[1])
             watch.still = None
@@ -499,6 +553,9 @@ def _result(loop: ClosedLoop, wall: float, path, interrupted: bool) -> RunResult
         speed_changes=tuple(watch.lights.changes) if watch.lights is not None else (),
         interrupted=interrupted,
         interaction=setup.scenario.interaction.mode,
+        separation=setup.scenario.safety.separation,
+        waited=status.waited,
+        replans=status.replans,
         faults=tuple(
             fault_records(
                 setup.scenario.faults, loop.cell.injected(root), status.detections, root.get_time()

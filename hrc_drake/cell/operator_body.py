@@ -36,6 +36,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.framework import LeafSystem
 
 from hrc_drake.cell.sim_operator import ActivityKind, OperatorActivity
+from hrc_drake.hri.activity import SHOULDER, bolting_hand, min_jerk
 from hrc_drake.hri.scenario import BodyConfig
 
 UPPER_ARM, FOREARM = 0.30, 0.32  # shoulder-elbow, elbow-hand centre [m] (adult, ~50th pct)
@@ -43,7 +44,6 @@ ARM_RADII = (0.045, 0.04)
 HAND_RADIUS = 0.05
 TORSO_RADIUS, TORSO_LENGTH = 0.15, 0.45
 HEAD_RADIUS = 0.10
-SHOULDER = np.array([-0.05, 0.18, 0.50])  # right shoulder from the stance point at table height
 TORSO_CENTRE = np.array([0.0, 0.0, 0.25])
 HEAD_CENTRE = np.array([0.0, 0.0, 0.75])
 CHAIN_GAP = 1 - np.sqrt(3) / 2  # of a chain sphere's radius (see `_chain`)
@@ -77,38 +77,20 @@ class BodySpheres:
         return self  # immutable once made (Drake copies abstract values often)
 
 
-def min_jerk(x: float) -> float:
-    """The minimum-jerk profile 10x³ − 15x⁴ + 6x⁵ on [0, 1] (peak slope 1.875)."""
-    x = float(np.clip(x, 0.0, 1.0))
-    return x**3 * (10 - 15 * x + 6 * x**2)
-
-
 class BoltingScript:
     """The cell's operator: waits at the table edge; while bolting reaches to the part
-    (`reach_offset` from it), bolts, and is back at rest before the bolts are done.
-
-    Reach and withdrawal take `reach_time` each, shortened to fit three of them in the bolting
-    time; a reach the hand cannot make within `hand_speed` in that time (a minimum-jerk motion
-    peaks at 1.875 × distance / time) stops short along the way (lean runs' 0.5 s holds)."""
+    (`reach_offset` from it), bolts, and is back at rest before the bolts are done
+    (`hrc_drake.hri.activity.bolting_hand`)."""
 
     def __init__(self, config: BodyConfig):
-        self.rest = np.asarray(config.rest_hand, dtype=float)
-        self.offset = np.asarray(config.reach_offset, dtype=float)
-        self.speed, self.reach_time = config.hand_speed, config.reach_time
+        self.person = config.person()
+        self.left_handed = config.left_handed
 
     def __call__(self, now: float, activity: OperatorActivity, part: np.ndarray | None):
         """The hand centre at `now`."""
         if activity.kind != ActivityKind.BOLT or part is None:
-            return self.rest
-        length = activity.duration
-        phase = now - activity.start
-        if length <= 0 or not 0.0 <= phase <= length:
-            return self.rest
-        move = min(self.reach_time, length / 3)
-        path = part + self.offset - self.rest
-        reach = min(1.0, self.speed * move / 1.875 / max(np.linalg.norm(path), 1e-9))
-        out = min_jerk(phase / move) - min_jerk((phase - (length - 1.25 * move)) / move)
-        return self.rest + reach * out * path
+            return np.asarray(self.person.rest_hand, dtype=float)
+        return bolting_hand(self.person, now, activity.start, activity.duration, part)
 
 
 class ReachInto:
@@ -142,14 +124,14 @@ class ReachInto:
         return self.rest + out * (self.target - self.rest)
 
 
-def elbow(shoulder: np.ndarray, hand: np.ndarray) -> np.ndarray:
+def elbow(shoulder: np.ndarray, hand: np.ndarray, left: bool = False) -> np.ndarray:
     """The elbow of a two-link arm from `shoulder` to `hand` (elbow down and outward)."""
     d_vec = hand - shoulder
     d = float(np.clip(np.linalg.norm(d_vec), 1e-6, UPPER_ARM + FOREARM - 1e-6))
     u = d_vec / max(np.linalg.norm(d_vec), 1e-9)
     a = (UPPER_ARM**2 - FOREARM**2 + d**2) / (2 * d)
     h = np.sqrt(max(UPPER_ARM**2 - a**2, 0.0))
-    pole = np.array([0.0, 0.4, -1.0])
+    pole = np.array([0.0, -0.4 if left else 0.4, -1.0])
     w = pole - pole.dot(u) * u
     w /= max(np.linalg.norm(w), 1e-9)
     return shoulder + a * u + h * w
@@ -215,11 +197,11 @@ class BodyPose:
         return centres, _RADII, _GROUPS
 
 
-def body_pose(stance: np.ndarray, hand: np.ndarray) -> BodyPose:
-    """The body standing at `stance` (x, y) with the hand centre at `hand`; the torso leans
-    toward the hand when the arm is too short."""
+def body_pose(stance: np.ndarray, hand: np.ndarray, left: bool = False) -> BodyPose:
+    """The body standing at `stance` (x, y) with the hand centre at `hand` (of the left arm
+    with `left`); the torso leans toward the hand when the arm is too short."""
     base = np.array([stance[0], stance[1], 0.0])
-    shoulder = base + SHOULDER
+    shoulder = base + SHOULDER * [1.0, -1.0 if left else 1.0, 1.0]
     reach = np.linalg.norm(hand - shoulder)
     limit = 0.97 * (UPPER_ARM + FOREARM)
     lean = np.zeros(3)
@@ -232,7 +214,7 @@ def body_pose(stance: np.ndarray, hand: np.ndarray) -> BodyPose:
     shoulder = shoulder + lean
     return BodyPose(
         shoulder=shoulder,
-        elbow=elbow(shoulder, hand),
+        elbow=elbow(shoulder, hand, left),
         hand=hand,
         torso=base + TORSO_CENTRE + lean,
         head=base + HEAD_CENTRE + lean,
@@ -262,6 +244,7 @@ class OperatorBody(LeafSystem):
         super().__init__()
         self._stance = np.asarray(config.stance, dtype=float)
         self._script = script if script is not None else BoltingScript(config)
+        self._left = bool(getattr(self._script, "left_handed", config.left_handed))
         self._part_body = {
             name: int(plant.GetBodyIndices(model)[0]) for name, model in part_instances.items()
         }
@@ -283,7 +266,7 @@ class OperatorBody(LeafSystem):
         self._poses = self.DeclareAbstractInputPort(
             "body_poses", AbstractValue.Make([RigidTransform()])
         )
-        rest = body_pose(self._stance, self._script(0.0, OperatorActivity(), None))
+        rest = body_pose(self._stance, self._script(0.0, OperatorActivity(), None), self._left)
         self._pose = self.DeclareAbstractState(AbstractValue.Make(rest))
         self._spheres = self.DeclareAbstractState(AbstractValue.Make(_EMPTY))
         self.DeclareAbstractOutputPort(
@@ -316,7 +299,7 @@ class OperatorBody(LeafSystem):
         if activity.part in self._part_body:
             part = self._poses.Eval(context)[self._part_body[activity.part]].translation()
         hand = np.asarray(self._script(context.get_time(), activity, part), dtype=float)
-        return body_pose(self._stance, hand)
+        return body_pose(self._stance, hand, self._left)
 
     def _update(self, context, state) -> None:
         # A tracker's velocities: the change since its last sample.

@@ -108,6 +108,8 @@ class SafetyLog:
     body_contacts: int = 0
     slowed_time: float = 0.0
     stopped_time: float = 0.0
+    ssm_delay: float = 0.0  # s the plan fell behind while monitoring slowed or stopped it
+    limiting: bool = False  # monitoring slowed the plan and its speed is not back yet
 
     def __deepcopy__(self, memo) -> SafetyLog:
         return self  # immutable once made
@@ -126,6 +128,7 @@ class SafetyLog:
             "body_contacts": self.body_contacts,
             "slowed_time": round(self.slowed_time, 3),
             "stopped_time": round(self.stopped_time, 3),
+            "ssm_delay": round(self.ssm_delay, 3),
         }
 
 
@@ -482,8 +485,10 @@ def assess(
 def log_step(
     log: SafetyLog, reading: SeparationReading, intent: MotionIntent, period: float
 ) -> SafetyLog:
-    """`log` with one more monitor period: the reading's figures, and the time slowed or
-    stopped while the plan moves the arm (`plan_moves`) at a rate below 1 or at 0."""
+    """`log` with one more monitor period: the reading's figures, the time slowed or stopped
+    while the plan moves the arm (`plan_moves`) at a rate below 1 or at 0, and the delay that
+    monitoring added: (1 − rate) × period from the moment it limits the speed until the rate is
+    back at 1 (the ramp back counts; a stop to turn, or the protective stop, does not)."""
     log = replace(
         log,
         steps=log.steps + 1,
@@ -500,6 +505,11 @@ def log_step(
             imposed=log.imposed + (0 if commanded else short),
         )
     if plan_moves(intent):
+        limiting = log.limiting or reading.limit < 1.0 - 1e-9
+        if limiting:
+            log = replace(log, ssm_delay=log.ssm_delay + (1.0 - intent.rate) * period)
+        limiting = limiting and not (reading.limit >= 1.0 - 1e-9 and intent.rate >= 1.0 - 1e-9)
+        log = replace(log, limiting=limiting)
         if intent.rate <= 1e-9:
             log = replace(log, stopped_time=log.stopped_time + period)
         elif intent.rate < 1.0 - 1e-9:

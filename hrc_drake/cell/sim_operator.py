@@ -19,6 +19,7 @@ station applies: simulator only). The controller sees none of this: only `hri.in
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from enum import StrEnum
 
@@ -42,8 +43,8 @@ class ActivityKind(StrEnum):
 @dataclass(frozen=True)
 class OperatorActivity:
     """The simulated operator's activity: `kind` on `part` from `start` for `duration` seconds
-    (decision `step`); `answered_step` and `answered_at` say when the operator last indicated
-    a task (scripted body motions may key on it)."""
+    (decision `step`); `answered_step`, `answered_at` and `answered_task` say when the operator
+    last indicated a task, and which (body motions key on it)."""
 
     kind: ActivityKind = ActivityKind.REST
     part: str = ""
@@ -52,6 +53,7 @@ class OperatorActivity:
     step: int = 0
     answered_step: int = 0
     answered_at: float = float("-inf")
+    answered_task: str = ""
 
     def __deepcopy__(self, memo) -> OperatorActivity:
         return self  # immutable
@@ -76,9 +78,17 @@ class SimulatedOperator(LeafSystem):
     `hri.indication` (Indication), `activity` (OperatorActivity), `bolts` (frozenset[Weld]).
     Updated every `period` seconds."""
 
-    def __init__(self, operator: Operator, bolt_time: float, period: float):
+    def __init__(
+        self,
+        operator: Operator,
+        bolt_time: float,
+        period: float,
+        busy_until: Callable[[OperatorActivity], float] | None = None,
+    ):
         super().__init__()
         self._operator, self._bolt_time = operator, bolt_time
+        # When the hands are free to bolt (an operator still fetching bolts starts after).
+        self._busy_until = busy_until
         self._prompt = self.DeclareAbstractInputPort("hri.prompt", AbstractValue.Make(Prompt()))
         self._configuration = self.DeclareAbstractInputPort(
             "configuration", AbstractValue.Make(CellConfiguration())
@@ -113,18 +123,21 @@ class SimulatedOperator(LeafSystem):
             task = self._answer(prompt)
         if task is not None:
             indication = Indication(prompt.step, task, False, now)
-            activity = replace(activity, answered_step=prompt.step, answered_at=now)
+            activity = replace(
+                activity, answered_step=prompt.step, answered_at=now, answered_task=task
+            )
             if task == UNDO and prompt.state:
                 parts = self._parts_at(context, prompt.state[-1])
                 bolts = frozenset(w for w in bolts if w.part not in parts)
                 pending = pending - parts
         elif prompt.kind == PromptKind.BOLT and prompt.step == indication.step:
             if not indication.bolted and activity.kind != ActivityKind.BOLT:
+                free = now if self._busy_until is None else self._busy_until(activity)
                 activity = replace(
                     activity,
                     kind=ActivityKind.BOLT,
                     part=prompt.part,
-                    start=now,
+                    start=max(now, free),
                     duration=self._bolt_time,
                     step=prompt.step,
                 )

@@ -58,6 +58,7 @@ from pydrake.systems.sensors import CameraConfig, RgbdSensor
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.arm_servo import GravityCompensation, servo_actuators
 from hrc_drake.cell.contacts import geometry_owners, owner_pairs
+from hrc_drake.cell.desk import DeskScript, add_bins, desk_of
 from hrc_drake.cell.faults import FaultInjector, SilentOperator
 from hrc_drake.cell.gripper import add_gripper_ports
 from hrc_drake.cell.obstacle import (
@@ -328,12 +329,22 @@ def _add_arm(builder: DiagramBuilder, plant: MultibodyPlant, ur3) -> None:
     builder.Connect(weight.get_output_port(), plant.get_actuation_input_port(ur3))
 
 
+def _body_script(scenario: Scenario, frames: CellFrames, body_script):
+    """The operator body's script: the one given, else the scenario's activity (`desk`: this
+    operator seed's person on the layout's desk; `bolting`: `BoltingScript`, as None)."""
+    if body_script is not None or scenario.body.activity != "desk":
+        return body_script
+    person = scenario.body.person(seed=scenario.operator.seed)
+    return DeskScript(person, desk_of(frames, frames.design.layout))
+
+
 def _add_operator(builder, plant, scene_graph, parts, scenario: Scenario, operator, body_script):
     """The simulated operator and its body (a tracker that sees nobody without one); returns
     the simulated operator."""
     run = scenario.run
+    busy = getattr(body_script, "busy_until", None)
     person = builder.AddNamedSystem(
-        "operator", SimulatedOperator(operator, scenario.motion.hold_time, run.period)
+        "operator", SimulatedOperator(operator, scenario.motion.hold_time, run.period, busy)
     )
     builder.ExportInput(person.GetInputPort("hri.prompt"), "hri.prompt")
     builder.ExportOutput(person.GetOutputPort("hri.indication"), "hri.indication")
@@ -523,6 +534,9 @@ def make_cell_station(
     else:
         _export_disturbance(builder, plant)
     parts = {name: instances[name] for name in design.instance_names}
+    if scenario.body.enabled:
+        add_bins(scene_graph, design.layout)
+    body_script = _body_script(scenario, frames, body_script)
     person = _add_operator(builder, plant, scene_graph, parts, scenario, operator, body_script)
     if injector is not None:  # it counts tasks from the prompts the station shows
         builder.ConnectInput("hri.prompt", injector.GetInputPort("hri.prompt"))

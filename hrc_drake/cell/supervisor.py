@@ -48,6 +48,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 
 from hrc_drake.cell.anticipation import Anticipation, back_above, wait_point
 from hrc_drake.cell.intent import MotionIntent
+from hrc_drake.cell.keep_clear import KeepClear, KeepClearSettings
 from hrc_drake.cell.recovery import FaultRecovery
 from hrc_drake.cell.slot_monitor import CellConfiguration, PartStatus
 from hrc_drake.cell.supervisor_state import (
@@ -68,7 +69,7 @@ from hrc_drake.tasks.policy import Policy
 from hrc_drake.tasks.tokens import UNDO
 
 
-class Supervisor(FaultRecovery, Anticipation, LeafSystem):
+class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
     """Task-level state machine of the cell (see the module docstring).
 
     Input ports: `configuration` (CellConfiguration), `hri.indication` (Indication),
@@ -94,6 +95,7 @@ class Supervisor(FaultRecovery, Anticipation, LeafSystem):
         home_opening: float,
         limits: SupervisorLimits | None = None,
         on_task: Callable[[TaskRecord], None] | None = None,
+        keep_clear: KeepClearSettings | None = None,
     ):
         super().__init__()
         policy.matches(space.spec)
@@ -101,6 +103,8 @@ class Supervisor(FaultRecovery, Anticipation, LeafSystem):
         self._limits = limits if limits is not None else SupervisorLimits()
         self._on_task = on_task
         self._declare_inputs()
+        clear = keep_clear if keep_clear is not None else KeepClearSettings()
+        self._declare_keep_clear(clear.forecast, clear.scale, clear.max_wait, clear.departure)
         initial = SupervisorStatus(
             q_hold=tuple(float(x) for x in home), opening_hold=float(home_opening)
         )
@@ -162,8 +166,13 @@ class Supervisor(FaultRecovery, Anticipation, LeafSystem):
         if s.mode != Mode.EXECUTE or s.plan is None:
             output.set_value(MotionIntent(rate=s.rate))
             return
-        plan, tau = s.plan, s.plan_time(context.get_time())
+        now = context.get_time()
+        plan, tau = s.plan, s.plan_time(now)
         grasped = plan.segment(Stage.GRASP).end <= tau < plan.t_release
+        if s.held(now):  # a planned wait for the operator: the arm stands still
+            carrying = plan.instance if grasped else None
+            output.set_value(MotionIntent(carrying=carrying, moving=False, rate=s.rate))
+            return
         moving = tau < plan.duration and not s.holding_for_bolts(tau) and s.rate > 0
         qdot = plan.trajectory.EvalDerivative(min(tau, plan.duration), 1).ravel()
         output.set_value(
@@ -188,6 +197,7 @@ class Supervisor(FaultRecovery, Anticipation, LeafSystem):
             self._check_tracking(status, context, now)
             status = self._advance(status, float(np.clip(limit, 0.0, 1.0)), now)
             status = self._step(status, context, now)
+            status = self._keep_clear(status, context, now)
         except SupervisorError as err:
             status = self._stop(status, context, now, err)
         state.get_mutable_abstract_state(self._status_index).set_value(status)
@@ -268,7 +278,13 @@ class Supervisor(FaultRecovery, Anticipation, LeafSystem):
         qdot = np.abs(plan.trajectory.EvalDerivative(min(tau, plan.duration), 1)).max()
         step = self._limits.joint_acceleration * self._limits.period / max(qdot, 1e-9)
         speed = float(np.clip(limit, s.speed - step, s.speed + step))
-        return replace(s, tau=tau, tau_time=now, speed=speed, rate=speed)
+        held, since = s.held(now), s.held_since
+        if held and (since is None or since[0] != s.hold_at(now).tau):
+            since = (s.hold_at(now).tau, now)
+        waited = s.waited + (now - s.tau_time if held else 0.0)
+        return replace(
+            s, tau=tau, tau_time=now, speed=speed, rate=speed, waited=waited, held_since=since
+        )
 
     def _decide(self, s: SupervisorStatus, config: CellConfiguration, now: float):
         """At a task boundary: the MDP state from the cell, then the policy's proposal on the
@@ -407,6 +423,8 @@ class Supervisor(FaultRecovery, Anticipation, LeafSystem):
             planned_ahead=s.returning,  # a part put back: nothing to plan ahead for yet
             # Putting a part back, the arm stops above it, where the indicated task starts.
             turn_tau=back_above(plan) if s.returning else None,
+            holds=(),
+            held_since=None,
             idle=time.perf_counter() - s.requested_wall,
         )
         if started.awaiting and plan.task == started.committed:

@@ -8,7 +8,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hrc_drake.cell.desk import Anchor
 from hrc_drake.hri.messages import Prompt
+from hrc_drake.motion.clearance import Hold
 from hrc_drake.motion.plan import Plan
 from hrc_drake.motion.service import PlanRequest
 from hrc_drake.robot_models import UR3_JOINTS
@@ -127,6 +129,18 @@ class SupervisorStatus:
     recoveries: int = 0  # how often the task's part was picked again
     stopped: bool = False  # the protective-stop input is on
     detections: tuple[Detection, ...] = ()
+    # Predictive separation (`hrc_drake.cell.keep_clear`): where the plan waits for the
+    # operator (rest points and until when), what the waits were timed for, and what the
+    # tracker showed of the operator's activity.
+    holds: tuple[Hold, ...] = ()
+    clear_key: tuple = ()
+    seen: Anchor | None = None  # the activity as the tracker showed it (None: as forecast)
+    visiting: int | None = None  # the stay of the activity the hand is seen at
+    checked_at: float = float("-inf")  # when the tracked body was last held against it
+    replans: int = 0  # re-timed because the body departed from the forecast
+    waited: float = 0.0  # s spent in planned waits
+    held_since: tuple[float, float] | None = None  # (plan time, since when) of the wait now
+    forecast_view: tuple[tuple[float, float, float], ...] = ()  # forecast hand, for drawing
 
     def __deepcopy__(self, memo) -> SupervisorStatus:
         # Drake copies abstract values at every update and output evaluation; this value is
@@ -139,7 +153,22 @@ class SupervisorStatus:
         tau = self.tau + self.rate * (now - self.tau_time)
         if self.turn_tau is not None:
             tau = min(tau, self.turn_tau)
+        hold = self.hold_at(now)
+        if hold is not None:
+            tau = min(tau, hold.tau)
         return float(np.clip(tau, 0.0, self.plan.duration)) if self.plan is not None else tau
+
+    def hold_at(self, now: float) -> Hold | None:
+        """The planned wait the arm is in, or comes to, at `now` (None: none ahead)."""
+        for hold in self.holds:
+            if now < hold.until and self.tau <= hold.tau + 1e-9:
+                return hold
+        return None
+
+    def held(self, now: float) -> bool:
+        """Whether the arm stands in a planned wait at `now`."""
+        hold = self.hold_at(now)
+        return hold is not None and self.plan_time(now) >= hold.tau - 1e-9
 
     def holding_for_bolts(self, tau: float) -> bool:
         """Whether the robot holds the placed part still, waiting for the operator's bolts."""

@@ -26,6 +26,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from hrc_drake.hri.activity import Person, vary_person
 from hrc_drake.hri.faults import FaultConfig, FaultError, check_faults
 from hrc_drake.hri.operator import ScriptedOperator, StochasticOperator, parse_operator_script
 from hrc_drake.layout import CellLayout
@@ -219,6 +220,11 @@ class SafetyConfig:
         robot_uncertainty: Z_r [m]; 0 for the simulated robot.
         slow_band: m above S_p within which the robot already slows down.
         moving_speed: rad/s; a robot joint faster than this counts as moving (violations).
+        separation: `predictive` (the robot times its moves around where it forecasts the
+            operator's body, monitoring underneath) or `reactive` (monitoring alone).
+        departure: m; the observed hand this far from the forecast makes the robot forecast
+            again and re-time its moves.
+        max_wait: the longest a move is held back for the operator [s].
     """
 
     enabled: bool = True
@@ -230,27 +236,71 @@ class SafetyConfig:
     robot_uncertainty: float = 0.0
     slow_band: float = 0.05
     moving_speed: float = 0.01
+    separation: str = "predictive"
+    departure: float = 0.15
+    max_wait: float = 6.0
+
+
+_PERSON = Person()  # the defaults live there (Drake-free module)
 
 
 @dataclass
 class BodyConfig:
-    """The operator's kinematic body (hand, forearm, upper arm, torso, head) beside the table.
+    """The operator's kinematic body (hand, forearm, upper arm, torso, head) beside the table, and
+    what it does (`hrc_drake.hri.activity`).
 
     Attributes:
         enabled: put the body in the scene (off: no body, no monitoring).
+        activity: `bolting` (the hand reaches in only to bolt the held part: the Table 2 rows'
+            operator) or `desk` (it also points at the target seat and fetches bolts and nuts
+            from the layout's bins, sharing the desk with the robot).
         stance: [x, y] of the operator's torso axis in world [m] (the table edge is x = 0.75).
         rest_hand: [x, y, z] of the waiting hand in world [m].
         reach_offset: [x, y, z] of the hand from the held part while bolting [m].
         hand_speed: the hand's peak speed [m/s].
         reach_time: seconds of the reach and of the withdrawal (shortened to fit the hold).
+        reach: m from shoulder to hand centre with the arm stretched (the person may also lean
+            `hrc_drake.hri.activity.LEAN` toward the table).
+        left_handed: works with the left hand.
+        fetch_lag: seconds at rest between pointing and fetching (`desk`).
+        grab_time: seconds in a bin per handful (`desk`).
+        handful: bolts or nuts taken per grab (`desk`).
+        point_time: seconds the hand points over the target seat (`desk`).
+        spread: each operator seed draws its own person around these values (0: this person;
+            `hrc_drake.hri.activity.vary_person`).
     """
 
     enabled: bool = True
-    stance: list[float] = field(default_factory=lambda: [0.90, -0.05])
-    rest_hand: list[float] = field(default_factory=lambda: [0.70, 0.10, 0.06])
-    reach_offset: list[float] = field(default_factory=lambda: [0.14, 0.0, 0.04])
-    hand_speed: float = 1.6
-    reach_time: float = 0.6
+    activity: str = "bolting"
+    stance: list[float] = field(default_factory=lambda: list(_PERSON.stance))
+    rest_hand: list[float] = field(default_factory=lambda: list(_PERSON.rest_hand))
+    reach_offset: list[float] = field(default_factory=lambda: list(_PERSON.reach_offset))
+    hand_speed: float = _PERSON.hand_speed
+    reach_time: float = _PERSON.reach_time
+    reach: float = _PERSON.reach
+    left_handed: bool = _PERSON.left_handed
+    fetch_lag: float = _PERSON.fetch_lag
+    grab_time: float = _PERSON.grab_time
+    handful: int = _PERSON.handful
+    point_time: float = _PERSON.point_time
+    spread: float = 0.0
+
+    def person(self, seed: int | None = None) -> Person:
+        """The person these values describe; with an operator `seed`, the one drawn for it."""
+        person = Person(
+            stance=(self.stance[0], self.stance[1]),
+            rest_hand=tuple(self.rest_hand),
+            hand_speed=self.hand_speed,
+            reach=self.reach,
+            left_handed=self.left_handed,
+            fetch_lag=self.fetch_lag,
+            grab_time=self.grab_time,
+            handful=self.handful,
+            point_time=self.point_time,
+            reach_offset=tuple(self.reach_offset),
+            reach_time=self.reach_time,
+        )
+        return person if seed is None else vary_person(person, seed, self.spread)
 
 
 @dataclass
@@ -492,19 +542,81 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
             raise fail(f"body.{key}", f"give {want} coordinates in metres")
     if not 3.0 <= scenario.station.rg2.grip_force <= 40.0:
         raise fail("station.rg2.grip_force", "the RG2 grips with 3 to 40 N")
-    if not 0 < scenario.body.hand_speed <= 2.0:
-        raise fail("body.hand_speed", "give a speed in (0, 2] m/s (1.6 m/s: ISO 13855)")
     if scenario.cell is not None:
         try:
             scenario.cell.check("cell")
         except ValueError as err:
             raise ScenarioError(f"scenario {source}: {err}") from err
+    _check_body(scenario, fail)
+    _check_separation(scenario.safety, fail)
     _check_interaction(scenario.interaction, fail)
     try:
         check_faults(scenario.faults, source)
     except FaultError as err:
         raise ScenarioError(str(err)) from err
     return scenario
+
+
+SEPARATION_MODES = ("predictive", "reactive")
+ACTIVITIES = ("bolting", "desk")
+
+
+def _check_separation(safety: SafetyConfig, fail) -> None:
+    """The separation mode and the forecast's bounds."""
+    if safety.separation not in SEPARATION_MODES:
+        raise fail(
+            "safety.separation",
+            f"unknown mode {safety.separation!r}; use {' or '.join(SEPARATION_MODES)}",
+        )
+    if safety.departure <= 0:
+        raise fail("safety.departure", f"give a distance > 0 m, got {safety.departure}")
+    if safety.max_wait < 0:
+        raise fail("safety.max_wait", f"give seconds >= 0, got {safety.max_wait}")
+
+
+def _check_body(scenario: Scenario, fail) -> None:
+    """The operator's body: its values, and bins its hand reaches (with either hand, when
+    persons vary)."""
+    body = scenario.body
+    if not 0 < body.hand_speed <= 2.0:
+        raise fail("body.hand_speed", "give a speed in (0, 2] m/s (1.6 m/s: ISO 13855)")
+    if body.activity not in ACTIVITIES:
+        raise fail("body.activity", f"unknown activity {body.activity!r}; use one of {ACTIVITIES}")
+    for key in ("reach", "reach_time"):
+        if getattr(body, key) <= 0:
+            raise fail(f"body.{key}", f"must be > 0, got {getattr(body, key)}")
+    for key in ("fetch_lag", "grab_time", "point_time"):
+        if getattr(body, key) < 0:
+            raise fail(f"body.{key}", f"give seconds >= 0, got {getattr(body, key)}")
+    if body.handful < 1:
+        raise fail("body.handful", f"a hand takes at least 1 bolt per grab, got {body.handful}")
+    if not 0 <= body.spread <= 0.5:
+        raise fail("body.spread", f"give a fraction in [0, 0.5], got {body.spread}")
+    if body.activity != "desk" or not body.enabled:
+        return
+    layout = scenario.cell
+    if layout is None:
+        from hrc_drake.layout import layout_from
+        from hrc_drake.tasks.spec import SpecError, load_spec
+
+        try:
+            layout = layout_from(load_spec(scenario.assembly_path).cell)
+        except (SpecError, OSError, ValueError):
+            return  # the spec's own errors are reported where it is loaded
+    person = body.person()
+    hands = [person]
+    if body.spread > 0:
+        hands.append(dataclasses.replace(person, left_handed=not person.left_handed))
+    for i, b in enumerate(layout.bins):
+        for hand in hands:
+            if not hand.reaches(b.grab_point()):
+                side = "left" if hand.left_handed else "right"
+                raise fail(
+                    f"cell.bins[{i}]",
+                    f"bin {b.name!r} at {b.position} is out of the operator's {side} hand's "
+                    f"reach ({body.reach} m from the shoulder, standing at {body.stance}); "
+                    "move it toward the operator",
+                )
 
 
 def _check_interaction(it: InteractionConfig, fail) -> None:

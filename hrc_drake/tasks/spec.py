@@ -7,7 +7,9 @@ An assembly spec is a YAML file (see `models/assemblies/flange.yaml`) with these
 - ``parts``: symbol -> ``name``, ``count``, ``footprint`` (base slots it covers, adjacent) and,
   for a part others sit on, ``host: {tag}`` (the tag written in tokens of parts on it). A host
   offers one seat over each base slot it covers. Optional ``bolt_time``: seconds the operator
-  takes to bolt one such part (default `DEFAULT_BOLT_TIME`; used by time-aware cost tables).
+  takes to bolt one such part (default `DEFAULT_BOLT_TIME`; used by time-aware cost tables);
+  ``bolts``: how many bolts (each with a nut) the operator fetches for it (default
+  `DEFAULT_BOLTS`; the operator's activity on a shared desk).
 - ``mounts``: list of ``{part, to, count}``: how many of a part go on the base or on a host part.
   The counts of a part add up to its ``count``.
 - ``precedence`` (optional): ``complete_first: [H, ...]`` — once a host H is placed, the parts
@@ -49,6 +51,9 @@ BASE = "base"
 # Seconds the operator takes to bolt a part when its spec gives no `bolt_time`: the robot's
 # bolting hold in the cell (MotionOptions.hold_time).
 DEFAULT_BOLT_TIME = 5.0
+# Bolts per part when the spec does not say (our assumption: the paper says its flanges are
+# bolted, with bolts and nuts on the desk, but not how many).
+DEFAULT_BOLTS = 4
 _SYMBOL = re.compile(r"^[A-Z][A-Za-z]*$")
 
 
@@ -67,6 +72,14 @@ class PartType:
     host_tag: str | None = None
     bolt_time: float | None = None
     """Seconds the operator takes to bolt one part (None: `DEFAULT_BOLT_TIME`)."""
+    bolts: int = 0
+    """Bolts (each with its nut) the operator fetches for one part (0: `DEFAULT_BOLTS`). Not
+    part of the hash: it moves the operator's hands, not the states or rewards."""
+
+    @property
+    def bolt_count(self) -> int:
+        """The bolts one part takes (`bolts`, or `DEFAULT_BOLTS`)."""
+        return self.bolts or DEFAULT_BOLTS
 
     @property
     def is_host(self) -> bool:
@@ -298,7 +311,9 @@ def parse_spec(data: Any, source: str = "<memory>") -> AssemblySpec:
             raise _fail(
                 source, key, "a part symbol is a capital letter and letters, not the base's"
             )
-        _check_keys(desc, {"name", "count", "footprint", "host", "bolt_time"}, source, key + ".")
+        _check_keys(
+            desc, {"name", "count", "footprint", "host", "bolt_time", "bolts"}, source, key + "."
+        )
         count = _positive_int(_require(desc, "count", source, key + "."), source, key + ".count")
         footprint = _positive_int(desc.get("footprint", 1), source, key + ".footprint")
         if footprint > slots:
@@ -324,8 +339,9 @@ def parse_spec(data: Any, source: str = "<memory>") -> AssemblySpec:
                     f"must be a positive number of seconds, got {bolt_time!r}",
                 )
             bolt_time = float(bolt_time)
+        bolts = _positive_int(desc.get("bolts", DEFAULT_BOLTS), source, key + ".bolts")
         name_ = str(desc.get("name", symbol))
-        parts.append(PartType(symbol, name_, count, footprint, host_tag, bolt_time))
+        parts.append(PartType(symbol, name_, count, footprint, host_tag, bolt_time, bolts))
     by_symbol = {p.symbol: p for p in parts}
 
     raw_mounts = _require(data, "mounts", source, "")

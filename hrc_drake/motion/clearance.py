@@ -1,0 +1,175 @@
+"""Time a plan's moves around where a person is forecast to be.
+
+A plan is a chain of arm motions, each from rest to rest (`Plan.motions`). Given a forecast of
+the operator's body over time (`Occupancy`: spheres sampled in time, with their velocities) and
+the speed scale that speed-and-separation monitoring would allow the robot at a pose, a speed
+and a body (`ScaleFn`, the controller's own monitor applied to the forecast), `time_around`
+chooses for each motion still to come how long the arm waits at the rest point where it starts:
+the shortest wait after which the monitor is forecast never to slow the motion (the motion keeps
+the protective separation against the forecast body, even starting up to `RUNNING_LATE` late),
+or, if there is none within `max_wait`, the wait that costs least: the wait plus the time the
+monitor is forecast to add to the motion (`forecast_delay`), weighed `STOP_PENALTY` times for
+the braking and restarting it leaves out. The arm waits where its
+motions meet, so every trajectory it follows is still the validated plan; monitoring stays
+underneath and acts on the body as measured.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from hrc_drake.motion.plan import Plan, Stage
+
+# (q, q̇ at full speed, the part carried or None, body centres k×3, radii k, velocities k×3)
+#   -> the speed scale in [0, 1] that separation monitoring allows
+ScaleFn = Callable[[np.ndarray, np.ndarray, str | None, np.ndarray, np.ndarray, np.ndarray], float]
+# A forecast slowing costs this many times its lost seconds: the monitor brakes and restarts
+# the arm within the joint acceleration limit, which the forecast leaves out, and the person may
+# come closer than forecast (our weighting).
+STOP_PENALTY = 1.2
+SAMPLE = 0.15  # s between the checked poses of a motion
+WAIT_STEP = 0.2  # s between the waits tried
+# A motion is checked as if it started this late too: the arm comes to a rest point later than
+# its plan when the monitor slowed it on the way, or its speed ramps up again (our choice).
+RUNNING_LATE = (0.0,)
+_EPS = 1e-6
+
+
+@dataclass(frozen=True)
+class Occupancy:
+    """A forecast of the operator's body: at each of `times` (k, ascending, absolute [s]) the
+    body's spheres' `centres` (k×n×3) and `velocities` (k×n×3), `radii` (n) [m]. Outside
+    [times[0], times[-1]] nothing is forecast (the monitor alone acts there)."""
+
+    times: np.ndarray
+    centres: np.ndarray
+    radii: np.ndarray
+    velocities: np.ndarray
+
+    def at(self, t: float) -> int | None:
+        """The index of the sample nearest `t`, None outside the forecast."""
+        times = self.times
+        if len(times) == 0 or t < times[0] - _EPS or t > times[-1] + _EPS:
+            return None
+        i = int(np.searchsorted(times, t))
+        if i > 0 and (i == len(times) or t - times[i - 1] <= times[i] - t):
+            i -= 1
+        return i
+
+    def overlaps(self, start: float, end: float) -> bool:
+        """Whether the forecast covers any of [start, end]."""
+        return len(self.times) > 0 and start <= self.times[-1] and end >= self.times[0]
+
+
+@dataclass(frozen=True)
+class Hold:
+    """The arm waits at plan time `tau` (a rest point) until simulated time `until` [s]."""
+
+    tau: float
+    until: float
+
+
+def carried(plan: Plan, tau: float) -> str | None:
+    """The part in the gripper at plan time `tau` (None: empty)."""
+    return plan.instance if plan.segment(Stage.GRASP).end <= tau < plan.t_release else None
+
+
+@dataclass(frozen=True)
+class _Poses:
+    """A motion's checked poses: plan times from the motion's start, q, q̇, carried part."""
+
+    offsets: np.ndarray
+    q: np.ndarray
+    qdot: np.ndarray
+    carrying: tuple[str | None, ...]
+
+
+def _poses(plan: Plan, start: float, duration: float) -> _Poses:
+    count = max(2, int(np.ceil(duration / SAMPLE)) + 1)
+    taus = np.linspace(start, start + duration, count)
+    q = np.array([plan.trajectory.value(t).ravel() for t in taus])
+    qdot = np.array([plan.trajectory.EvalDerivative(t, 1).ravel() for t in taus])
+    return _Poses(taus - start, q, qdot, tuple(carried(plan, t) for t in taus))
+
+
+def forecast_delay(poses: _Poses, begin: float, occupancy: Occupancy, scale: ScaleFn) -> float:
+    """Seconds the monitor is forecast to add to the motion if it starts at `begin` (absolute):
+    the motion played forward in steps of its pose spacing, its plan time advancing at the
+    scale the monitor would allow against the forecast body at each moment (a stopped arm
+    stays where it stopped until the body leaves). Capped at the forecast's end."""
+    offsets = poses.offsets
+    duration = float(offsets[-1])
+    dt = duration / max(len(offsets) - 1, 1)
+    if dt <= 0:
+        return 0.0
+    t, tau = begin, 0.0
+    while tau < duration - _EPS:
+        k = min(round(tau / dt), len(offsets) - 1)
+        i = occupancy.at(t)
+        if i is None and t > occupancy.times[-1]:
+            break  # past the forecast: nothing slows it any more
+        s = 1.0
+        if i is not None and np.abs(poses.qdot[k]).max() > _EPS:
+            s = scale(
+                poses.q[k],
+                poses.qdot[k],
+                poses.carrying[k],
+                occupancy.centres[i],
+                occupancy.radii,
+                occupancy.velocities[i],
+            )
+        tau += s * dt
+        t += dt
+    return max(0.0, (t - begin) - tau) if tau < duration - _EPS else (t - begin) - duration
+
+
+def time_around(
+    plan: Plan,
+    tau: float,
+    now: float,
+    occupancy: Occupancy,
+    scale: ScaleFn,
+    max_wait: float,
+    end_tau: float | None = None,
+    spent: tuple[float, float] | None = None,
+) -> tuple[Hold, ...]:
+    """The waits of the motions of `plan` that start at or after plan time `tau` (the arm is
+    there at `now`) and before `end_tau` (None: the plan's end), as `Hold`s (see the module
+    docstring). A plan the forecast never slows gets none. `spent`: (plan time, seconds) the arm
+    has waited at a rest point already; its motion waits at most `max_wait` in all, so that a
+    forecast that keeps moving cannot hold the arm for ever."""
+    end_tau = plan.duration if end_tau is None else end_tau
+    holds: list[Hold] = []
+    shift = 0.0
+    for motion in plan.motions:
+        if motion.start < tau - _EPS or motion.start >= end_tau - _EPS:
+            continue
+        begin = now + (motion.start - tau) + shift
+        if not occupancy.overlaps(begin, begin + motion.duration + max_wait):
+            continue
+        poses = _poses(plan, motion.start, motion.duration)
+        longest = max_wait
+        if spent is not None and abs(spent[0] - motion.start) < _EPS:
+            longest = max(0.0, max_wait - spent[1])
+        best_wait, best_cost = 0.0, np.inf
+        for wait in np.arange(0.0, longest + _EPS, WAIT_STEP):
+            lost = max(
+                forecast_delay(poses, begin + wait + late, occupancy, scale)
+                for late in RUNNING_LATE
+            )
+            if lost <= _EPS:  # the first wait after which separation is forecast to hold
+                best_wait = float(wait)
+                break
+            cost = wait + STOP_PENALTY * lost
+            if cost < best_cost - _EPS:
+                best_wait, best_cost = float(wait), cost
+        if best_wait > 0.0:
+            shift += best_wait
+            holds.append(Hold(motion.start, begin + best_wait))
+    return tuple(holds)
+
+
+__all__ = ["Hold", "Occupancy", "ScaleFn", "carried", "forecast_delay", "time_around"]

@@ -1,0 +1,207 @@
+"""The operator on a shared desk: the activity model, the motion layer's timing around a
+forecast body, predictive separation in the cell, and the inputs it refuses."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from pydrake.trajectories import PiecewisePolynomial
+
+from hrc_drake.hri.activity import Desk, DeskBin, Person, indication_timeline, vary_person
+from hrc_drake.hri.scenario import ScenarioError, load_scenario
+from hrc_drake.motion.clearance import Occupancy, time_around
+from hrc_drake.motion.plan import MotionTiming, Plan, Segment, Stage
+
+DESK = Desk(
+    bins=(DeskBin("b", "bolts", (0.44, -0.22, 0.05)), DeskBin("n", "nuts", (0.47, -0.10, 0.05))),
+    seats={"F1": (0.30, -0.08, 0.03)},
+    parts={"F1": "F"},
+    bolts={"F": 6},
+)
+
+
+def test_after_indicating_the_hand_points_then_fetches_bolts_then_nuts_and_rests():
+    person = Person(hand_speed=1.0, handful=4, grab_time=0.5, point_time=1.0, fetch_lag=0.3)
+    timeline = indication_timeline(person, DESK, "F1", indicated_at=10.0)
+    stays = [m for m in timeline.moves if np.allclose(m.a, m.b) and m.end > m.start]
+    assert [m.what for m in stays] == ["point", "rest", "fetch", "fetch"]
+    point, lag, bolts, nuts = stays
+    assert np.allclose(point.a, DESK.point("F1")) and point.end - point.start == pytest.approx(1.0)
+    assert lag.end - lag.start == pytest.approx(0.3)
+    # 6 bolts at 4 a handful: two grabs in each bin.
+    assert np.allclose(bolts.a, DESK.bins[0].grab) and bolts.end - bolts.start == pytest.approx(1.0)
+    assert np.allclose(nuts.a, DESK.bins[1].grab)
+    # Each move takes the time that makes the minimum-jerk peak the hand speed.
+    first = timeline.moves[0]
+    distance = np.linalg.norm(first.b - first.a)
+    assert first.end - first.start == pytest.approx(1.875 * distance / 1.0)
+    assert np.abs(timeline.velocity(first.start + (first.end - first.start) / 2)).max() > 0
+    assert np.allclose(timeline.at(timeline.end + 1.0), person.rest_hand)
+    assert timeline.doing(point.start + 0.5) == "point"
+    assert indication_timeline(person, DESK, "undo", 10.0).moves == ()
+
+
+def test_each_operator_seed_is_its_own_person_and_the_same_seed_the_same_person():
+    person = Person()
+    drawn = [vary_person(person, seed, 0.3) for seed in range(8)]
+    assert len({p.hand_speed for p in drawn}) == 8
+    assert vary_person(person, 3, 0.3) == drawn[3]
+    assert vary_person(person, 3, 0.0) == person
+    for p in drawn:
+        assert 0.7 * person.hand_speed <= p.hand_speed <= 1.3 * person.hand_speed
+
+
+def _plan_along_x(duration: float = 4.0) -> Plan:
+    """A plan whose first joint goes 0 → 1 over two motions (0–2 s: 0 → 0.5, 2–4 s: 0.5 → 1),
+    each from rest to rest; the scale function below reads joint 0 as the robot's x."""
+    times = np.array([0.0, 2.0, 4.0])
+    knots = np.zeros((6, 3))
+    knots[0] = [0.0, 0.5, 1.0]
+    # Rest at every knot: cubics from rest to rest.
+    pieces = [
+        PiecewisePolynomial.CubicHermite(times[k : k + 2], knots[:, k : k + 2], np.zeros((6, 2)))
+        for k in range(2)
+    ]
+    trajectory = pieces[0]
+    trajectory.ConcatenateInTime(pieces[1])
+    gripper = PiecewisePolynomial.ZeroOrderHold([0.0, duration], np.zeros((1, 2)))
+    segments = (
+        Segment(Stage.APPROACH, 0.0, 0.0),
+        Segment(Stage.GRASP, 0.0, 0.0),
+        Segment(Stage.CARRY, 0.0, 4.0),
+    )
+    motions = (MotionTiming("first", 0.0, 2.0, 2.0), MotionTiming("second", 2.0, 2.0, 2.0))
+    return Plan(
+        "F1", "part", frozenset(), trajectory, gripper, 4.0, 4.0, 4.0, segments, (), motions
+    )
+
+
+def _slows_near(q, qdot, carrying, centres, radii, velocities) -> float:
+    """Monitoring's stand-in: stop within 0.3 m of a body sphere, else full speed."""
+    robot = np.array([q[0], 0.0, 0.0])
+    return 0.0 if (np.linalg.norm(centres - robot, axis=1) - radii).min() < 0.3 else 1.0
+
+
+def _reach(times, at: float, start: float, end: float) -> Occupancy:
+    """A hand resting far away that reaches to x = `at` over [start, end]."""
+    centres = np.array([[[at if start <= t <= end else 5.0, 0.0, 0.0]] for t in times])
+    return Occupancy(times, centres, np.array([0.05]), np.zeros_like(centres))
+
+
+def test_the_plan_waits_where_its_motions_meet_until_a_forecast_reach_is_over():
+    plan = _plan_along_x()
+    times = np.arange(0.0, 12.0, 0.1)
+    reach = _reach(times, at=1.0, start=2.5, end=4.5)  # over the second motion's end
+    holds = time_around(plan, 0.0, 0.0, reach, _slows_near, max_wait=6.0)
+    assert len(holds) == 1
+    (hold,) = holds
+    assert hold.tau == pytest.approx(2.0)  # at rest between the motions, not on the way
+    # It waits just long enough: the second motion then never comes near the reach.
+    assert 4.5 - 2.0 <= hold.until <= 4.5 + 0.3
+    # A reach the forecast puts elsewhere, or nothing forecast: no wait (reactive's plan).
+    assert time_around(plan, 0.0, 0.0, _reach(times, 5.0, 2.5, 4.5), _slows_near, 6.0) == ()
+    empty = Occupancy(np.zeros(0), np.zeros((0, 1, 3)), np.array([0.05]), np.zeros((0, 1, 3)))
+    assert time_around(plan, 0.0, 0.0, empty, _slows_near, 6.0) == ()
+    # A reach longer than the longest wait: it waits about all it may (to the forecast's
+    # resolution), clear of the hand, rather than stand stopped beside it; the monitor does
+    # the rest.
+    long = _reach(times, at=1.0, start=2.5, end=11.0)
+    (hold,) = time_around(plan, 0.0, 0.0, long, _slows_near, max_wait=1.0)
+    assert hold.tau == pytest.approx(2.0) and 2.6 <= hold.until <= 3.0 + 1e-9
+    # Having waited there already, it waits no longer than the rest of the longest wait.
+    (hold,) = time_around(plan, 0.0, 0.0, long, _slows_near, max_wait=1.0, spent=(2.0, 0.6))
+    assert hold.until <= 2.4 + 1e-9
+
+
+@pytest.mark.parametrize(
+    ("text", "needle"),
+    [
+        ("{safety: {separation: sometimes}}", "safety.separation: unknown mode 'sometimes'"),
+        ("{body: {hand_speed: 0}}", "body.hand_speed"),
+        ("{body: {hand_speed: -1}}", "body.hand_speed"),
+        ("{body: {activity: juggling}}", "body.activity"),
+        (
+            "{cell: {bins: [{name: far, holds: nuts, position: [0.1, 0.45]}]}}",
+            "out of the operator's right hand's reach",
+        ),
+        (
+            "{cell: {bins: [{name: base, holds: nuts, position: [0.05, 0.02]}]}}",
+            "inside the robot's footprint",
+        ),
+        ("{cell: {bins: [{name: x, holds: screws, position: [0.5, 0.0]}]}}", "holds"),
+    ],
+)
+def test_bad_desk_inputs_are_one_line_errors(text, needle):
+    with pytest.raises(ScenarioError, match=None) as err:
+        load_scenario("shared-desk", text)
+    assert needle in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+def test_separation_flag_is_checked_before_any_work():
+    cmd = [sys.executable, "-m", "hrc_drake.cli", "simulate", "--separation", "maybe", "--json"]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [
+        "hrc-drake simulate: error: --separation: unknown mode 'maybe'; use predictive or reactive"
+    ]
+
+
+# --- predictive separation in the cell (lean holds) -------------------------------------------
+
+DESK_TEXT = "{operator: {model: follows, seed: 0}, body: {spread: 0.0}, interaction: {mode: wait}}"
+
+
+def _desk_run(separation: str, **person):
+    """A lean run of the shared desk; `person`: how the simulated operator differs from the
+    one the scenario describes (and the controller forecasts)."""
+    from dataclasses import replace
+
+    from hrc_drake.cell.desk import DeskScript, desk_of
+    from hrc_drake.cell.run import run_scenario
+    from hrc_drake.cell.scenario import LEAN, cell_design, load_cell_scenario
+    from hrc_drake.motion.scene import load_cell_frames
+    from hrc_drake.tasks.spec import load_spec
+
+    texts = [DESK_TEXT, LEAN, f"{{safety: {{separation: {separation}}}}}"]
+    scenario = load_cell_scenario("shared-desk", texts)
+    script = None
+    if person:
+        design = cell_design(scenario, load_spec(scenario.assembly_path))
+        desk = desk_of(load_cell_frames(design), design.layout)
+        script = DeskScript(replace(scenario.body.person(), **person), desk)
+    return run_scenario(scenario, body_script=script)
+
+
+@pytest.fixture(scope="module")
+def desk_runs():
+    """The shared desk with the forecast's own person, monitoring alone and predictive."""
+    return {mode: _desk_run(mode) for mode in ("reactive", "predictive")}
+
+
+def test_predictive_separation_waits_where_monitoring_alone_stops(desk_runs):
+    reactive, predictive = desk_runs["reactive"], desk_runs["predictive"]
+    for result in (reactive, predictive):
+        assert result.done and not result.collisions
+        assert result.names == ["1", "2", "7", "10"]
+        assert result.safety.body_contacts == 0
+    # Monitoring alone: the operator's pointing and fetching stop the arm on its way.
+    assert reactive.safety.ssm_delay > 1.0 and reactive.waited == 0.0
+    # Predictive: the arm waits at rest points instead, and is not slowed on its way.
+    assert predictive.waited > 1.0
+    assert predictive.safety.ssm_delay < reactive.safety.ssm_delay / 2
+    assert predictive.safety.violations == 0
+    assert predictive.to_json()["separation"] == "predictive"
+    assert predictive.to_json()["safety"]["ssm_delay"] == pytest.approx(
+        predictive.safety.ssm_delay, abs=1e-3
+    )
+
+
+def test_a_person_unlike_the_forecast_makes_the_robot_retime_and_keeps_separation():
+    # This operator dawdles 2.5 s before fetching and grabs twice as long: the forecast, made
+    # for the population's person, is wrong until the tracker shows where they are.
+    result = _desk_run("predictive", fetch_lag=2.5, grab_time=2.0)
+    assert result.done and not result.collisions
+    assert result.replans > 0
+    assert result.safety.violations == 0 and result.safety.body_contacts == 0
