@@ -301,3 +301,34 @@ def test_a_recording_plays_from_file_in_the_browser(chromium, tmp_path, flange_f
     assert page.errors == [], page.errors
     beyond = [u for u in page.requests if u != record.as_uri() and not u.startswith("data:")]
     assert beyond == [], beyond
+
+
+def test_a_shared_desk_recording_shows_the_bins_and_the_robots_forecast(chromium, tmp_path, capsys):
+    """The shared desk's recording draws the operator's bins, and the controller's forecast of
+    the operator's hand (translucent spheres): shown, and moving, while the robot follows a
+    plan, hidden once it has none, so a reviewer sees what the robot waited for."""
+    from hrc_drake.cli import main
+
+    record = tmp_path / "desk.html"
+    args = ["simulate", "--scenario", "shared-desk", "--lean", "--record", str(record), "--json"]
+    assert main(args) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["separation"] == "predictive" and data["safety"]["planned_wait"] > 0
+    page = Page(chromium)
+    page.page.goto(record.as_uri())
+    page.page.wait_for_function("() => viewer.animator.duration > 0", timeout=30_000)
+
+    def at(t: float, path: list[str]) -> bool:
+        page.page.evaluate(f"viewer.animator.pause(); viewer.animator.seek({t})")
+        time.sleep(0.3)
+        return page.shown(path)["visible"]
+
+    assert at(0.0, ["drake", "visualizer", "bin_bolts"])
+    assert at(0.0, ["drake", "visualizer", "bin_nuts"])
+    first = data["steps"][0]["sim_time"]
+    assert at(0.5 * first, ["forecast", "0"])
+    early = page.shown(["forecast", "0"])
+    assert at(first + 0.5 * data["steps"][1]["sim_time"], ["forecast", "0"])
+    assert page.shown(["forecast", "0"])["x"] != early["x"]
+    assert not at(data["sim_time"] - 0.05, ["forecast", "0"])
+    assert page.errors == [], page.errors

@@ -205,3 +205,17 @@ def test_a_person_unlike_the_forecast_makes_the_robot_retime_and_keeps_separatio
     assert result.done and not result.collisions
     assert result.replans > 0
     assert result.safety.violations == 0 and result.safety.body_contacts == 0
+
+
+def test_a_part_put_back_is_timed_around_the_operator_too():
+    """A swap: the habitual operator indicates S23 while the robot carries F1, which it puts
+    back, retreating while the operator goes for the bolts. The put-back plan holds for no
+    bolts, so it is timed to its end (it was timed only to its release: 9 violations)."""
+    from hrc_drake.cell.run import run_scenario
+    from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+
+    text = "{operator: {model: habitual, seed: 3}}"
+    result = run_scenario(load_cell_scenario("shared-desk", [text, LEAN]))
+    assert result.done and result.tasks[0].swapped
+    assert result.safety.violations == 0 and result.safety.body_contacts == 0
+    assert result.safety.ssm_delay < 1.0  # timed to its release only: 3.4 s

@@ -60,8 +60,9 @@ def desk_of(frames: CellFrames, layout: CellLayout) -> Desk:
 
 
 def add_bins(scene_graph, layout: CellLayout) -> None:
-    """Draw the layout's bins on the table (illustration and perception: the robot's plant has
-    no bins, its planner never goes down there)."""
+    """Draw the layout's bins on the table (illustration and perception only: the robot's plant
+    has no bins, so a layout must keep them clear of the robot's plans; `shared-desk`'s are at
+    least 18 mm from the robot and what it carries in every placement plan of the flange case)."""
     if not layout.bins:
         return
     source = scene_graph.RegisterSource("desk")

@@ -9,10 +9,16 @@ the plan again
 
 - when the plan, the indicated task or the bolts change (each task boundary: the forecast is
   solved again there);
-- when the tracked body departs from the forecast by more than `safety.departure`: the forecast
-  is moved in time to the moment of the person's timeline that explains the observed hand (a
-  person running late or early), and if none does, the observed body is taken to stay where it
-  is for `STAY` seconds.
+- when the tracked hand reaches a stay of the activity (the pointing pose, a bin) or leaves the
+  one it was at: the forecast goes on from there, with a narrower timing spread (the person's
+  progress, seen);
+- when the tracked body departs from every forecast timeline by more than `safety.departure`:
+  the forecast is moved in time to the moment of the person's timeline that explains the
+  observed hand (a person running late or early), and if none does, the observed body is taken
+  to stay where it is for `STAY` seconds (counted in `replans`).
+
+Before the first task it fits the forecast to the person the tracker shows at rest: the hand
+they work with and where it rests.
 
 The separation monitor stays underneath and acts on the body as measured; the waits only keep
 it from having to.
@@ -29,6 +35,7 @@ from hrc_drake.cell.desk import Anchor, OperatorForecast
 from hrc_drake.cell.operator_body import BodySpheres
 from hrc_drake.cell.supervisor_state import Mode, SupervisorStatus
 from hrc_drake.motion.clearance import Occupancy, ScaleFn, time_around
+from hrc_drake.tasks.tokens import UNDO
 
 CHECK_PERIOD = 0.1  # s between comparisons of the tracked body with the forecast
 RETIME_PERIOD = 1.0  # s: a departure re-times the plan at most this often
@@ -64,7 +71,9 @@ class KeepClear:
         departure: float,
     ) -> None:
         self._forecast, self._scale = forecast, scale
-        self._fitted: OperatorForecast | None = None  # fitted to the person once seen at rest
+        # Fitted to the person once seen at rest: the controller's model of who stands there,
+        # learned once per run (a Supervisor runs one simulation).
+        self._fitted: OperatorForecast | None = None
         self._max_wait, self._departure = max_wait, departure
         self._body_port = self.DeclareAbstractInputPort(
             "operator.body", AbstractValue.Make(_NOBODY)
@@ -157,7 +166,10 @@ class KeepClear:
         does not explain, taken to stay `STAY` seconds)."""
         anchor = self._anchor(s)
         plan, tau = s.plan, s.plan_time(now)
-        end_tau = plan.duration if s.bolted else plan.t_in_place
+        # Up to the hold for the bolts (its end depends on the operator), or to the end of a
+        # plan that holds for none (an undo, a part put back) or is past its hold.
+        holds_for_bolts = plan.task != UNDO and not s.bolted
+        end_tau = plan.t_in_place if holds_for_bolts else plan.duration
         horizon = max(end_tau - tau, 0.0) + self._max_wait + 1.0
         occupancy = self._forecast.occupancy(anchor, now, now + horizon, self._offsets(s))
         if unexplained is not None:

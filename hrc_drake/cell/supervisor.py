@@ -25,9 +25,10 @@ sees an obstacle waits for it to move or go, planning again each time it does, f
 reports of the scenario's faults, `hrc_drake.cell.fault_report`).
 
 In `anticipate` mode it does not wait at step 3: it starts on the placement its policy commits
-to and turns when the indication names another task (`hrc_drake.cell.anticipation`). The fault
-handling is `hrc_drake.cell.recovery`; the Supervisor's values (its mode, state, records and
-limits) are `hrc_drake.cell.supervisor_state`.
+to and turns when the indication names another task (`hrc_drake.cell.anticipation`). With
+predictive separation it times its plan's moves around its forecast of the operator
+(`hrc_drake.cell.keep_clear`). The fault handling is `hrc_drake.cell.recovery`; the
+Supervisor's values (its mode, state, records and limits) are `hrc_drake.cell.supervisor_state`.
 
 The robot follows its plan in plan time `tau`, which advances at the speed scale s ∈ [0, 1] that
 the separation monitor allows on the optional `speed_limit` input: the robot slows down by
@@ -75,7 +76,9 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
     Input ports: `configuration` (CellConfiguration), `hri.indication` (Indication),
     `ur3.state_estimated` (12), `rg2.state_measured` (2: opening, rate), `rg2.grip_detected`
     (1), `speed_limit` (1: the speed scale the separation monitor allows; unconnected, 1),
-    `safety.stop` (1: the robot's protective-stop input; unconnected, none).
+    `safety.stop` (1: the robot's protective-stop input; unconnected, none), `operator.body`
+    (BodySpheres, the tracked body: predictive separation holds it against its forecast,
+    `hrc_drake.cell.keep_clear`; unconnected, nobody).
     Output ports: `command` (14: the arm's joint positions and velocities, then the gripper's
     opening and grip force; the controller splits it into `ur3.position`, `ur3.velocity`,
     `rg2.opening`, `rg2.force`),
