@@ -219,3 +219,42 @@ def test_a_part_put_back_is_timed_around_the_operator_too():
     assert result.done and result.tasks[0].swapped
     assert result.safety.violations == 0 and result.safety.body_contacts == 0
     assert result.safety.ssm_delay < 1.0  # timed to its release only: 3.4 s
+
+
+def test_the_robot_keeps_clear_of_the_desks_bins_in_every_placement_plan():
+    """The bins are drawn, not in the robot's plant: the layout keeps them clear. Every
+    placement plan of the flange case keeps the arm, its fingers as commanded and the part it
+    carries at least 1 cm from every point of the bins' tops."""
+    from hrc_drake.cell.run import shared_planner
+    from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
+    from hrc_drake.cell.separation import RobotEnvelope, nearest_points
+    from hrc_drake.motion.clearance import carried
+    from hrc_drake.tasks.graph import generate_states
+    from hrc_drake.tasks.spec import load_spec
+    from hrc_drake.tasks.tokens import UNDO
+
+    scenario = load_cell_scenario("shared-desk", None)
+    design = cell_design(scenario, load_spec(scenario.assembly_path))
+    planner = shared_planner(motion_options(scenario), design)
+    envelope, space = RobotEnvelope(design), generate_states(design.spec)
+    tops = np.array(
+        [
+            [x, y, b.size[2]]
+            for b in scenario.cell.bins
+            for x in np.linspace(b.position[0] - b.size[0] / 2, b.position[0] + b.size[0] / 2, 7)
+            for y in np.linspace(b.position[1] - b.size[1] / 2, b.position[1] + b.size[1] / 2, 7)
+        ]
+    )
+    closest, plans = np.inf, 0
+    for index in range(space.n_states):
+        for task, _ in space.tasks(index):
+            if task == UNDO:
+                continue
+            plan = planner.plan_task(frozenset(space.configuration(index)), task)
+            plans += 1
+            for tau in np.linspace(0.0, plan.duration, 80):
+                shapes = envelope.shapes(carried(plan, tau), True)
+                R, p = envelope.pose(plan.positions(tau), plan.gripper_opening(tau))
+                closest = min(closest, nearest_points(shapes, R, p, tops).distance.min())
+    assert plans == 19
+    assert closest >= 0.01, closest
