@@ -27,9 +27,7 @@ import platform
 import sys
 from pathlib import Path
 
-from cell_pool import pooled_loop, run_pool
-
-from hrc_drake.atomic import atomic_write_text
+from cell_pool import pooled_loop, publish, run_pool
 
 CELLS = {
     "flange row 1": ("row1-optimal", ""),
@@ -209,12 +207,7 @@ def main(argv: list[str] | None = None) -> int:
     jobs = [(c, i, m, args.lean) for c in CELLS for i in interfaces(c) for m in MODES]
     runs, wall = run_pool(one_run, jobs, args.workers)
     add_task_level(runs, jobs)
-    text = report(runs, args, wall)
-    if args.lean:
-        print(text)
-    else:
-        atomic_write_text(REPORT, text)
-        print(f"{text}\nwritten to {REPORT}")
+    publish(report(runs, args, wall), REPORT, args.lean)
     return 0
 
 

@@ -23,9 +23,7 @@ import statistics
 import sys
 from pathlib import Path
 
-from cell_pool import pooled_loop, run_pool
-
-from hrc_drake.atomic import atomic_write_text
+from cell_pool import pooled_loop, publish, run_pool
 
 POPULATIONS = ("follows", "habitual", "mistake-prone", "change-of-mind")
 INTERACTIONS = ("anticipate", "wait")
@@ -175,7 +173,9 @@ def report(runs: list[dict], args, wall: float) -> str:
         "# Reactive and predictive separation on a shared desk",
         "",
         f"`python benchmarks/bench_shared_desk.py --workers {args.workers} --seeds {args.seeds}"
-        f"{' --lean' if args.lean else ''}`: {len(runs)} runs in {wall / 60:.1f} min on "
+        f"{' --lean' if args.lean else ''}"
+        f"{' --no-regression' if getattr(args, 'no_regression', False) else ''}`: "
+        f"{len(runs)} runs in {wall / 60:.1f} min on "
         f"{platform.processor() or platform.machine()}, Python {platform.python_version()}.",
         "",
         f"## 1. `shared-desk`: every population, both interaction modes, seeds 0..{args.seeds - 1}",
@@ -230,12 +230,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.no_regression:
         jobs += [("regression", c, s, args.lean) for c in REGRESSION for s in SEPARATIONS]
     runs, wall = run_pool(one_run, jobs, args.workers)
-    text = report(runs, args, wall)
-    if args.lean:
-        print(text)
-    else:
-        atomic_write_text(REPORT, text)
-        print(f"{text}\nwritten to {REPORT}")
+    publish(report(runs, args, wall), REPORT, args.lean)
     return 0
 
 

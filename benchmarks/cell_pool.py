@@ -24,6 +24,18 @@ def pooled_loop(scenario, key: str):
     return build_closed_loop(scenario, motion_planner=_PLANNERS[key])
 
 
+def publish(text: str, report, lean: bool) -> None:
+    """Print a benchmark's report; unless it ran `lean` (a quick look), also write it to the
+    `report` path (atomically)."""
+    from hrc_drake.atomic import atomic_write_text
+
+    if lean:
+        print(text)
+        return
+    atomic_write_text(report, text)
+    print(f"{text}\nwritten to {report}")
+
+
 def run_pool(one_run: Callable, jobs: Sequence, workers: int) -> tuple[list, float]:
     """(`one_run` of every job in order, wall seconds), over `workers` spawned processes, with
     a progress line on stderr."""
