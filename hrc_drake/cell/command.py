@@ -282,7 +282,9 @@ def _print_summary(result, scenario) -> None:
             f"{figures['violations']} violation(s)"
             + (f" (+{figures['imposed']} moved from outside)" if figures["imposed"] else "")
             + f", slowed {figures['slowed_time']} s, "
-            f"stopped {figures['stopped_time']} s"
+            f"stopped {figures['stopped_time']} s (added {figures['ssm_delay']} s); "
+            f"separation {result.separation}"
+            + (f", waited {result.waited:.1f} s where it planned to" if result.waited else "")
         )
     if result.collisions:
         print("  unexpected contacts:", *result.collisions[:5], sep="\n    ")
