@@ -228,7 +228,6 @@ def test_the_robot_keeps_clear_of_the_desks_bins_in_every_placement_plan():
     from hrc_drake.cell.run import shared_planner
     from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
     from hrc_drake.cell.separation import RobotEnvelope, nearest_points
-    from hrc_drake.motion.clearance import carried
     from hrc_drake.tasks.graph import generate_states
     from hrc_drake.tasks.spec import load_spec
     from hrc_drake.tasks.tokens import UNDO
@@ -253,7 +252,7 @@ def test_the_robot_keeps_clear_of_the_desks_bins_in_every_placement_plan():
             plan = planner.plan_task(frozenset(space.configuration(index)), task)
             plans += 1
             for tau in np.linspace(0.0, plan.duration, 80):
-                shapes = envelope.shapes(carried(plan, tau), True)
+                shapes = envelope.shapes(plan.carrying(tau), True)
                 R, p = envelope.pose(plan.positions(tau), plan.gripper_opening(tau))
                 closest = min(closest, nearest_points(shapes, R, p, tops).distance.min())
     assert plans == 19

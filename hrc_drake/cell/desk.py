@@ -201,10 +201,10 @@ class OperatorForecast:
         """The stays of the activity the forecast expects after the indication of `task`."""
         return desk_stays(self.person, self.desk, task)
 
-    def timeline(self, anchor: Anchor) -> HandTimeline:
-        """The hand's forecast moves for `anchor`."""
+    def timeline(self, anchor: Anchor, shift: float = 0.0) -> HandTimeline:
+        """The hand's forecast moves for `anchor`, `shift` seconds later."""
         stays = self.stays(anchor.task)[anchor.done :]
-        return stays_timeline(self.person, stays, anchor.at + anchor.lag, anchor.start)
+        return stays_timeline(self.person, stays, anchor.at + anchor.lag + shift, anchor.start)
 
     def occupancy(
         self, anchor: Anchor, start: float, end: float, offsets: tuple[float, ...] = (0.0,)
@@ -213,7 +213,7 @@ class OperatorForecast:
         `anchor` moved by each of `offsets` [s]."""
         times = np.arange(start, end + self.SAMPLE / 2, self.SAMPLE)
         bodies = [
-            body_samples(self.person, self.timeline(replace(anchor, lag=anchor.lag + d)), times)
+            body_samples(self.person, self.timeline(anchor, d), times)
             for d in dict.fromkeys(offsets)
         ]
         # Past the first timeline, the arm only: torso and head barely move between them.
@@ -234,10 +234,7 @@ class OperatorForecast:
     ) -> float:
         """How far the observed `hand` is from the nearest forecast one at `now` [m] (of the
         timelines of `anchor` moved by each of `offsets`)."""
-        return min(
-            float(np.linalg.norm(self.timeline(replace(anchor, lag=anchor.lag + d)).at(now) - hand))
-            for d in offsets
-        )
+        return min(float(np.linalg.norm(self.timeline(anchor, d).at(now) - hand)) for d in offsets)
 
     def reanchored(self, anchor: Anchor, hand: np.ndarray, now: float) -> tuple[Anchor, float]:
         """(the anchor whose timeline best explains the observed `hand` at `now`, moved in time

@@ -418,8 +418,7 @@ class _StackLight:
 class _ForecastView:
     """With Meshcat (also in recordings): the controller's forecast of the operator's hand
     over the next three seconds as translucent amber spheres, drawn each time the robot times
-    its plan around it (predictive separation), and the arm's planned wait marked by the
-    stack light's pole turning amber."""
+    its plan around it (predictive separation)."""
 
     RADIUS = 0.06  # m: the hand and the forecast's uncertainty
 

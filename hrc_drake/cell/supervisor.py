@@ -62,7 +62,7 @@ from hrc_drake.cell.supervisor_state import (
     TaskRecord,
 )
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
-from hrc_drake.motion.plan import Plan, Stage
+from hrc_drake.motion.plan import Plan
 from hrc_drake.motion.service import PlanFailure, PlanRequest, PlanService
 from hrc_drake.robot_models import UR3_JOINTS
 from hrc_drake.tasks.graph import StateKind, StateSpace
@@ -171,9 +171,8 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
             return
         now = context.get_time()
         plan, tau = s.plan, s.plan_time(now)
-        grasped = plan.segment(Stage.GRASP).end <= tau < plan.t_release
+        carrying = plan.carrying(tau)
         if s.held(now):  # a planned wait for the operator: the arm stands still
-            carrying = plan.instance if grasped else None
             output.set_value(MotionIntent(carrying=carrying, moving=False, rate=s.rate))
             return
         moving = tau < plan.duration and not s.holding_for_bolts(tau) and s.rate > 0
@@ -181,7 +180,7 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
         output.set_value(
             MotionIntent(
                 qdot=qdot if tau < plan.duration else np.zeros_like(qdot),
-                carrying=plan.instance if grasped else None,
+                carrying=carrying,
                 moving=moving,
                 rate=s.rate,
             )

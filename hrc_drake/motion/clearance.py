@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hrc_drake.motion.plan import Plan, Stage
+from hrc_drake.motion.plan import Plan
 
 # (q, q̇ at full speed, the part carried or None, body centres k×3, radii k, velocities k×3)
 #   -> the speed scale in [0, 1] that separation monitoring allows
@@ -75,11 +75,6 @@ class Hold:
     until: float
 
 
-def carried(plan: Plan, tau: float) -> str | None:
-    """The part in the gripper at plan time `tau` (None: empty)."""
-    return plan.instance if plan.segment(Stage.GRASP).end <= tau < plan.t_release else None
-
-
 @dataclass(frozen=True)
 class _Poses:
     """A motion's checked poses: plan times from the motion's start, q, q̇, carried part."""
@@ -95,7 +90,7 @@ def _poses(plan: Plan, start: float, duration: float) -> _Poses:
     taus = np.linspace(start, start + duration, count)
     q = np.array([plan.trajectory.value(t).ravel() for t in taus])
     qdot = np.array([plan.trajectory.EvalDerivative(t, 1).ravel() for t in taus])
-    return _Poses(taus - start, q, qdot, tuple(carried(plan, t) for t in taus))
+    return _Poses(taus - start, q, qdot, tuple(plan.carrying(t) for t in taus))
 
 
 def forecast_delay(poses: _Poses, begin: float, occupancy: Occupancy, scale: ScaleFn) -> float:
@@ -175,4 +170,4 @@ def time_around(
     return tuple(holds)
 
 
-__all__ = ["Hold", "Occupancy", "ScaleFn", "carried", "forecast_delay", "time_around"]
+__all__ = ["Hold", "Occupancy", "ScaleFn", "forecast_delay", "time_around"]

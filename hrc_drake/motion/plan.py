@@ -111,6 +111,11 @@ class Plan:
         """Commanded opening between the finger insides at time t [m]."""
         return float(self.gripper.value(float(np.clip(t, 0.0, self.duration)))[0, 0])
 
+    def carrying(self, t: float) -> str | None:
+        """The part instance in the gripper at time t: from the grasp's end to the release
+        (None: the gripper is empty)."""
+        return self.instance if self.segment(Stage.GRASP).end <= t < self.t_release else None
+
     def segment(self, stage: Stage) -> Segment:
         """The segment of a stage."""
         return next(s for s in self.segments if s.stage == stage)
