@@ -114,6 +114,24 @@ def test_the_plan_waits_where_its_motions_meet_until_a_forecast_reach_is_over():
     assert hold.until <= 2.4 + 1e-9
 
 
+def test_beside_a_hand_that_only_goes_away_the_plan_may_be_slowed_rather_than_wait():
+    """With `slowing_ok` (the hand seen in the last bin of its fetch), a wait that would cost
+    more than being slowed past the hand is not taken: here the reach only halves the speed."""
+    plan = _plan_along_x()
+    times = np.arange(0.0, 12.0, 0.1)
+    reach = _reach(times, at=1.0, start=0.0, end=5.0)
+
+    def halves_near(q, qdot, carrying, centres, radii, velocities) -> float:
+        return 0.5 if _slows_near(q, qdot, carrying, centres, radii, velocities) < 1 else 1.0
+
+    (hold,) = time_around(plan, 0.0, 0.0, reach, halves_near, max_wait=6.0)
+    assert hold.tau == pytest.approx(2.0) and hold.until >= 4.0  # waits out the reach
+    assert time_around(plan, 0.0, 0.0, reach, halves_near, 6.0, slowing_ok=True) == ()
+    # A reach that would stop the arm is still waited out.
+    (hold,) = time_around(plan, 0.0, 0.0, reach, _slows_near, 6.0, slowing_ok=True)
+    assert hold.until >= 4.0
+
+
 @pytest.mark.parametrize(
     ("text", "needle"),
     [
@@ -146,6 +164,31 @@ def test_separation_flag_is_checked_before_any_work():
     assert done.stderr.strip().splitlines() == [
         "hrc-drake simulate: error: --separation: unknown mode 'maybe'; use predictive or reactive"
     ]
+
+
+def test_a_body_the_forecast_cannot_explain_replaces_every_forecast_timeline_while_it_stays():
+    """Each timeline of a joined forecast (whole body first, then arms) is replaced by the
+    observed body's same spheres until the stay ends, and left as forecast after it."""
+    from hrc_drake.cell.desk import Anchor, OperatorForecast
+    from hrc_drake.cell.keep_clear import _staying
+    from hrc_drake.cell.operator_body import BodySpheres, body_pose
+
+    person = Person()
+    forecast = OperatorForecast(person, DESK, delay=1.0, sigma=0.3)
+    offsets = forecast.offsets(True)
+    occupancy = forecast.occupancy(Anchor("F1", 0.0), 0.0, 3.0, offsets)
+    pose = body_pose(np.asarray(person.stance), np.array([0.35, 0.0, 0.25]))
+    centres, radii, groups = pose.spheres()
+    body = BodySpheres(centres, radii, np.zeros_like(centres), groups)
+    held = _staying(occupancy, body, until=1.0)
+    n, arm = len(radii), groups[2][1]
+    assert occupancy.centres.shape[1] == n + arm * (len(offsets) - 1)
+    early, late = occupancy.times <= 1.0, occupancy.times > 1.0
+    for start in [0, *range(n, occupancy.centres.shape[1], arm)]:
+        size = n if start == 0 else arm
+        assert np.allclose(held.centres[early, start : start + size], centres[:size])
+    assert not np.allclose(occupancy.centres[early], held.centres[early])
+    assert np.array_equal(held.centres[late], occupancy.centres[late])
 
 
 # --- predictive separation in the cell (lean holds) -------------------------------------------

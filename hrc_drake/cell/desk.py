@@ -136,7 +136,7 @@ def body_samples(person: Person, timeline: HandTimeline, times: np.ndarray) -> O
 
 
 # The hand, forearm and upper arm: the first three groups of `BodyPose.spheres`.
-_ARM_SPHERES = body_pose(np.zeros(2), np.array([0.5, 0.0, 0.1])).spheres()[2][2][1]
+ARM_SPHERES = body_pose(np.zeros(2), np.array([0.5, 0.0, 0.1])).spheres()[2][2][1]
 
 
 @dataclass(frozen=True)
@@ -217,7 +217,7 @@ class OperatorForecast:
             for d in dict.fromkeys(offsets)
         ]
         # Past the first timeline, the arm only: torso and head barely move between them.
-        arm = _ARM_SPHERES
+        arm = ARM_SPHERES
         bodies[1:] = [
             Occupancy(b.times, b.centres[:, :arm], b.radii[:arm], b.velocities[:, :arm])
             for b in bodies[1:]

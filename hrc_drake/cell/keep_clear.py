@@ -31,7 +31,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from pydrake.common.value import AbstractValue
 
-from hrc_drake.cell.desk import Anchor, OperatorForecast
+from hrc_drake.cell.desk import ARM_SPHERES, Anchor, OperatorForecast
 from hrc_drake.cell.operator_body import BodySpheres
 from hrc_drake.cell.supervisor_state import Mode, SupervisorStatus
 from hrc_drake.motion.clearance import Occupancy, ScaleFn, time_around
@@ -114,6 +114,15 @@ class KeepClear:
                 return Anchor(task, now, done=k, start=here), k
         return None
 
+    def _at_last_bin(self, s: SupervisorStatus) -> bool:
+        """Whether the tracker shows the hand in the last bin of its fetch: from there it only
+        goes back to rest, away from the robot."""
+        if s.visiting is None or s.pending is None:
+            return False
+        stays = self._forecast.stays(s.pending[1])
+        fetches = [k for k, stay in enumerate(stays) if stay.what == "fetch"]
+        return bool(fetches) and s.visiting == fetches[-1]
+
     def _fit(self, body: BodySpheres) -> None:
         """Fit the forecast to the person the tracker shows at rest before the first task (the
         controller knows the population's operator, not which hand this one works with or
@@ -179,7 +188,15 @@ class KeepClear:
             spent = (s.held_since[0], now - s.held_since[1])
         if tau < end_tau:
             holds = time_around(
-                plan, tau, now, occupancy, self._scale, self._max_wait, end_tau, spent
+                plan,
+                tau,
+                now,
+                occupancy,
+                self._scale,
+                self._max_wait,
+                end_tau,
+                spent,
+                self._at_last_bin(s),
             )
         timeline = self._forecast.timeline(anchor)
         view = tuple(tuple(float(x) for x in timeline.at(now + d)) for d in VIEW_TIMES)
@@ -188,15 +205,18 @@ class KeepClear:
 
 def _staying(occupancy: Occupancy, body: BodySpheres, until: float) -> Occupancy:
     """`occupancy` with the observed `body` standing still in place of the forecast until
-    `until` (a body of another sphere count replaces nothing)."""
-    n = len(body.radii)
-    if n == 0 or occupancy.centres.shape[1] % n:
+    `until`. The forecast's first timeline is a whole body and each further one its arm
+    (`OperatorForecast.occupancy`), so each is replaced by the body's same spheres; a body of
+    another sphere count than the forecast's replaces nothing."""
+    n, total = len(body.radii), occupancy.centres.shape[1]
+    arm = min(ARM_SPHERES, n)
+    if n == 0 or total < n or (total - n) % arm:
         return occupancy
-    copies = occupancy.centres.shape[1] // n
+    index = np.concatenate([np.arange(n), np.tile(np.arange(arm), (total - n) // arm)])
     centres, velocities = occupancy.centres.copy(), occupancy.velocities.copy()
     now = occupancy.times <= until
-    centres[now] = np.tile(body.centres, (copies, 1))
-    velocities[now] = np.tile(body.velocities, (copies, 1))
+    centres[now] = body.centres[index]
+    velocities[now] = body.velocities[index]
     return replace(occupancy, centres=centres, velocities=velocities)
 
 

@@ -133,6 +133,7 @@ def time_around(
     max_wait: float,
     end_tau: float | None = None,
     spent: tuple[float, float] | None = None,
+    slowing_ok: bool = False,
 ) -> tuple[Hold, ...]:
     """The waits of the motions of `plan` that start at or after plan time `tau` (the arm is
     there at `now`) and before `end_tau` (None: the plan's end), as `Hold`s (see the module
@@ -158,8 +159,8 @@ def time_around(
                 forecast_delay(poses, begin + wait + late, occupancy, scale)
                 for late in RUNNING_LATE
             )
-            if lost <= _EPS:  # the first wait after which separation is forecast to hold
-                best_wait = float(wait)
+            if lost <= _EPS and (not slowing_ok or wait < best_cost - _EPS):
+                best_wait = float(wait)  # no later wait can cost less
                 break
             cost = wait + STOP_PENALTY * lost
             if cost < best_cost - _EPS:
