@@ -17,6 +17,10 @@ the plan again
   observed hand (a person running late or early), and if none does, the observed body is taken
   to stay where it is for `STAY` seconds (counted in `replans`).
 
+Once the tracker shows the hand in the last bin of its fetch, from where it only goes back to
+rest, away from the robot, each wait is the cheapest one: the arm may go on slowed beside the
+hand instead of waiting until it has left.
+
 Before the first task it fits the forecast to the person the tracker shows at rest: the hand
 they work with and where it rests.
 

@@ -7,9 +7,9 @@ and a body (`ScaleFn`, the controller's own monitor applied to the forecast), `t
 chooses for each motion still to come how long the arm waits at the rest point where it starts:
 the shortest wait after which the monitor is forecast never to slow the motion (the motion keeps
 the protective separation against the forecast body, starting at each delay of `RUNNING_LATE`),
-or, if there is none within `max_wait`, the wait that costs least: the wait plus the time the
-monitor is forecast to add to the motion (`forecast_delay`), weighed `STOP_PENALTY` times for
-the braking and restarting it leaves out. The arm waits where its motions meet, so every
+or, if there is none within `max_wait` (or the caller allows slowing), the wait that costs
+least: the wait plus the time the monitor is forecast to add to the motion (`forecast_delay`),
+weighed `STOP_PENALTY` times for the braking and restarting it leaves out. The arm waits where its motions meet, so every
 trajectory it follows is still the validated plan; monitoring stays underneath and acts on the
 body as measured. The forecast's own timing spread (`hrc_drake.cell.desk.OperatorForecast`)
 covers a person early or late.
@@ -139,7 +139,10 @@ def time_around(
     there at `now`) and before `end_tau` (None: the plan's end), as `Hold`s (see the module
     docstring). A plan the forecast never slows gets none. `spent`: (plan time, seconds) the arm
     has waited at a rest point already; its motion waits at most `max_wait` in all, so that a
-    forecast that keeps moving cannot hold the arm for ever."""
+    forecast that keeps moving cannot hold the arm for ever. `slowing_ok`: the caller knows the
+    forecast hand only goes away from the arm (the tracker saw it in the last bin of its
+    fetch), so each wait is the cheapest, even if the monitor is then forecast to slow the
+    motion."""
     end_tau = plan.duration if end_tau is None else end_tau
     holds: list[Hold] = []
     shift = 0.0
