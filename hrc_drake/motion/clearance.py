@@ -9,10 +9,10 @@ the shortest wait after which the monitor is forecast never to slow the motion (
 the protective separation against the forecast body, starting at each delay of `RUNNING_LATE`),
 or, if there is none within `max_wait` (or the caller allows slowing), the wait that costs
 least: the wait plus the time the monitor is forecast to add to the motion (`forecast_delay`),
-weighed `STOP_PENALTY` times for the braking and restarting it leaves out. The arm waits where its motions meet, so every
-trajectory it follows is still the validated plan; monitoring stays underneath and acts on the
-body as measured. The forecast's own timing spread (`hrc_drake.cell.desk.OperatorForecast`)
-covers a person early or late.
+weighed `STOP_PENALTY` times for the braking and restarting it leaves out. The arm waits where
+its motions meet, so every trajectory it follows is still the validated plan; monitoring stays
+underneath and acts on the body as measured. The forecast's own timing spread
+(`hrc_drake.cell.desk.OperatorForecast`) covers a person early or late.
 """
 
 from __future__ import annotations
