@@ -162,8 +162,9 @@ def time_around(
                 forecast_delay(poses, begin + wait + late, occupancy, scale)
                 for late in RUNNING_LATE
             )
-            if lost <= _EPS and (not slowing_ok or wait < best_cost - _EPS):
-                best_wait = float(wait)  # no later wait can cost less
+            if lost <= _EPS:  # separation forecast to hold: no later wait costs less
+                if not slowing_ok or wait < best_cost - _EPS:
+                    best_wait = float(wait)
                 break
             cost = wait + STOP_PENALTY * lost
             if cost < best_cost - _EPS:
