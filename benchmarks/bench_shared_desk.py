@@ -109,22 +109,24 @@ def robot_late(scenario, result) -> float:
     """Seconds per held task the robot put the part in place after the operator's hands were
     free of the fetch (0 where it was there first): how much of the assembly the robot's own
     motion, and what slows it, decides."""
-    from hrc_drake.cell.desk import desk_of
     from hrc_drake.cell.scenario import cell_design
-    from hrc_drake.hri.activity import indication_timeline
+    from hrc_drake.cell.sim_operator import OperatorActivity
+    from hrc_drake.cell.station import body_script_of
     from hrc_drake.motion.scene import load_cell_frames
     from hrc_drake.tasks.spec import load_spec
 
+    # The simulated operator's own script: its person, its desk, its end of the fetch.
     design = cell_design(scenario, load_spec(scenario.assembly_path))
-    desk = desk_of(load_cell_frames(design), design.layout)
-    person = scenario.body.person(seed=scenario.operator.seed)
+    script = body_script_of(scenario, load_cell_frames(design))
     holds = [float(e.split(":")[0]) for e in result.events if ": holds " in e]
     late = []
     for task in result.tasks:
         held = [t for t in holds if task.start_time <= t <= task.end_time]
         if held and task.indicated_at is not None:
-            free = indication_timeline(person, desk, task.indicated, task.indicated_at).end
-            late.append(max(0.0, held[-1] - free))
+            answered = OperatorActivity(
+                answered_step=task.step, answered_at=task.indicated_at, answered_task=task.indicated
+            )
+            late.append(max(0.0, held[-1] - script.busy_until(answered)))
     return statistics.fmean(late) if late else 0.0
 
 

@@ -199,8 +199,8 @@ class KeepClear:
                 self._scale,
                 self._max_wait,
                 end_tau,
-                spent,
-                self._at_last_bin(s),
+                spent=spent,
+                slowing_ok=self._at_last_bin(s),
             )
         timeline = self._forecast.timeline(anchor)
         view = tuple(tuple(float(x) for x in timeline.at(now + d)) for d in VIEW_TIMES)

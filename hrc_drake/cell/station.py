@@ -329,9 +329,10 @@ def _add_arm(builder: DiagramBuilder, plant: MultibodyPlant, ur3) -> None:
     builder.Connect(weight.get_output_port(), plant.get_actuation_input_port(ur3))
 
 
-def _body_script(scenario: Scenario, frames: CellFrames, body_script):
+def body_script_of(scenario: Scenario, frames: CellFrames, body_script=None):
     """The operator body's script: the one given, else the scenario's activity (`desk`: this
-    operator seed's person on the layout's desk; `bolting`: `BoltingScript`, as None)."""
+    operator seed's person on the layout's desk, a `DeskScript`; `bolting`: `BoltingScript`,
+    as None)."""
     if body_script is not None or scenario.body.activity != "desk":
         return body_script
     person = scenario.body.person(seed=scenario.operator.seed)
@@ -536,7 +537,7 @@ def make_cell_station(
     parts = {name: instances[name] for name in design.instance_names}
     if scenario.body.enabled:
         add_bins(scene_graph, design.layout)
-    body_script = _body_script(scenario, frames, body_script)
+    body_script = body_script_of(scenario, frames, body_script)
     person = _add_operator(builder, plant, scene_graph, parts, scenario, operator, body_script)
     if injector is not None:  # it counts tasks from the prompts the station shows
         builder.ConnectInput("hri.prompt", injector.GetInputPort("hri.prompt"))
