@@ -10,9 +10,14 @@ stopping added), the planned waits, least separation and margin, violations, bod
 Section 2: the regression cells — Table 2's nine rows and the 4-slot and 5-slot cells — in both
 separation modes: the states of `react`, terminal, collisions, violations, body contacts.
 
+Section 3: the bound of a perfect forecast. Waiting for the indication, with the operator exactly
+the person the controller assumes (`body.spread: 0`) and a forecast that keeps no timing spread
+(`safety.forecast_spread: 0`), the predictive robot knows where the hand will be; monitoring
+alone against it, on the same seeds.
+
 Full settings (5 s holds, TCP <= 0.25 m/s, body and monitor on). Usage:
-``python benchmarks/bench_shared_desk.py [--workers 2] [--seeds 2] [--lean]`` (with ``--lean``
-the report is printed, not written).
+``python benchmarks/bench_shared_desk.py [--workers 2] [--seeds 2] [--lean] [--no-regression]
+[--no-bound]`` (with ``--lean`` the report is printed, not written).
 """
 
 from __future__ import annotations
@@ -53,11 +58,18 @@ REPORT = Path(__file__).parent / "reports" / "shared_desk.md"
 
 
 def scenario_of(job: tuple) -> object:
-    """The scenario of a job: ("desk", population, interaction, seed, separation, lean) or
-    ("regression", cell, separation, lean)."""
+    """The scenario of a job: ("desk", population, interaction, seed, separation, lean),
+    ("bound", population, seed, separation, lean) or ("regression", cell, separation, lean)."""
     from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 
-    if job[0] == "desk":
+    if job[0] == "bound":
+        _, population, seed, separation, lean = job
+        texts = [
+            f"{{operator: {{model: {population}, seed: {seed}}}, interaction: {{mode: wait}}, "
+            f"body: {{spread: 0.0}}, safety: {{separation: {separation}, forecast_spread: 0.0}}}}"
+        ]
+        name = "shared-desk"
+    elif job[0] == "desk":
         _, population, interaction, seed, separation, lean = job
         texts = [
             f"{{operator: {{model: {population}, seed: {seed}}}, "
@@ -101,7 +113,7 @@ def one_run(job: tuple) -> dict:
         "body_contacts": safety.body_contacts,
         "collisions": len(result.collisions),
         "error": result.error,
-        "robot_late": robot_late(scenario, result) if job[0] == "desk" else 0.0,
+        "robot_late": robot_late(scenario, result) if job[0] != "regression" else 0.0,
     }
 
 
@@ -118,15 +130,13 @@ def robot_late(scenario, result) -> float:
     # The simulated operator's own script: its person, its desk, its end of the fetch.
     design = cell_design(scenario, load_spec(scenario.assembly_path))
     script = body_script_of(scenario, load_cell_frames(design))
-    holds = [float(e.split(":")[0]) for e in result.events if ": holds " in e]
     late = []
     for task in result.tasks:
-        held = [t for t in holds if task.start_time <= t <= task.end_time]
-        if held and task.indicated_at is not None:
+        if task.held_at is not None and task.indicated_at is not None:
             answered = OperatorActivity(
                 answered_step=task.step, answered_at=task.indicated_at, answered_task=task.indicated
             )
-            late.append(max(0.0, held[-1] - script.busy_until(answered)))
+            late.append(max(0.0, task.held_at - script.busy_until(answered)))
     return statistics.fmean(late) if late else 0.0
 
 
@@ -191,17 +201,45 @@ def regression_rows(runs: list[dict]) -> list[str]:
     return lines
 
 
+def bound_rows(runs: list[dict]) -> list[str]:
+    """Per population: monitoring alone against a perfect forecast (means over seeds)."""
+    lines = [
+        "| population | time reactive [s] | time exact forecast [s] | exact / reactive | "
+        "ssm_delay r / p [s] | robot late r / p [s/task] | least margin r / p [m] | "
+        "violations r / p | terminal, react |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for population in POPULATIONS:
+        re = [r for r in runs if r["job"][1] == population and r["job"][3] == "reactive"]
+        pr = [r for r in runs if r["job"][1] == population and r["job"][3] == "predictive"]
+        if not re or not pr:
+            continue
+        t_r, t_p = _mean(re, "seconds"), _mean(pr, "seconds")
+        ok = all(r["terminal"] and r["react"] for r in re + pr)
+        lines.append(
+            f"| {population} | {t_r:.2f} | {t_p:.2f} | {t_p / t_r:.3f} | "
+            f"{_mean(re, 'ssm_delay'):.2f} / {_mean(pr, 'ssm_delay'):.2f} | "
+            f"{_mean(re, 'robot_late'):.2f} / {_mean(pr, 'robot_late'):.2f} | "
+            f"{min(r['min_margin'] for r in re):.3f} / {min(r['min_margin'] for r in pr):.3f} | "
+            f"{sum(r['violations'] for r in re)} / {sum(r['violations'] for r in pr)} | "
+            f"{'yes' if ok else 'NO'} |"
+        )
+    return lines
+
+
 def report(runs: list[dict], args, wall: float) -> str:
     """The markdown report."""
     desk = [r for r in runs if r["job"][0] == "desk"]
     regression = [r for r in runs if r["job"][0] == "regression"]
+    bound = [r for r in runs if r["job"][0] == "bound"]
     totals = {s: [r for r in desk if r["job"][4] == s] for s in SEPARATIONS}
     lines = [
         "# Reactive and predictive separation on a shared desk",
         "",
         f"`python benchmarks/bench_shared_desk.py --workers {args.workers} --seeds {args.seeds}"
         f"{' --lean' if args.lean else ''}"
-        f"{' --no-regression' if getattr(args, 'no_regression', False) else ''}`: "
+        f"{' --no-regression' if getattr(args, 'no_regression', False) else ''}"
+        f"{' --no-bound' if getattr(args, 'no_bound', False) else ''}`: "
         f"{len(runs)} runs in {wall / 60:.1f} min on "
         f"{platform.processor() or platform.machine()}, Python {platform.python_version()}.",
         "",
@@ -233,6 +271,25 @@ def report(runs: list[dict], args, wall: float) -> str:
             *regression_rows(regression),
             "",
         ]
+    if bound:
+        re = [r for r in bound if r["job"][3] == "reactive"]
+        pr = [r for r in bound if r["job"][3] == "predictive"]
+        lines += [
+            "## 3. The bound of a perfect forecast (waiting for the indication)",
+            "",
+            "The operator is the person the controller assumes (`body.spread: 0`) and the "
+            "forecast keeps no timing spread (`safety.forecast_spread: 0`): after the "
+            "indication the predictive robot knows where the hand will be.",
+            "",
+            *bound_rows(bound),
+            "",
+            f"All {len(bound)} runs: mean time reactive {_mean(re, 'seconds'):.2f} s, exact "
+            f"forecast {_mean(pr, 'seconds'):.2f} s (ratio "
+            f"{_mean(pr, 'seconds') / _mean(re, 'seconds'):.3f}); violations reactive "
+            f"{sum(r['violations'] for r in re)}, exact forecast "
+            f"{sum(r['violations'] for r in pr)}.",
+            "",
+        ]
     errors = [r for r in runs if r["error"]]
     if errors:
         lines += ["## Errors", "", *(f"- {r['job']}: {r['error']}" for r in errors), ""]
@@ -248,6 +305,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--no-regression", action="store_true", help="section 1 only (the shared desk)"
     )
+    parser.add_argument(
+        "--no-bound", action="store_true", help="skip section 3 (the perfect forecast)"
+    )
     args = parser.parse_args(argv)
     jobs: list[tuple] = [
         ("desk", p, i, seed, s, args.lean)
@@ -256,6 +316,13 @@ def main(argv: list[str] | None = None) -> int:
         for seed in range(args.seeds)
         for s in SEPARATIONS
     ]
+    if not args.no_bound:
+        jobs += [
+            ("bound", p, seed, s, args.lean)
+            for p in POPULATIONS
+            for seed in range(args.seeds)
+            for s in SEPARATIONS
+        ]
     if not args.no_regression:
         jobs += [("regression", c, s, args.lean) for c in REGRESSION for s in SEPARATIONS]
     runs, wall = run_pool(one_run, jobs, args.workers)

@@ -41,8 +41,12 @@ def test_the_robot_starts_on_its_commitment_before_the_indication():
     # well before it.
     assert first.indicated_at > 1.0
     assert max(v for t, v in speeds if t < first.indicated_at) > 0.1
+    # It holds the part for the bolts after the indication, standing still while it holds.
+    assert first.indicated_at < first.held_at < first.end_time
+    assert max(v for t, v in speeds if first.held_at <= t <= first.held_at + 0.4) < 0.05
     step = result.to_json()["steps"][0]
     assert step["committed"] == "F1" and step["indicated_at"] == round(first.indicated_at, 3)
+    assert step["held_at"] == round(first.held_at, 3)
 
 
 def test_in_wait_mode_the_robot_holds_still_until_the_indication():

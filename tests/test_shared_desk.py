@@ -148,6 +148,8 @@ def test_beside_a_hand_that_only_goes_away_the_plan_may_be_slowed_rather_than_wa
             "inside the robot's footprint",
         ),
         ("{cell: {bins: [{name: x, holds: screws, position: [0.5, 0.0]}]}}", "holds"),
+        ("{safety: {forecast_spread: -0.5}}", "safety.forecast_spread: give a fraction"),
+        ("{safety: {forecast_spread: 2}}", "safety.forecast_spread: give a fraction"),
     ],
 )
 def test_bad_desk_inputs_are_one_line_errors(text, needle):
@@ -189,6 +191,37 @@ def test_a_body_the_forecast_cannot_explain_replaces_every_forecast_timeline_whi
         assert np.allclose(held.centres[early, start : start + size], centres[:size])
     assert not np.allclose(occupancy.centres[early], held.centres[early])
     assert np.array_equal(held.centres[late], occupancy.centres[late])
+
+
+def test_a_forecast_without_timing_spread_is_the_one_timeline_of_the_model():
+    """`safety.forecast_spread` 0 keeps only the modelled timeline (the bound of a perfect
+    forecast); 1 keeps the whole spread, before the indication (delay quantiles), after it and
+    once seen."""
+    from hrc_drake.cell.desk import Anchor, OperatorForecast
+
+    person = Person()
+    full = OperatorForecast(person, DESK, delay=2.0, sigma=0.4)
+    exact = OperatorForecast(person, DESK, delay=2.0, sigma=0.4, spread=0.0)
+    for stage in (False, True, "seen"):
+        assert exact.offsets(stage) == (0.0,)
+        assert len(full.offsets(stage)) >= 3
+    assert min(full.offsets(False)) < 0.0 < max(full.offsets(False))
+    assert full.offsets(True)[0] == pytest.approx(-OperatorForecast.EARLY)
+    # Half the spread: the same timelines, half as far from the model's.
+    half = OperatorForecast(person, DESK, delay=2.0, sigma=0.4, spread=0.5)
+    assert np.allclose(half.offsets(True), np.asarray(full.offsets(True)) / 2)
+    anchor = Anchor("F1", 0.0)
+    one = exact.occupancy(anchor, 0.0, 2.0, exact.offsets(True))
+    joined = full.occupancy(anchor, 0.0, 2.0, full.offsets(True))
+    assert one.centres.shape[1] < joined.centres.shape[1]
+    # The fitted forecast keeps its spread.
+    from hrc_drake.cell.operator_body import BodySpheres, body_pose
+
+    centres, radii, groups = body_pose(
+        np.asarray(person.stance), np.asarray(person.rest_hand)
+    ).spheres()
+    fitted = exact.fitted(BodySpheres(centres, radii, np.zeros_like(centres), groups))
+    assert fitted.offsets(True) == (0.0,)
 
 
 # --- predictive separation in the cell (lean holds) -------------------------------------------

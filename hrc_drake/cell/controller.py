@@ -102,7 +102,9 @@ def keep_clear_settings(
         return KeepClearSettings(max_wait=safety.max_wait, departure=safety.departure)
     desk = desk_of(load_cell_frames(design), design.layout)
     delay = scenario.interaction_model().delay
-    forecast = OperatorForecast(body.person(), desk, delay.median, delay.sigma)
+    forecast = OperatorForecast(
+        body.person(), desk, delay.median, delay.sigma, safety.forecast_spread
+    )
     acceleration = options.joint_acceleration_limit
 
     reach = REACH_BOUND + max(

@@ -157,7 +157,9 @@ class OperatorForecast:
     """The controller's forecast of the operator's body (see the module docstring).
 
     `person`: the parameters assumed of the operator; `delay`, `sigma`: the interface's median
-    delay from a prompt to the indication [s] and the standard deviation of its log.
+    delay from a prompt to the indication [s] and the standard deviation of its log; `spread`:
+    the fraction of the timing spread below kept (`safety.forecast_spread`; 0: one timeline,
+    the model's own).
 
     A forecast is the union of the body on a few timelines — swept volumes in time windows:
     before the indication, one per quantile of the delay (`QUANTILES`), each also `JITTER` late;
@@ -172,18 +174,25 @@ class OperatorForecast:
     EARLY, LATE = 0.1, 0.3  # s ahead of and behind the model after the indication
     SEEN_LATE = 0.3  # s behind the model once the tracker saw where the activity is
 
-    def __init__(self, person: Person, desk: Desk, delay: float, sigma: float = 0.0):
+    def __init__(
+        self, person: Person, desk: Desk, delay: float, sigma: float = 0.0, spread: float = 1.0
+    ):
         self.person, self.desk, self.delay, self.sigma = person, desk, delay, sigma
+        self.spread = spread
 
     def offsets(self, indicated: bool | str) -> tuple[float, ...]:
         """The time offsets of the timelines a forecast joins (see the class docstring):
-        before the indication (False), after it (True), or once seen at a stay ("seen")."""
+        before the indication (False), after it (True), or once seen at a stay ("seen"); the
+        same offsets once each (with `spread` 0, only 0)."""
+        k = self.spread
         if indicated == "seen":
-            return tuple(np.linspace(0.0, self.SEEN_LATE, 3))
-        if indicated:
-            return tuple(np.linspace(-self.EARLY, self.LATE, 6))
-        quantiles = [self.delay * (np.exp(self.sigma * z) - 1.0) for z in self.QUANTILES]
-        return tuple(q + d for q in quantiles for d in (0.0, self.JITTER))
+            offsets = np.linspace(0.0, k * self.SEEN_LATE, 3)
+        elif indicated:
+            offsets = np.linspace(-k * self.EARLY, k * self.LATE, 6)
+        else:
+            quantiles = [self.delay * (np.exp(k * self.sigma * z) - 1.0) for z in self.QUANTILES]
+            offsets = [q + d for q in quantiles for d in (0.0, k * self.JITTER)]
+        return tuple(dict.fromkeys(float(d) for d in offsets))
 
     def fitted(self, body) -> OperatorForecast:
         """This forecast for the person a tracked `body` (BodySpheres) at rest shows: the hand
@@ -195,7 +204,7 @@ class OperatorForecast:
         left = bool(shoulder[1] < torso[1])
         rest = tuple(float(x) for x in body.centres[body.groups[0][0]])
         person = replace(self.person, left_handed=left, rest_hand=rest)
-        return OperatorForecast(person, self.desk, self.delay, self.sigma)
+        return OperatorForecast(person, self.desk, self.delay, self.sigma, self.spread)
 
     def stays(self, task: str) -> tuple[Stay, ...]:
         """The stays of the activity the forecast expects after the indication of `task`."""

@@ -149,6 +149,7 @@ def _step_json(t: TaskRecord) -> dict:
         "plan_ready": t.plan_ready,
         "committed": t.committed,
         "indicated_at": None if t.indicated_at is None else round(t.indicated_at, 3),
+        "held_at": None if t.held_at is None else round(t.held_at, 3),
         "retargeted": t.retargeted,
         "swapped": t.swapped,
     }

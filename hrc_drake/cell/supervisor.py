@@ -318,6 +318,7 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
             committed=committed,
             awaiting=committed is not None,
             indicated_at=None,
+            held_at=None,
             change=None,
             retargeted=False,
             swapped=False,
@@ -470,7 +471,8 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
         _proposed, indicated, part = s.pending
         if s.prompt.kind != PromptKind.BOLT:
             prompt = Prompt(s.step, PromptKind.BOLT, s.state, indicated, part)
-            return replace(s, prompt=prompt, events=(*s.events, f"{now:.2f}: holds {part}"))
+            event = f"{now:.2f}: holds {part}"
+            return replace(s, prompt=prompt, held_at=now, events=(*s.events, event))
         indication: Indication = self._indication_port.Eval(context)
         if not indication.answers(s.prompt):
             return s
@@ -541,6 +543,7 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
             plan_ready=s.plan_ready,
             committed=s.committed,
             indicated_at=s.indicated_at,
+            held_at=s.held_at,
             retargeted=s.retargeted,
             swapped=s.swapped,
         )

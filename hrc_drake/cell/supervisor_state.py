@@ -55,6 +55,7 @@ class TaskRecord:
     plan_ready: bool = False  # the plan was made ahead of the indication
     committed: str | None = None  # the task the robot started on before the indication
     indicated_at: float | None = None  # when the indication came [s]
+    held_at: float | None = None  # when the part was in place, held for the bolts [s]
     retargeted: bool = False  # the robot turned to another seat for the same kind of part
     swapped: bool = False  # the robot turned to another part (putting a carried one back)
 
@@ -116,6 +117,7 @@ class SupervisorStatus:
     committed: str | None = None  # anticipating: the task the robot started on
     awaiting: bool = False  # started on `committed`; the indication is not in yet
     indicated_at: float | None = None
+    held_at: float | None = None  # when the robot last held the part for the bolts
     change: str | None = None  # the indicated task the robot is stopping to turn to
     # Re-targeting on the way: the plan time of the rest point of the plan (the lift's end, the
     # pre-place pose) where the arm turns to `turn_request`, asked for while it goes there.

@@ -225,6 +225,9 @@ class SafetyConfig:
         departure: m; the observed hand this far from the forecast makes the robot forecast
             again and re-time its moves.
         max_wait: the longest a move is held back for the operator [s].
+        forecast_spread: how much of its timing spread the forecast keeps (1: all of it; 0: it
+            takes the person's modelled timing as exact, the bound that a perfect forecast of a
+            person who behaves as modelled would reach; `hrc_drake.cell.desk.OperatorForecast`).
     """
 
     enabled: bool = True
@@ -239,6 +242,7 @@ class SafetyConfig:
     separation: str = "predictive"
     departure: float = 0.15
     max_wait: float = 6.0
+    forecast_spread: float = 1.0
 
 
 _PERSON = Person()  # the defaults live there (Drake-free module)
@@ -572,6 +576,10 @@ def _check_separation(safety: SafetyConfig, fail) -> None:
         raise fail("safety.departure", f"give a distance > 0 m, got {safety.departure}")
     if safety.max_wait < 0:
         raise fail("safety.max_wait", f"give seconds >= 0, got {safety.max_wait}")
+    if not 0.0 <= safety.forecast_spread <= 1.0:
+        raise fail(
+            "safety.forecast_spread", f"give a fraction in [0, 1], got {safety.forecast_spread}"
+        )
 
 
 def _check_body(scenario: Scenario, fail) -> None:
