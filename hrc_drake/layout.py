@@ -16,6 +16,9 @@ from typing import Any
 from hrc_drake.typed_yaml import load_typed
 
 BIN_SIZE = [0.12, 0.09, 0.045]  # a small parts bin on the desk [m] (our choice)
+# The robot's base on the table: r 0.064 m and a cable connector 36 mm out
+# (shared/reference/ur3-rg2.md).
+ROBOT_FOOTPRINT = 0.10
 
 
 @dataclass
@@ -123,11 +126,6 @@ class CellLayout:
                     f"{key}.position: the bin at {b.position} stands inside the robot's "
                     f"footprint ({ROBOT_FOOTPRINT} m around its base at the origin); move it"
                 )
-
-
-# The robot's base on the table: r 0.064 m and a cable connector 36 mm out
-# (shared/reference/ur3-rg2.md).
-ROBOT_FOOTPRINT = 0.10
 
 
 def layout_from(spec_cell: Any, override: CellLayout | None = None) -> CellLayout:

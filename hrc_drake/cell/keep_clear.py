@@ -67,18 +67,12 @@ class KeepClear:
     """The Supervisor's predictive separation (see the module docstring); a mixin of
     `hrc_drake.cell.supervisor.Supervisor`."""
 
-    def _declare_keep_clear(
-        self,
-        forecast: OperatorForecast | None,
-        scale: ScaleFn | None,
-        max_wait: float,
-        departure: float,
-    ) -> None:
-        self._forecast, self._scale = forecast, scale
+    def _declare_keep_clear(self, settings: KeepClearSettings) -> None:
+        self._forecast, self._scale = settings.forecast, settings.scale
         # Fitted to the person once seen at rest: the controller's model of who stands there,
         # learned once per run (a Supervisor runs one simulation).
         self._fitted: OperatorForecast | None = None
-        self._max_wait, self._departure = max_wait, departure
+        self._max_wait, self._departure = settings.max_wait, settings.departure
         self._body_port = self.DeclareAbstractInputPort(
             "operator.body", AbstractValue.Make(_NOBODY)
         )
@@ -150,7 +144,7 @@ class KeepClear:
         if s.mode != Mode.EXECUTE or s.plan is None:
             return s
         key = (id(s.plan), s.step, s.pending[1], s.indicated_at, s.bolted)
-        if key != s.clear_key[:5]:
+        if key != s.clear_key:
             s = replace(s, seen=None, visiting=None)
             return self._retime(s, key, now, None)
         if now - s.checked_at < CHECK_PERIOD:
@@ -167,7 +161,7 @@ class KeepClear:
         offsets = self._offsets(s)
         if self._forecast.departure(anchor, hand, now, offsets) <= self._departure:
             return replace(s, checked_at=now)
-        if now - s.clear_key[5] < RETIME_PERIOD:
+        if now - s.timed_at < RETIME_PERIOD:
             return replace(s, checked_at=now)
         moved, left = self._forecast.reanchored(anchor, hand, now)
         s = replace(s, seen=moved, replans=s.replans + 1)
@@ -204,7 +198,9 @@ class KeepClear:
             )
         timeline = self._forecast.timeline(anchor)
         view = tuple(tuple(float(x) for x in timeline.at(now + d)) for d in VIEW_TIMES)
-        return replace(s, holds=holds, clear_key=(*key, now), checked_at=now, forecast_view=view)
+        return replace(
+            s, holds=holds, clear_key=key, timed_at=now, checked_at=now, forecast_view=view
+        )
 
 
 def _staying(occupancy: Occupancy, body: BodySpheres, until: float) -> Occupancy:

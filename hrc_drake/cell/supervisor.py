@@ -107,7 +107,7 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
         self._on_task = on_task
         self._declare_inputs()
         clear = keep_clear if keep_clear is not None else KeepClearSettings()
-        self._declare_keep_clear(clear.forecast, clear.scale, clear.max_wait, clear.departure)
+        self._declare_keep_clear(clear)
         initial = SupervisorStatus(
             q_hold=tuple(float(x) for x in home), opening_hold=float(home_opening)
         )
@@ -280,10 +280,11 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
         qdot = np.abs(plan.trajectory.EvalDerivative(min(tau, plan.duration), 1)).max()
         step = self._limits.joint_acceleration * self._limits.period / max(qdot, 1e-9)
         speed = float(np.clip(limit, s.speed - step, s.speed + step))
-        held, since = s.held(now), s.held_since
-        if held and (since is None or since[0] != s.hold_at(now).tau):
-            since = (s.hold_at(now).tau, now)
-        waited = s.waited + (now - s.tau_time if held else 0.0)
+        hold = s.hold_at(now) if s.held(now) else None  # the planned wait the arm stands in
+        since = s.held_since
+        if hold is not None and (since is None or since[0] != hold.tau):
+            since = (hold.tau, now)
+        waited = s.waited + (now - s.tau_time if hold is not None else 0.0)
         return replace(
             s, tau=tau, tau_time=now, speed=speed, rate=speed, waited=waited, held_since=since
         )

@@ -136,6 +136,7 @@ class SupervisorStatus:
     # tracker showed of the operator's activity.
     holds: tuple[Hold, ...] = ()
     clear_key: tuple = ()
+    timed_at: float = float("-inf")  # when the plan was last timed around the forecast
     seen: Anchor | None = None  # the activity as the tracker showed it (None: as forecast)
     visiting: int | None = None  # the stay of the activity the hand is seen at
     checked_at: float = float("-inf")  # when the tracked body was last held against it
