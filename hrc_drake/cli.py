@@ -9,7 +9,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import sys
+import threading
 from pathlib import Path
 
 from hrc_drake.evaluate_command import (
@@ -19,7 +21,7 @@ from hrc_drake.evaluate_command import (
 )
 from hrc_drake.hri.operator import OperatorScriptError, ScriptedOperator, parse_operator_script
 from hrc_drake.hri.scenario import ScenarioError, table2_scenarios
-from hrc_drake.paths import UsageError, check_output_path
+from hrc_drake.paths import UsageError, check_output_path, image_kind
 from hrc_drake.progress import ProgressLine
 from hrc_drake.tasks.costs import CostTable, CostTableError, load_cost_table
 from hrc_drake.tasks.decide import (
@@ -33,6 +35,7 @@ from hrc_drake.tasks.graph import StateSpace, UnknownStateError, generate_states
 from hrc_drake.tasks.learn import SCHEDULES, Schedule, train
 from hrc_drake.tasks.mdp import MdpConfig, build_mdp
 from hrc_drake.tasks.policy import (
+    POLICY_FILE,
     Policy,
     PolicyFileError,
     load_policy,
@@ -44,6 +47,67 @@ from hrc_drake.tasks.solve import exact_policy, tasks_to_finish, timed_config
 from hrc_drake.tasks.spec import SpecError, load_spec
 
 EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130  # the shell's status for a command ended by SIGINT (128 + 2)
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+
+
+def discount(text: str) -> float:
+    """`--gamma`: a discount in (0, 1]. Refused (exit 2, the flag named, before any work): 0 and
+    below, above 1 (values would grow without bound) and NaN."""
+    value = _number(text)
+    if not 0.0 < value <= 1.0:  # False for NaN too
+        raise argparse.ArgumentTypeError(
+            f"{text} is not a discount; give a number in (0, 1] (0.95: the paper's; 1: "
+            "undiscounted, with --costs)"
+        )
+    return value
+
+
+def probability(text: str) -> float:
+    """`--mistake-prob`: a probability in [0, 1] (NaN refused), as `discount`."""
+    value = _number(text)
+    if not 0.0 <= value <= 1.0:  # False for NaN too
+        raise argparse.ArgumentTypeError(
+            f"{text} is not a probability; give a number in [0, 1] (default 0.05)"
+        )
+    return value
+
+
+def seed(text: str) -> int:
+    """`--seed`: a whole number >= 0 (numpy's generators refuse negative seeds, which would be a
+    traceback after the runs began)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text}: give a whole number >= 0")
+    return value
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """A command's parser whose errors are one line, ``hrc-drake solve: error: argument
+    --gamma: ...``, exit 2: the message names the flag and the fix; the usage block argparse
+    prints above it would bury that line (`hrc-drake CMD --help` shows the flags)."""
+
+    def error(self, message: str):
+        """Print `message` as one line on stderr and exit with status 2."""
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
+
+
+def add_force_flag(p) -> None:
+    """Register `--force` on the parser `p` of a command that writes files."""
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing output file that is not of the kind this command writes",
+    )
 
 
 def _space(args) -> StateSpace:
@@ -112,7 +176,7 @@ def cmd_states(args) -> int:
 
 def cmd_solve(args) -> int:
     """Solve the MDP exactly and save the policy."""
-    check_output_path(args.out, "--out")
+    check_output_path(args.out, "--out", kind=POLICY_FILE, force=args.force)
     space = _space(args)
     costs = _costs(args, space)
     policy = exact_policy(space, _mdp_config(args, costs), costs=costs)
@@ -127,7 +191,7 @@ def _schedule(args) -> Schedule:
 
 def cmd_train(args) -> int:
     """Q-learning with the paper's or our schedule; save the policy."""
-    check_output_path(args.out, "--out")
+    check_output_path(args.out, "--out", kind=POLICY_FILE, force=args.force)
     space = _space(args)
     costs = _costs(args, space)
     config = _mdp_config(args, costs)
@@ -305,7 +369,8 @@ def cmd_plot(args) -> int:
     """Figure 8 (state graph) or Figure 9 (learning curve) as a PNG, PDF or SVG."""
     from hrc_drake.tasks import plots
 
-    check_output_path(args.out, "--out", suffixes=plots.FORMATS)
+    kind = image_kind(Path(args.out).suffix)
+    check_output_path(args.out, "--out", suffixes=plots.FORMATS, kind=kind, force=args.force)
     space = _space(args)
     if args.what == "graph":
         plots.plot_state_graph(space, args.out)
@@ -327,12 +392,14 @@ def cmd_costs(args) -> int:
 def cmd_simulate(args) -> int:
     """Run a scenario through the Drake cell (headless) and record it."""
     from hrc_drake.cell.command import simulate_command
-    from hrc_drake.cell.interface import StationLinkError
+    from hrc_drake.cell.interface import ScenarioMismatch, StationLinkError
     from hrc_drake.cell_models import CellModelError
 
     try:
         return simulate_command(args)
-    except CellModelError as err:
+    except (CellModelError, ScenarioMismatch) as err:
+        # A station that serves another scenario: the two command lines must agree, as for
+        # an option refused (the station exits 2 as well).
         print(f"hrc-drake simulate: error: {err}", file=sys.stderr)
         return EXIT_USAGE
     except StationLinkError as err:
@@ -342,9 +409,11 @@ def cmd_simulate(args) -> int:
 
 def cmd_station(args) -> int:
     """Serve a scenario's simulated station over LCM (for `simulate --station-lcm`)."""
+    from hrc_drake.cell.command import check_assembly_matches
     from hrc_drake.cell.remote import station_command
     from hrc_drake.cell_models import CellModelError
 
+    check_assembly_matches(args)  # before the station is built, as simulate does
     try:
         return station_command(args)
     except CellModelError as err:
@@ -362,18 +431,21 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="assembly spec (default: models/assemblies/flange.yaml)",
     )
-    common.add_argument("--seed", type=int, default=0)
+    common.add_argument("--seed", type=seed, default=0, help="random seed, a whole number >= 0")
     common.add_argument("--json", action="store_true", help="print data as JSON")
     common.add_argument(
-        "--gamma", type=float, default=None, help="discount (default 0.95; 1 with --costs)"
+        "--gamma",
+        type=discount,
+        default=None,
+        help="discount in (0, 1] (default 0.95; 1 with --costs)",
     )
     common.add_argument(
         "--mistake-prob",
-        type=float,
+        type=probability,
         default=0.05,
-        help="probability that the operator misplaces a part (spec `mistakes`)",
+        help="probability in [0, 1] that the operator misplaces a part (spec `mistakes`)",
     )
-    sub = parser.add_subparsers(dest="command", required=True)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
 
     def add(name, func, help_text):
         p = sub.add_parser(name, parents=[common], help=help_text)
@@ -382,15 +454,19 @@ def build_parser() -> argparse.ArgumentParser:
 
     add("states", cmd_states, "the state table (Table 1)")
     costs_help = "cost table (hrc-drake costs): minimise seconds instead of tasks"
+    out_help = "policy file to write (an existing file that is not a policy needs --force)"
     p = add("solve", cmd_solve, "exact policy -> file")
-    p.add_argument("--out", required=True)
+    p.add_argument("--out", required=True, help=out_help)
     p.add_argument("--costs", type=Path, default=None, help=costs_help)
+    add_force_flag(p)
     p = add("train", cmd_train, "Q-learned policy -> file")
-    p.add_argument("--out", required=True)
+    p.add_argument("--out", required=True, help=out_help)
     p.add_argument("--schedule", choices=list(SCHEDULES), default="full")
     p.add_argument("--costs", type=Path, default=None, help=costs_help)
+    add_force_flag(p)
     p = add("costs", cmd_costs, "plan every task edge and bet -> cost table file (seconds)")
     p.add_argument("--out", type=Path, required=True)
+    add_force_flag(p)
     add_interaction_flags(p, "; prices the bets with the interface's delay")
     add("policy", cmd_policy, "the policy for every state").add_argument("--policy")
     p = add("react", cmd_react, "decision loop with a scripted operator")
@@ -402,6 +478,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("what", choices=["graph", "learning"])
     p.add_argument("--out", required=True)
     p.add_argument("--schedule", choices=list(SCHEDULES), default="paper")
+    add_force_flag(p)
     p = add("simulate", cmd_simulate, "run a scenario in the Drake cell")
     p.add_argument(
         "--scenario",
@@ -423,12 +500,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="0.5 s bolting holds (tests, previews); same as --scenario-text with LEAN",
     )
     p.add_argument("--still", type=Path, default=None, help="PNG of the cell at --still-time")
-    p.add_argument("--still-time", type=float, default=10.0, help="simulated time of --still")
+    p.add_argument(
+        "--still-time", type=float, default=None, help="simulated time of --still (default 10)"
+    )
     p.add_argument(
         "--live",
         action="store_true",
-        help="you are the operator: serve Meshcat (open the printed URL), run at the wall "
-        "clock's pace and wait for your click at every task boundary",
+        help="you are the operator: serve Meshcat (open the printed URL) and run at the wall "
+        "clock's pace; at every task boundary your click is the indication (anticipating, the "
+        "robot starts on its proposal meanwhile; with --interaction wait it waits for it)",
     )
     p.add_argument(
         "--port",
@@ -436,6 +516,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="the port Meshcat serves with --live or --record (default: the first free from 7000)",
     )
+    add_force_flag(p)
     p.add_argument(
         "--station-lcm",
         metavar="URL",
@@ -488,10 +569,19 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `hrc-drake`."""
     args = build_parser().parse_args(argv)
+    # A shell that starts a job in the background hands it SIGINT ignored, and Python then
+    # leaves it ignored: Ctrl-C (or a SIGINT sent on purpose) would not end the command.
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         code = args.func(args)
         sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's final flush
         return code
+    except KeyboardInterrupt:
+        # The last resort: commands with partial results (simulate, evaluate) write them and
+        # return 130 themselves; anything else stops here with one line and no traceback.
+        print(f"hrc-drake {args.command}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except BrokenPipeError:
         _quiet_stdout()
         return 1

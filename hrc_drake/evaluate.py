@@ -19,27 +19,27 @@ its likely answers); at task level a boundary whose task was among them costs no
 other the motion layer's median planning time (`PLANNING_SECONDS`).
 Time figures (mean, p95, worst) are over the completed runs.
 
-At cell level (``--cell``) each run is a closed-loop simulation of the physical cell: times are
-the cell's simulated seconds, and the robot's idle time at a boundary is the wall time it waited
-for the planner after the operator's answer (``plan_ready_rate``: the share of boundaries whose
-plan was made ahead, while the operator bolted). A cell run plays the evaluation's interaction:
-its Supervisor asks the decider's bet (`commit`) at each boundary and starts on it, or waits; the
-simulated operator indicates after the interface's delay (`DelayedIndications`), drawn from the
-same seeded stream as the task level's, so a run's delays are the same at both levels. This
-module does not know
-the cell: `Setup.cell` is an object that plays cell runs
-(`CellRuns`; `hrc_drake.cell.evaluate.CellOptions`), so the dependency goes one way, from the
-cell to here. The command line is
-`hrc_drake.evaluate_command`.
+At cell level (``--cell``) each run is a closed-loop simulation of the physical cell: times are the
+cell's simulated seconds, and so is the robot's idle time at a boundary (simulated time stands still
+while the planner works, so it is one controller update); the wall time it waited for the planner
+after the operator's answer is ``wall_mean_idle`` (``plan_ready_rate``: the share of boundaries
+whose plan was made ahead, while the operator bolted). A cell run plays the evaluation's
+interaction: its Supervisor asks the decider's bet (`commit`) at each boundary and starts on it, or
+waits; the simulated operator indicates after the interface's delay (`DelayedIndications`), drawn
+from the same seeded stream as the task level's, so a run's delays are the same at both levels. This
+module does not know the cell: `Setup.cell` is an object that plays cell runs (`CellRuns`;
+`hrc_drake.cell.evaluate.CellOptions`), so the dependency goes one way, from the cell to here. The
+command line is `hrc_drake.evaluate_command`.
 
 Runs spread over local processes (``workers``) or, with ``ray``, over a Ray cluster (the optional
 extra ``hrc_drake[ray]``): each worker builds its own decider (and, at cell level, its own
 diagram per run), and results are gathered by run index, so the report is the same whichever
-way it runs (but for the ``wall_*`` figures and, at cell level, the measured idle time).
+way it runs (but for the ``wall_*`` figures).
 """
 
 from __future__ import annotations
 
+import signal
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -53,7 +53,6 @@ from hrc_drake.tasks.costs import CostTable, operator_seconds
 from hrc_drake.tasks.deciders import DECIDERS, commit_to_proposal, make_decider
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.interaction import (
-    DelayedIndications,
     Interaction,
     InteractionCosts,
     delay_generator,
@@ -95,6 +94,11 @@ class RunResult:
     swaps: int = 0
     indication_delay: float = 0.0
     indication_wait: float = 0.0
+    wall_idle: tuple[float, ...] = ()  # cell level: the idle waits in wall-clock seconds
+    states: tuple[str, ...] = ()
+    """Cell only: the states the run went through (their names)."""
+    violations: int = 0
+    """Cell only: separation violations (ISO/TS 15066 S_p; 0 without the operator's body)."""
 
 
 def run_seed(seed: int, run: int) -> int:
@@ -221,8 +225,11 @@ class CellRuns(Protocol):
     def check(self, operator, model_name: str) -> None:
         """UsageError for an operator model the cell cannot play."""
 
-    def play(self, prepared: Any, space: StateSpace, decider, operator) -> RunResult:
-        """One run; the decider is not reset."""
+    def play(self, prepared: Any, setup: Setup, decider, run: int) -> RunResult:
+        """Run `run` of the evaluation `setup`; the decider is not reset."""
+
+    def replay(self, setup: Setup, run: int) -> str | None:
+        """The command that plays run `run` alone (None: it cannot be played alone)."""
 
     def playing(self, mode: str) -> CellRuns:
         """The same cell playing the interaction `mode` (`anticipate`, `wait`)."""
@@ -254,6 +261,14 @@ class Setup:
 _WORKER: dict[str, Any] = {}
 
 
+def _prepare_worker(setup: Setup) -> None:
+    # A pool's worker leaves Ctrl-C to the parent, which terminates the pool: the terminal
+    # sends SIGINT to the whole process group, and a worker's KeyboardInterrupt would only
+    # print its traceback.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _prepare(setup)
+
+
 def _prepare(setup: Setup) -> None:
     # Built once per process: deciders hold numpy solutions, the paper's agent trains here
     # (seeded, so every process learns the same table).
@@ -272,14 +287,12 @@ def _play(run: int) -> RunResult:
         decider.start_run()
     else:
         decider.reset()
+    if setup.cell is not None:
+        # The run's scenario builds the operator (`CellOptions.run_text`): the model seeded
+        # `run_seed`, indicating after the delays the task level draws for the same run.
+        return setup.cell.play(_WORKER["cell"], setup, decider, run)
     seed = run_seed(setup.seed, run)
     operator = make_operator_model(setup.operator_model, setup.space, seed=seed, **setup.params)
-    if setup.cell is not None:
-        # The simulated operator indicates after the delays the task level would draw.
-        delays = DelayedIndications(
-            operator, setup.interaction.delay, rng=delay_generator(setup.seed, run)
-        )
-        return setup.cell.play(_WORKER["cell"], setup.space, decider, delays)
     delays = delay_generator(setup.seed, run)
     return simulate_run(setup.space, setup.costs, decider, operator, _WORKER["timeline"], delays)
 
@@ -368,15 +381,18 @@ def _run_ray(setup: Setup, runs: int, workers: int | None, address: str | None, 
         pending = {actors[k % workers].play.remote(chunk): chunk for k, chunk in enumerate(chunks)}
         results: list[RunResult | None] = [None] * runs
         done = 0
-        while pending:
-            ready, _ = ray.wait(list(pending), num_returns=1)
-            chunk = pending.pop(ready[0])
-            for i, result in zip(chunk, ray.get(ready[0]), strict=True):
-                results[i] = result
-            done += len(chunk)
-            if progress is not None:
-                progress(done, runs)
-        return results, workers
+        try:
+            while pending:
+                ready, _ = ray.wait(list(pending), num_returns=1)
+                chunk = pending.pop(ready[0])
+                for i, result in zip(chunk, ray.get(ready[0]), strict=True):
+                    results[i] = result
+                done += len(chunk)
+                if progress is not None:
+                    progress(done, runs)
+        except KeyboardInterrupt:
+            return results, workers, True  # shutting Ray down below ends its actors
+        return results, workers, False
     finally:
         if started:
             ray.shutdown()
@@ -414,44 +430,70 @@ def evaluate(
         setup.cell.check(operator, setup.operator_model)
         setup.cell.prepare(setup.space)
     start = time.perf_counter()
+    results: list[RunResult | None] = [None] * runs
+    interrupted = False
     if ray:
-        results, workers = _run_ray(setup, runs, workers, ray_address, progress)
+        results, workers, interrupted = _run_ray(setup, runs, workers, ray_address, progress)
         backend = "ray"
     elif workers in (None, 1):
         workers, backend = 1, "serial"
         _prepare(setup)
-        results = []
-        for i in range(runs):
-            results.append(_play(i))
-            if progress is not None:
-                progress(i + 1, runs)
-    else:
-        import multiprocessing
-
-        backend = "processes"
-        ctx = multiprocessing.get_context("spawn")
-        chunks = _chunks(runs, workers, 0 if setup.cell is not None else 4)
-        results = [None] * runs
-        done = 0
-        with ctx.Pool(workers, initializer=_prepare, initargs=(setup,)) as pool:
-            # Unordered: progress counts every finished chunk, not the longest prefix of them.
-            for indices, chunk in pool.imap_unordered(_play_chunk, chunks):
-                for i, result in zip(indices, chunk, strict=True):
-                    results[i] = result
-                done += len(chunk)
+        try:
+            for i in range(runs):
+                results[i] = _play(i)
                 if progress is not None:
-                    progress(done, runs)
+                    progress(i + 1, runs)
+        except KeyboardInterrupt:
+            interrupted = True
+    else:
+        backend = "processes"
+        interrupted = _run_pool(setup, runs, workers, results, progress)
     wall = time.perf_counter() - start
-    report = summarise(setup, results)
+    indices = [i for i, r in enumerate(results) if r is not None]
+    report = summarise(setup, [results[i] for i in indices], indices)
+    # Ctrl-C: the report is of the runs done (`runs`), out of those asked for.
+    report["interrupted"] = interrupted
+    report["runs_requested"] = runs
     report["wall_seconds"] = round(wall, 3)
-    report["wall_runs_per_second"] = round(runs / wall, 3) if wall > 0 else None
+    report["wall_runs_per_second"] = round(len(indices) / wall, 3) if wall > 0 else None
     report["workers"] = workers
     report["backend"] = backend
     return report
 
 
-def summarise(setup: Setup, results: list[RunResult]) -> dict[str, Any]:
-    """The JSON report of a list of runs."""
+def _run_pool(setup: Setup, runs: int, workers: int, results: list, progress) -> bool:
+    """Play the runs over `workers` local processes into `results` (by run index); True if
+    Ctrl-C stopped them first (the workers are terminated: none is left running)."""
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("spawn")
+    chunks = _chunks(runs, workers, 0 if setup.cell is not None else 4)
+    done = 0
+    pool = ctx.Pool(workers, initializer=_prepare_worker, initargs=(setup,))
+    try:
+        # Unordered: progress counts every finished chunk, not the longest prefix of them.
+        for indices, chunk in pool.imap_unordered(_play_chunk, chunks):
+            for i, result in zip(indices, chunk, strict=True):
+                results[i] = result
+            done += len(chunk)
+            if progress is not None:
+                progress(done, runs)
+    except KeyboardInterrupt:
+        return True
+    finally:
+        # Terminated, not closed: on Ctrl-C the workers are mid-run (SIGTERM ends them); after
+        # the last chunk they are idle. join() waits until every one has exited.
+        pool.terminate()
+        pool.join()
+    return False
+
+
+def summarise(
+    setup: Setup, results: list[RunResult], runs: list[int] | None = None
+) -> dict[str, Any]:
+    """The JSON report of a list of runs; `runs` are their indices in the evaluation (default
+    0, 1, ...: every run, in order), which name the failing ones at cell level."""
+    runs = list(range(len(results))) if runs is None else runs
     done = [r for r in results if r.completed]
     times = np.array([r.seconds for r in done])
     idle = [x for r in results for x in r.idle]
@@ -459,6 +501,10 @@ def summarise(setup: Setup, results: list[RunResult]) -> dict[str, Any]:
 
     def fig(x):
         return None if x is None else round(float(x), 3)
+
+    def mean(values):
+        # None, not NaN, when Ctrl-C came before any run finished.
+        return fig(np.mean(values)) if values else None
 
     boundaries = sum(r.tasks for r in results)
     interaction = setup.interaction
@@ -469,13 +515,13 @@ def summarise(setup: Setup, results: list[RunResult]) -> dict[str, Any]:
         "assembly": setup.space.spec.name,
         "runs": len(results),
         "completed": len(done),
-        "completion_rate": len(done) / len(results),
+        "completion_rate": len(done) / len(results) if results else None,
         "mean_time": fig(times.mean() if len(done) else None),
         "p95_time": fig(np.percentile(times, 95) if len(done) else None),
         "worst_time": fig(times.max() if len(done) else None),
-        "mean_tasks": fig(np.mean([r.tasks for r in results])),
-        "mean_undos": fig(np.mean([r.undos for r in results])),
-        "mean_deviations": fig(np.mean([r.deviations for r in results])),
+        "mean_tasks": mean([r.tasks for r in results]),
+        "mean_undos": mean([r.undos for r in results]),
+        "mean_deviations": mean([r.deviations for r in results]),
         "mean_idle": round(float(np.mean(idle)), 4) if idle else 0.0,
         "p95_idle": round(float(np.percentile(idle, 95)), 4) if idle else 0.0,
         "plan_ready_rate": round(float(np.mean(ready)), 4) if ready else None,
@@ -485,10 +531,10 @@ def summarise(setup: Setup, results: list[RunResult]) -> dict[str, Any]:
         "commit_rate": round(sum(r.commits for r in results) / boundaries, 4)
         if boundaries
         else 0.0,
-        "mean_retargets": fig(np.mean([r.retargets for r in results])),
-        "mean_swaps": fig(np.mean([r.swaps for r in results])),
-        "mean_indication_delay": fig(np.mean([r.indication_delay for r in results])),
-        "mean_indication_wait": fig(np.mean([r.indication_wait for r in results])),
+        "mean_retargets": mean([r.retargets for r in results]),
+        "mean_swaps": mean([r.swaps for r in results]),
+        "mean_indication_delay": mean([r.indication_delay for r in results]),
+        "mean_indication_wait": mean([r.indication_wait for r in results]),
         "keep_model": setup.keep_model,
         "seed": setup.seed,
         "level": "task" if setup.cell is None else "cell",
@@ -496,16 +542,59 @@ def summarise(setup: Setup, results: list[RunResult]) -> dict[str, Any]:
     }
     if setup.cell is not None:
         errors = sorted({r.error for r in results if r.error and not r.completed})
+        wall_idle = [x for r in results for x in r.wall_idle]
         report.update(
             {
                 # How long the arm stood still for an indication the cell does not measure.
                 "mean_indication_wait": None,
                 "collisions": int(sum(r.collisions for r in results)),
+                "wall_mean_idle": round(float(np.mean(wall_idle)), 4) if wall_idle else 0.0,
                 **setup.cell.describe(setup.space),
                 "errors": errors[:5],
+                "failures": failures(setup, results, runs),
             }
         )
     return report
+
+
+def stop_reason(result: RunResult) -> str:
+    """Why a cell run failed, in one line: its error, else what kept it from passing."""
+    if result.error:
+        return result.error
+    if not result.completed:
+        last = result.states[-1] if result.states else "?"
+        return f"ended in state {last}, not terminal"
+    problems = []
+    if result.collisions:
+        problems.append(f"{result.collisions} robot collision(s)")
+    if result.violations:
+        problems.append(f"{result.violations} separation violation(s)")
+    return ", ".join(problems)
+
+
+def failures(setup: Setup, results: list[RunResult], runs: list[int]) -> list[dict[str, Any]]:
+    """The cell runs that did not complete or had robot collisions or separation violations,
+    each with what replays it alone (`CellRuns.replay`): its index, the operator's seed, model
+    and parameters, the stop reason, the states it went through and the command."""
+    out = []
+    for run, r in zip(runs, results, strict=True):
+        if r.completed and not r.collisions and not r.violations:
+            continue
+        out.append(
+            {
+                "run": run,
+                "seed": run_seed(setup.seed, run),
+                "operator_model": setup.operator_model,
+                "params": dict(setup.params),
+                "completed": r.completed,
+                "stop": stop_reason(r),
+                "states": list(r.states),
+                "collisions": r.collisions,
+                "separation_violations": r.violations,
+                "replay": setup.cell.replay(setup, run),
+            }
+        )
+    return out
 
 
 def plot_times(report: dict[str, Any], path: Path) -> None:

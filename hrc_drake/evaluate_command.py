@@ -17,7 +17,7 @@ from pathlib import Path
 
 from hrc_drake.evaluate import Setup, evaluate, plot_times
 from hrc_drake.hri.populations import make_operator_model
-from hrc_drake.paths import UsageError, check_output_path
+from hrc_drake.paths import UsageError, check_output_path, image_kind
 from hrc_drake.progress import ProgressLine, duration
 from hrc_drake.tasks.costs import CostTable, CostTableError, load_cost_table
 from hrc_drake.tasks.deciders import DECIDERS
@@ -32,6 +32,7 @@ from hrc_drake.tasks.interaction import (
     make_interaction,
 )
 
+EXIT_INTERRUPTED = 130  # the shell's status for a command ended by SIGINT (128 + 2)
 DEFAULT_RUNS = 1000
 DEFAULT_CELL_RUNS = 20
 # Cell runs are closed-loop simulations of about half a minute each: more than this in one
@@ -41,6 +42,18 @@ MAX_CELL_RUNS = 1000
 # benchmarks/reports/evaluate_cell.md measured 18-47 s of wall time per run of about 36 s
 # simulated. The estimate gives the range.
 CELL_REAL_TIME_FACTORS = (0.75, 2.0)
+# Task-level runs keep every run's result until the report (its p95 and the --plot histogram need
+# every time): about 1.5 KB per run against `random` (15 tasks a run; 0.5 KB against
+# `mistake-prone`), so memory grows with --runs. The mean's standard error at 10^6 runs is a
+# thousandth of the times' spread, far below the 1 % between deciders (docs/evaluation.md): more
+# runs only cost memory and hours, so they are refused with this limit in the message.
+MAX_TASK_RUNS = 1_000_000
+TASK_RUN_BYTES = 1500
+# Serial task-level runs per second on the flange case (2-core machine, `exact` 1,700 against
+# `random`, 4,000 against `follows`; `mpc` 140 against `random`): the estimate gives the range.
+TASK_RUNS_PER_SECOND = (140, 4000)
+# Task-level evaluations whose slowest estimate is longer than this say so before they start.
+ESTIMATE_ABOVE_SECONDS = 30.0
 # Robot seconds of a task edge when no cost table is at hand yet: the mean of the flange case's
 # table (38 edges, 5.5-7.1 s; `hrc-drake costs`).
 TYPICAL_ROBOT_SECONDS = 6.4
@@ -143,7 +156,8 @@ def _check_flags(args) -> Path | None:
     if args.plot is not None:
         from hrc_drake.tasks.plots import FORMATS
 
-        plot = check_output_path(args.plot, "--plot", FORMATS)
+        kind = image_kind(Path(args.plot).suffix)
+        plot = check_output_path(args.plot, "--plot", FORMATS, kind=kind, force=args.force)
     if args.decider not in DECIDERS:
         raise UsageError(f"unknown decider {args.decider!r}; known deciders: {', '.join(DECIDERS)}")
     unused = ["--gamma"] if args.gamma is not None else []
@@ -171,12 +185,35 @@ def _check_flags(args) -> Path | None:
         raise UsageError(f"--runs {args.runs}: give at least 1 run")
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers {args.workers}: give at least 1 worker")
+    if not args.cell and args.runs is not None:
+        _check_task_runs(args.runs, args.workers if args.ray is None else None)
     if args.keep_model and (args.ray is not None or (args.workers or 1) > 1):
         raise UsageError(
             "--keep-model: one operator's assemblies follow each other, each learning from the "
             "last; they run in one process: drop --workers and --ray"
         )
     return plot
+
+
+def _check_task_runs(runs: int, workers: int | None) -> None:
+    """Task level: refuse more than MAX_TASK_RUNS runs (one line, with the estimate); say how
+    long and how much memory a long evaluation takes before it starts."""
+    workers = max(1, min(workers or 1, usable_cpus()))
+    slow, fast = (runs / (rate * workers) for rate in TASK_RUNS_PER_SECOND)
+    memory = runs * TASK_RUN_BYTES / 1e6
+    size = f"{memory / 1000:.1f} GB" if memory >= 1000 else f"{max(memory, 1):.0f} MB"
+    estimate = (
+        f"about {duration(fast)} to {duration(slow)} of wall time on {workers} worker(s) and "
+        f"up to {size} of memory for the report"
+    )
+    if runs > MAX_TASK_RUNS:
+        raise UsageError(
+            f"--runs {runs}: {estimate}; at most {MAX_TASK_RUNS:,} runs per evaluation (the "
+            "figures settle long before: the mean's error at 10^6 runs is 0.1 % of the spread); "
+            "give fewer, or repeat with other --seed values"
+        )
+    if slow > ESTIMATE_ABOVE_SECONDS:
+        print(f"evaluate: {runs} runs, {estimate}", file=sys.stderr)
 
 
 def _cell_options(args, space: StateSpace, operator):
@@ -188,7 +225,9 @@ def _cell_options(args, space: StateSpace, operator):
     separation = separation_from_flags(args)
     mode = None if separation is None else f"{{safety: {{separation: {separation}}}}}"
     overrides = [t for t in (LEAN if args.lean else None, *(args.scenario_text or []), mode) if t]
-    cell = CellOptions(args.scenario or DEFAULT_BASE_SCENARIO, tuple(overrides))
+    # The cost table's file goes into the failing runs' replay commands (empty: the cache's).
+    costs = "" if args.costs is None else str(Path(args.costs).resolve())
+    cell = CellOptions(args.scenario or DEFAULT_BASE_SCENARIO, tuple(overrides), costs=costs)
     cell.check(operator, args.operator_model)
     return cell, cell.prepare(space)
 
@@ -298,16 +337,38 @@ def cmd_evaluate(args) -> int:
             )
         except misfits as err:
             raise UsageError(str(err)) from None
-    if plot is not None:
+    if plot is not None and report["completed"]:
         plot_times(report, plot)
     report.pop("times")
     if args.json:
         json.dump(report, sys.stdout, indent=1)
         sys.stdout.write("\n")
-        return 0
-    for key, value in report.items():
-        print(f"{key:22} {value}")
+    else:
+        print_report(report)
+    if report["interrupted"]:
+        # After the report of the runs done: the one line that says why it ends here.
+        done, asked = report["runs"], report["runs_requested"]
+        print(f"hrc-drake evaluate: interrupted after {done} of {asked} runs", file=sys.stderr)
+        return EXIT_INTERRUPTED
     return 0
+
+
+def print_report(report: dict) -> None:
+    """The report as `key value` lines; the failing cell runs (`failures`) one by one, each
+    with why it stopped and the command that replays it."""
+    for key, value in report.items():
+        if key != "failures":
+            print(f"{key:22} {value}")
+    failing = report.get("failures")
+    if failing is None:
+        return
+    print(f"{'failures':22} {len(failing)}")
+    for f in failing:
+        params = " ".join(f"{k}={v}" for k, v in f["params"].items())
+        who = f"{f['operator_model']}{' ' + params if params else ''}, seed {f['seed']}"
+        print(f"  run {f['run']} ({who}): {f['stop']}")
+        print(f"    states: {' '.join(f['states'])}")
+        print(f"    replay: {f['replay'] or 'not alone (the decider learned over earlier runs)'}")
 
 
 def add_evaluate_parser(add) -> None:
@@ -323,8 +384,8 @@ def add_evaluate_parser(add) -> None:
         "--runs",
         type=int,
         default=None,
-        help=f"runs (default {DEFAULT_RUNS}; with --cell {DEFAULT_CELL_RUNS}, at most "
-        f"{MAX_CELL_RUNS})",
+        help=f"runs (default {DEFAULT_RUNS}, at most {MAX_TASK_RUNS:,}; with --cell "
+        f"{DEFAULT_CELL_RUNS}, at most {MAX_CELL_RUNS})",
     )
     p.add_argument(
         "--workers",
@@ -363,6 +424,11 @@ def add_evaluate_parser(add) -> None:
     p.add_argument("--costs", type=Path, default=None, help="cost table (default: the cell's)")
     p.add_argument(
         "--param", action="append", default=None, help="operator model parameter KEY=VALUE"
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing --plot file that is not an image of its kind",
     )
     add_interaction_flags(p, "; with --cell, over the scenario's `interaction.mode`")
     add_separation_flag(p, " (with --cell)")

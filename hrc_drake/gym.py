@@ -26,7 +26,9 @@
   itself with reward 0 and ``terminated`` True.
 
 ``reset(options={"state": s})`` starts in state `s` (an id or a task sequence): exploring starts.
-Registered as ``"hrc_drake/Assembly-v0"``.
+Registered as ``"hrc_drake/Assembly-v0"`` when this module is imported. Gymnasium 1.x loads no
+plugin entry points, so without importing it first, name the module in the id:
+``gymnasium.make("hrc_drake.gym:hrc_drake/Assembly-v0")`` imports it, then makes the environment.
 """
 
 from __future__ import annotations

@@ -3,7 +3,9 @@
 A command that writes a file (`--out`, `--record`, `--still`, `--plot`) calls `check_output_path`
 first, so that a directory, a device, a missing folder or a place where no file can be made is a
 one-line error at once, not a traceback (or a replaced device node) after minutes of training or
-simulation.
+simulation. One rule for files that exist: a command replaces only a file of the kind it writes
+(a policy with a policy, a PNG with a PNG; each writer passes its `OutputKind`), anything else
+only with `--force` (`hrc-drake solve --out notes.md` must not destroy the notes).
 """
 
 from __future__ import annotations
@@ -11,7 +13,8 @@ from __future__ import annotations
 import os
 import stat
 import tempfile
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 from pathlib import Path
 
 
@@ -19,8 +22,63 @@ class UsageError(ValueError):
     """A command-line value that cannot be used; the message names the flag and the fix."""
 
 
-def check_output_path(path: str | Path, flag: str, suffixes: Iterable[str] | None = None) -> Path:
+@dataclass(frozen=True)
+class OutputKind:
+    """The kind of file a command writes, for `check_output_path`: `name` in messages ("policy
+    file") and `recognise(path)`, True when an existing file is one (so replacing it with a new
+    one is what the user asked for); `example`, a file name a hint may advise ("policy.json";
+    empty: the given name's stem and suffix)."""
+
+    name: str
+    recognise: Callable[[Path], bool]
+    example: str = ""
+
+
+def _head(path: Path) -> bytes:
+    """The first bytes of `path` (empty if it cannot be read)."""
+    try:
+        with open(path, "rb") as f:
+            return f.read(512)
+    except OSError:
+        return b""
+
+
+def _starts_with(*magics: bytes) -> Callable[[Path], bool]:
+    def recognise(path: Path) -> bool:
+        head = _head(path).lstrip().lower()
+        return any(head.startswith(m.lower()) for m in magics)
+
+    return recognise
+
+
+# Files recognised by their first bytes: what a reader of the format checks first too.
+PNG_FILE = OutputKind("PNG image", _starts_with(b"\x89PNG"))
+PDF_FILE = OutputKind("PDF file", _starts_with(b"%PDF"))
+SVG_FILE = OutputKind("SVG image", _starts_with(b"<?xml", b"<svg"))
+# Drake's Meshcat page names itself in its <title>, within the first bytes.
+MESHCAT_RECORDING = OutputKind(
+    "Meshcat recording",
+    lambda path: _starts_with(b"<!doctype html")(path) and b"meshcat" in _head(path).lower(),
+)
+
+
+def image_kind(suffix: str) -> OutputKind:
+    """The OutputKind of a plot file with this suffix (.png, .pdf, .svg)."""
+    return {".pdf": PDF_FILE, ".svg": SVG_FILE}.get(suffix.lower(), PNG_FILE)
+
+
+def check_output_path(
+    path: str | Path,
+    flag: str,
+    suffixes: Iterable[str] | None = None,
+    kind: OutputKind | None = None,
+    force: bool = False,
+) -> Path:
     """`path` as a Path if a file can be written there; UsageError naming `flag` otherwise.
+
+    An existing regular file is replaced only if `kind` recognises it as a file of the kind the
+    command writes, or with `force` (`--force`); a writer that passes no `kind` replaces any
+    regular file (kept for callers outside the command line).
 
     Refused: an existing directory (or a name ending in a separator), anything else that exists
     and is not a regular file (a device such as /dev/null, a pipe, a socket: files are written by
@@ -57,6 +115,11 @@ def check_output_path(path: str | Path, flag: str, suffixes: Iterable[str] | Non
         raise UsageError(f"{flag} {text}: folder {parent} is not writable; choose another place")
     if path.exists() and not os.access(path, os.W_OK):
         raise UsageError(f"{flag} {text}: the file is read-only; choose another name")
+    if kind is not None and not force and path.is_file() and not kind.recognise(path):
+        raise UsageError(
+            f"{flag} {text}: exists and is not a {kind.name}; writing would destroy it: choose a "
+            f"new name (e.g. {flag} {_example(path, kind)}), or add --force to replace it"
+        )
     _probe(parent, text, flag)
     return path
 
@@ -75,6 +138,37 @@ def _refuse_special_file(path: Path, text: str, flag: str) -> None:
             f"{flag} {text}: exists and is not a regular file ({_kind(mode)}); writing would "
             "replace it: give the name of a new or regular file"
         )
+
+
+def _example(path: Path, kind: OutputKind) -> Path:
+    if not kind.example:
+        return fresh_name(path)
+    example = Path(kind.example)
+    return fresh_name(path, example.stem, example.suffix)
+
+
+def fresh_name(path: str | Path, stem: str | None = None, suffix: str | None = None) -> Path:
+    """A name beside `path` that does not exist yet (`stem` and `suffix`, default `path`'s, then
+    `-2`, `-3`, ...): what a hint advises instead of overwriting a file it does not know."""
+    path = Path(path)
+    stem = stem or path.stem
+    suffix = suffix or path.suffix
+    for n in range(1, 1000):
+        candidate = path.with_name(f"{stem}{'' if n == 1 else f'-{n}'}{suffix}")
+        if not candidate.exists():
+            return candidate
+    return path.with_name(f"{stem}-new{suffix}")
+
+
+def not_a_file(path: str | Path) -> str:
+    """What `path`, which exists and is not a regular file, is, for a one-line error: ``is a
+    character device, not a regular file``."""
+    try:
+        mode = Path(path).stat().st_mode
+    except OSError as err:
+        return f"cannot be used ({err.strerror})"
+    kind = "a folder" if stat.S_ISDIR(mode) else _kind(mode)
+    return f"is {kind}, not a regular file"
 
 
 def _kind(mode: int) -> str:

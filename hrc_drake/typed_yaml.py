@@ -5,8 +5,8 @@ Drake) reads the same files with `load_typed` here. Both are strict in the same 
 key or a value of the wrong type is an error naming the key, and keys left out keep the schema's
 defaults (or those of `defaults`, for command-line overrides on top of a file).
 
-Supported field types: `str`, `int`, `float` (an int is accepted), `bool`, `X | None`,
-`list[X]`, `dict[str, X]` and nested dataclasses.
+Supported field types: `str`, `int`, `float` (an int is accepted), `bool`, `X | None`, `X | Y`
+(the first that fits), `list[X]`, `dict[str, X]` and nested dataclasses.
 """
 
 from __future__ import annotations
@@ -31,6 +31,46 @@ class YamlSyntaxError(TypedYamlError):
 # A number PyYAML (YAML 1.1) reads as a string because it has no dot, e.g. 5e-3; YAML 1.2 and
 # Drake's yaml_load_typed read it as a number, so it is one here too.
 _EXPONENT_NUMBER = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+$")
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, refusing a key given twice in one mapping: YAML forbids it, and
+    PyYAML would keep the last value silently (a careless `{hold_time: 1, hold_time: 5}`)."""
+
+    def construct_mapping(self, node, deep=False):
+        """The mapping of `node`; ConstructorError at the second occurrence of a key."""
+        if isinstance(node, yaml.MappingNode):
+            seen = set()
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue  # `<<: *base` may be overridden key by key, as YAML intends
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    duplicate = key in seen
+                except TypeError:
+                    continue  # an unhashable key is refused by the base class below
+                if duplicate:
+                    raise yaml.constructor.ConstructorError(
+                        "while constructing a mapping",
+                        node.start_mark,
+                        f"found duplicate key {key!r}; give each key once",
+                        key_node.start_mark,
+                    )
+                seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+def safe_load_unique(text: str) -> Any:
+    """`yaml.safe_load(text)`, but a key given twice in a mapping is a yaml.YAMLError (with its
+    line and column, for `yaml_error_line`) instead of the last value winning silently."""
+    return yaml.load(text, Loader=_UniqueKeyLoader)  # a SafeLoader subclass: as safe
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    """`repr(value)`, cut to `limit` characters: a whole text file read as one YAML string
+    (`--scenario README.md`) must not fill the terminal with a one-line error."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[: limit - 5]}...{text[-1]}"
 
 
 def _type_name(tp: Any) -> str:
@@ -58,36 +98,42 @@ def _convert(value: Any, tp: Any, key: str, default: Any = dataclasses.MISSING) 
     if origin in (typing.Union, types.UnionType):
         if value is None and type(None) in args:
             return None
-        (inner,) = [a for a in args if a is not type(None)]
-        return _convert(value, inner, key, default)
+        inner = [a for a in args if a is not type(None)]
+        # `float | str` (as Drake's loader reads it): the first type the value fits.
+        for tp_ in inner[:-1]:
+            try:
+                return _convert(value, tp_, key, default)
+            except TypedYamlError:
+                pass
+        return _convert(value, inner[-1], key, default)
     if dataclasses.is_dataclass(tp):
         base = default if dataclasses.is_dataclass(default) else None
         return _merge(value, tp, key, base)
     if origin is list:
         if not isinstance(value, list):
-            raise TypedYamlError(f"{key}: expected a list, got {value!r}")
+            raise TypedYamlError(f"{key}: expected a list, got {_short(value)}")
         return [_convert(v, args[0], f"{key}[{i}]") for i, v in enumerate(value)]
     if origin is dict:
         if not isinstance(value, dict):
-            raise TypedYamlError(f"{key}: expected a mapping, got {value!r}")
+            raise TypedYamlError(f"{key}: expected a mapping, got {_short(value)}")
         return {str(k): _convert(v, args[1], f"{key}.{k}") for k, v in value.items()}
     if tp is float:
         if isinstance(value, str) and _EXPONENT_NUMBER.match(value.strip()):
             return float(value)
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise TypedYamlError(f"{key}: expected a number, got {value!r}")
+            raise TypedYamlError(f"{key}: expected a number, got {_short(value)}")
         return float(value)
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise TypedYamlError(f"{key}: expected a whole number, got {value!r}")
+            raise TypedYamlError(f"{key}: expected a whole number, got {_short(value)}")
         return value
     if tp is bool:
         if not isinstance(value, bool):
-            raise TypedYamlError(f"{key}: expected true or false, got {value!r}")
+            raise TypedYamlError(f"{key}: expected true or false, got {_short(value)}")
         return value
     if tp is str:
         if not isinstance(value, str):
-            raise TypedYamlError(f"{key}: expected a string, got {value!r} (quote it)")
+            raise TypedYamlError(f"{key}: expected a string, got {_short(value)} (quote it)")
         return value
     raise TypeError(f"typed_yaml: unsupported field type {tp!r} at {key}")
 
@@ -97,7 +143,7 @@ def _merge(data: Any, schema: type, where: str, base: Any = None) -> Any:
     if data is None:
         data = {}
     if not isinstance(data, dict):
-        raise TypedYamlError(f"{where or '<top>'}: expected a mapping, got {data!r}")
+        raise TypedYamlError(f"{where or '<top>'}: expected a mapping, got {_short(data)}")
     hints = typing.get_type_hints(schema)
     fields = {f.name: f for f in dataclasses.fields(schema)}
     unknown = sorted(set(data) - set(fields))
@@ -125,11 +171,12 @@ def load_typed(
 
     Keys missing from the YAML keep the values of `defaults` (an instance of `schema`) or the
     schema's own defaults; nested mappings merge key by key. A syntax error in `text` is a
-    TypedYamlError naming `source` (a file name), the line and the column.
+    TypedYamlError naming `source` (a file name), the line and the column; so is a key given
+    twice in one mapping (`safe_load_unique`).
     """
     if text is not None:
         try:
-            data = yaml.safe_load(text)
+            data = safe_load_unique(text)
         except yaml.YAMLError as err:
             raise YamlSyntaxError(yaml_error_line(err, source)) from None
     base = dataclasses.replace(defaults) if defaults is not None else None

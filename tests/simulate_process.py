@@ -30,13 +30,14 @@ def hrc_drake_command() -> list[str]:
 
 
 class SimulateProcess:
-    """`hrc-drake simulate ARGS`; its stderr lines are collected as they come."""
+    """`hrc-drake simulate ARGS` (or another `command`); its stderr lines are collected as they
+    come."""
 
-    def __init__(self, *args: str):
+    def __init__(self, *args: str, command: str = "simulate"):
         env = dict(os.environ, PYTHONUNBUFFERED="1")
-        self.args = args
+        self.args = (command, *args)
         self.proc = subprocess.Popen(
-            [*hrc_drake_command(), "simulate", *args],
+            [*hrc_drake_command(), command, *args],
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
@@ -107,7 +108,7 @@ class SimulateProcess:
 
     def _story(self, what: str) -> str:
         tail = "\n".join(self.stderr_lines[-15:])
-        return f"hrc-drake simulate {' '.join(self.args)}: {what}; stderr ends:\n{tail}"
+        return f"hrc-drake {' '.join(self.args)}: {what}; stderr ends:\n{tail}"
 
 
 __all__ = ["SimulateProcess", "free_port", "hrc_drake_command"]

@@ -69,6 +69,7 @@ def test_cell_runs_play_the_task_level_runs_and_are_independent(played):
     # are those of the task level, run for run.
     assert _keys(report, *DECISIONS) == _keys(expected, *DECISIONS)
     assert report["level"] == "cell" and report["collisions"] == 0 and report["errors"] == []
+    assert report["failures"] == [] and report["interrupted"] is False  # every run passed
     assert _keys(report, *INTERACTION) == _keys(expected, *INTERACTION)
     assert report["interaction"] == WAIT and report["commit_rate"] == 0.0
     # The simulated operator waited the delays the task level drew for the same runs.
@@ -77,6 +78,9 @@ def test_cell_runs_play_the_task_level_runs_and_are_independent(played):
     # before each the robot waits for the indication (the pointer's delay, about 2 s).
     assert 20.0 < min(report["times"]) < 35.0 < max(report["times"]) < 75.0
     assert 0.0 <= report["plan_ready_rate"] <= 1.0 and report["mean_idle"] >= 0.0
+    # Idle in simulated seconds: one Supervisor update (20 ms) a boundary, the planner's wall
+    # time apart, so the report does not depend on the machine.
+    assert report["mean_idle"] == pytest.approx(0.02) and report["wall_mean_idle"] >= 0.0
     # Run 1 alone in a fresh process state gives what it gave after run 0: runs share no plans
     # and no decider memory, so the way runs are spread does not change the report.
     _prepare(cell)
@@ -160,3 +164,45 @@ def test_ray_missing_is_a_clear_error(flange_space, toy_costs, monkeypatch):
     setup = Setup(flange_space, toy_costs, "exact", "follows", {}, 0)
     with pytest.raises(UsageError, match=r"pip install 'hrc_drake\[ray\]'"):
         evaluate(setup, 2, ray=True)
+
+
+@pytest.mark.slow
+def test_a_failing_cell_run_is_listed_and_replays_alone(tmp_path, toy_costs, capsys):
+    """A cap on the simulated time that run 1 (a mistake, taken back) cannot finish within:
+    the report lists it, with the `simulate` command that gives its states and stop alone."""
+    import shlex
+    import subprocess
+
+    from simulate_process import hrc_drake_command
+
+    from hrc_drake.evaluate import run_seed
+    from hrc_drake.evaluate_command import print_report
+    from hrc_drake.tasks.costs import save_cost_table
+
+    costs = tmp_path / "toy-costs.json"
+    save_cost_table(toy_costs, costs)
+    args = ["evaluate", "--cell", "--lean", "--runs", "2", "--seed", str(SEED), "--json"]
+    args += ["--decider", "mpc", "--operator-model", "mistake-prone", "--param", "p=0.5"]
+    args += ["--costs", str(costs), "--scenario-text", NO_BODY]
+    assert main([*args, "--scenario-text", "{run: {max_sim_time: 22}}"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["completed"] == 1  # run 0 follows, within the cap: not listed
+    (failure,) = report["failures"]
+    assert failure["run"] == 1 and failure["seed"] == run_seed(SEED, 1)
+    assert failure["operator_model"] == "mistake-prone" and failure["params"] == {"p": "0.5"}
+    assert failure["stop"] == "no terminal state within 22.0 s of simulated time"
+    assert len(failure["states"]) >= 3 and failure["collisions"] == 0
+    command = shlex.split(failure["replay"])
+    assert command[:2] == ["hrc-drake", "simulate"]
+    replay = subprocess.run(
+        [*hrc_drake_command(), *command[1:], "--json"], capture_output=True, text=True, timeout=600
+    )
+    assert replay.returncode == 1, replay.stderr[-500:]
+    alone = json.loads(replay.stdout)
+    assert alone["names"] == failure["states"] and alone["error"] == failure["stop"]
+    assert alone["terminal"] is False
+    # The text report names the run, why it stopped and its replay command.
+    print_report(report)
+    text = capsys.readouterr().out
+    assert f"run 1 (mistake-prone p=0.5, seed {failure['seed']}): {failure['stop']}" in text
+    assert f"replay: {failure['replay']}" in text

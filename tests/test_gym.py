@@ -149,3 +149,22 @@ def test_ansi_render(flange_space):
     env.step(env.tasks.index("F1"))
     text = env.render()
     assert text.startswith("state 2: F1 [normal] after proposing F1; feasible: S23, undo")
+
+
+def test_make_by_module_id_in_a_fresh_process():
+    """Gymnasium 1.x loads no plugin entry points: a fresh interpreter makes the environment
+    from the module-qualified id, which imports hrc_drake.gym (and so registers it) itself."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, gymnasium\n"
+        "assert 'hrc_drake.gym' not in sys.modules\n"
+        "env = gymnasium.make('hrc_drake.gym:hrc_drake/Assembly-v0')\n"
+        "obs, info = env.reset(seed=0)\n"
+        "print(env.spec.id, obs, int(info['action_mask'].sum()))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120
+    ).stdout
+    assert out.split() == [ENV_ID, "0", "5"]

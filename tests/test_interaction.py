@@ -47,6 +47,7 @@ from hrc_drake.tasks.profile import (
     load_profile,
     new_profile,
     save_profile,
+    update_profile,
 )
 from hrc_drake.tasks.solve import exact_policy
 from hrc_drake.tasks.spec import parse_spec
@@ -269,6 +270,45 @@ def test_profile_files_are_checked(tmp_path, space):
     path.write_text("{not json")
     with pytest.raises(ProfileError, match="not JSON"):
         load_profile(path, space)
+
+
+def test_concurrent_profile_updates_keep_both_sessions(tmp_path, space, monkeypatch):
+    """Two runs ending at once with one profile: each update reads, learns and writes under the
+    file's lock, so both sessions are counted (unlocked, both would read the same file and the
+    later write would drop the other's session)."""
+    import threading
+    import time
+
+    import hrc_drake.tasks.profile as profile_module
+
+    path = tmp_path / "operator.json"
+    save_profile(_learned_profile(space, 1), path)
+    _, decisions = run_decisions(space, exact_policy(space), ScriptedOperator({1: "F3"}))
+    learn_now = profile_module.learn
+
+    def slow_learn(profile, tasks):
+        time.sleep(0.3)  # long enough that the other update reads before this one writes
+        return learn_now(profile, tasks)
+
+    monkeypatch.setattr(profile_module, "learn", slow_learn)
+    errors = []
+
+    def run():
+        try:
+            update_profile(path, space, decisions)
+        except Exception as err:  # pragma: no cover - reported by the assertion below
+            errors.append(err)
+
+    threads = [threading.Thread(target=run) for _ in range(2)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert errors == []
+    saved = load_profile(path, space)
+    assert saved.assemblies == 3
+    assert saved.model.observations((), "F1").get("F3") == 2.0
+    assert (tmp_path / "operator.json.lock").exists()
 
 
 def _spec_data():

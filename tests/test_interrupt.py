@@ -92,3 +92,100 @@ def test_ctrl_c_ends_a_run_started_with_sigint_ignored(tmp_path):
         out, err = run.communicate(timeout=TIMEOUT)
     assert run.returncode == 130, err[-300:]
     assert json.loads(out)["interrupted"] is True
+
+
+def _children(pid: int) -> list[int]:
+    """The processes whose parent is `pid` (from /proc: psutil is not a dependency)."""
+    from pathlib import Path
+
+    out = []
+    for status in Path("/proc").glob("[0-9]*/status"):
+        try:
+            text = status.read_text()
+        except OSError:
+            continue  # ended while listed
+        if f"\nPPid:\t{pid}\n" in text:
+            out.append(int(status.parent.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    """Whether process `pid` exists and is not a zombie."""
+    from pathlib import Path
+
+    try:
+        return "\nState:\tZ" not in Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
+
+
+def _ended_by_ctrl_c(run: SimulateProcess, command: str) -> tuple[str, list[str]]:
+    """Send Ctrl-C; check status 130, one `interrupted` line last, no traceback; stdout and
+    stderr lines."""
+    run.interrupt()
+    code, out, err = run.finish(TIMEOUT)
+    assert code == 130, err[-5:]
+    assert not any("Traceback" in line for line in err), err
+    assert err[-1].startswith(f"hrc-drake {command}: interrupted"), err[-3:]
+    assert sum("interrupted" in line for line in err) == 1, err
+    return out, err
+
+
+@pytest.fixture
+def toy_costs_file(tmp_path, toy_costs):
+    """The hand-made cost table in a file: the deciders need no motion planning."""
+    from hrc_drake.tasks.costs import save_cost_table
+
+    path = tmp_path / "toy-costs.json"
+    save_cost_table(toy_costs, path)
+    return path
+
+
+def test_ctrl_c_ends_cell_evaluation_with_the_runs_done_and_no_workers(toy_costs_file):
+    """Interrupted once the first of four runs is done, two still running in workers: the
+    report of the runs done, marked interrupted, and the workers gone."""
+    import time
+
+    args = ["--cell", "--lean", "--runs", "4", "--workers", "2", "--json"]
+    args += ["--decider", "exact", "--operator-model", "follows", "--costs", str(toy_costs_file)]
+    run = SimulateProcess(*args, "--scenario-text", "{body: {enabled: false}}", command="evaluate")
+    try:
+        run.wait_for_line(r"cell exact vs follows: run 1/4", TIMEOUT)
+        workers = _children(run.proc.pid)
+        assert len(workers) >= 2  # the pool's two (and multiprocessing's resource tracker)
+        out, err = _ended_by_ctrl_c(run, "evaluate")
+    finally:
+        run.kill()
+    report = json.loads(out)
+    assert report["interrupted"] is True and report["runs_requested"] == 4
+    assert 1 <= report["runs"] < 4 and report["completed"] == report["runs"]
+    assert err[-1] == f"hrc-drake evaluate: interrupted after {report['runs']} of 4 runs"
+    deadline = time.monotonic() + 10.0
+    while any(_alive(p) for p in workers) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not [p for p in workers if _alive(p)]
+
+
+def test_ctrl_c_ends_task_level_evaluation_with_the_runs_done(toy_costs_file):
+    args = ["--decider", "exact", "--operator-model", "random", "--runs", "1000000", "--json"]
+    run = SimulateProcess(*args, "--costs", str(toy_costs_file), command="evaluate")
+    try:
+        run.wait_for_line(r"evaluate exact vs random: run \d+/1000000", TIMEOUT)
+        out, _err = _ended_by_ctrl_c(run, "evaluate")
+    finally:
+        run.kill()
+    report = json.loads(out)
+    assert report["interrupted"] is True and 0 < report["runs"] < 1000000
+
+
+def test_ctrl_c_ends_costs_leaving_the_previous_table(toy_costs_file):
+    """Interrupted while planning: the previous table in the file is left as it was."""
+    before = toy_costs_file.read_bytes()
+    run = SimulateProcess("--out", str(toy_costs_file), command="costs")
+    try:
+        run.wait_for_line(r"planning task edges and bets: plan \d+", TIMEOUT)
+        _ended_by_ctrl_c(run, "costs")
+    finally:
+        run.kill()
+    assert toy_costs_file.read_bytes() == before
+    assert [p.name for p in toy_costs_file.parent.iterdir()] == [toy_costs_file.name]

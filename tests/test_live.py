@@ -191,3 +191,81 @@ def test_a_port_meshcat_cannot_serve_is_a_one_line_error(capsys, port):
         and len(err) == 1
         and err[0].startswith(f"hrc-drake simulate: error: --port {port}:")
     )
+
+
+def _press(meshcat, name: str) -> None:
+    """A click on the button `name`, as the browser sends it."""
+    meshcat._InjectWebsocketMessage(umsgpack.packb({"type": "button", "name": name}))
+
+
+def test_a_question_asked_again_is_sent_afresh_and_a_click_after_it_counts(flange_space):
+    """The Supervisor asks again (the prompt's `asked` one up): the terminal says so and the
+    buttons are deleted and added again (a browser that missed them gets them); a click before
+    the question is not its answer, one after the re-ask is; a button deleted by another hand
+    is added again instead of failing the run."""
+    from hrc_drake.hri.messages import Prompt, PromptKind
+
+    meshcat, said = Meshcat(), []
+    operator = LiveOperator(
+        meshcat,
+        flange_space,
+        place=lambda task, state: RigidTransform([0.3, 0.0, 0.0]),
+        clock=lambda: 0.0,
+        say=said.append,
+    )
+    # A click on a name left over from before the question does not answer it.
+    meshcat.AddButton("F1 - robot proposal")
+    _press(meshcat, "F1 - robot proposal")
+    prompt = Prompt(1, PromptKind.CHOOSE, (), "F1")
+    assert operator.poll(prompt) is None
+    assert "F1 - robot proposal" in meshcat.GetButtonNames()
+    meshcat.DeleteButton("F2 instead")  # gone from the panel: added again, not an error
+    assert operator.poll(prompt) is None and "F2 instead" in meshcat.GetButtonNames()
+    again = Prompt(1, PromptKind.CHOOSE, (), "F1", asked=1)
+    assert operator.poll(again) is None
+    assert "still no answer (asked again, 1 time)" in said[-1]
+    _press(meshcat, "F2 instead")
+    assert operator.poll(again) == "F2"
+    assert meshcat.GetButtonNames() == []
+
+
+def test_a_task_handed_over_is_confirmed_with_one_button(flange_space):
+    """A `HANDOVER` shows "I did F1" and says why; the click returns the task and takes the
+    button down."""
+    from hrc_drake.hri.messages import Prompt, PromptKind
+
+    meshcat, said = Meshcat(), []
+    operator = LiveOperator(
+        meshcat,
+        flange_space,
+        place=lambda task, state: None,
+        clock=lambda: 0.0,
+        say=said.append,
+    )
+    prompt = Prompt(1, PromptKind.HANDOVER, (), "F1", "oval_flange_1", reason="it lies tilted")
+    assert operator.poll(prompt) is None
+    assert meshcat.GetButtonNames() == ["I did F1"]
+    assert "hands F1: oval flange on slot 1 over to you (it lies tilted)" in said[-1]
+    _press(meshcat, "I did F1")
+    assert operator.poll(prompt) == "F1" and meshcat.GetButtonNames() == []
+
+
+@pytest.mark.slow
+def test_a_live_prompt_nobody_answers_ends_the_run_after_the_give_up(tmp_path, capsys):
+    """Nobody clicks: the robot asks again every `run.indication_timeout` (the terminal says
+    so) and after `run.indication_give_up` the run ends, not terminal, with a one-line reason,
+    its JSON and its recording written."""
+    from hrc_drake.cell.run import run_scenario
+    from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+
+    text = "{run: {indication_timeout: 1, indication_give_up: 2.5}}"
+    row = load_cell_scenario("row1-optimal", [LEAN, text])
+    result = run_scenario(row, live=True, record=tmp_path / "live.html")
+    report = result.to_json()
+    assert report["terminal"] is False and not report["interrupted"]
+    assert "no indication from the operator in 2.5 s" in report["error"]
+    assert "run.indication_give_up" in report["error"] and "\n" not in report["error"]
+    assert report["steps"] == [] and report["sim_time"] < 3.5
+    assert (tmp_path / "live.html").stat().st_size > 100_000
+    err = capsys.readouterr().err
+    assert "still no answer (asked again, 2 times)" in err

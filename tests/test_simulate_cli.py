@@ -41,6 +41,12 @@ def test_simulate_json_has_the_documented_keys(capsys):
     assert all(s["observed"] == s["operator"] and s["sim_time"] > 0 for s in data["steps"])
     for key in ("sim_time", "wall_time", "real_time_factor"):
         assert data[key] > 0
+    # Idle is simulated time: simulated time stands still while the planner works, so the robot
+    # idles one Supervisor update whatever the machine; the wall-clock wait is reported apart.
+    period = load_scenario("row4-forces-4").run.period
+    assert all(s["idle_time"] == pytest.approx(period) for s in data["steps"])
+    assert data["mean_idle"] == pytest.approx(period)
+    assert all(s["wall_idle_time"] >= 0 for s in data["steps"]) and data["wall_mean_idle"] >= 0
 
 
 @pytest.mark.parametrize(

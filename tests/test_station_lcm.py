@@ -313,6 +313,8 @@ def test_repeated_commands_are_answered_again():
     server = CellStationServer(make_fake_station(), lcm, STEP, timeouts=QUICK)
     heard = []
     lcm.Subscribe("UR3_STATUS", heard.append)
+    # The session's hello first (a controller that states no scenario): then the lockstep.
+    lcm.Publish(lm.END_CHANNEL, lm.session_message(0, "hello", "{}").encode())
     commands = [
         (c.channel, c.encode(0, *(np.zeros(p.size) if p.size else p.model() for p in c.ports)))
         for c in lm.COMMANDS

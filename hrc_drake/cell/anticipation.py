@@ -164,8 +164,11 @@ class Anticipation:
         if turn == Turn.LATER or s.speed > 0.0:
             return None
         q = tuple(float(x) for x in plan.trajectory.value(tau).ravel())
+        opening = plan.gripper_opening(tau)
         if turn == Turn.REPLAN:
-            layout, keywords = config.layout(), {"start": q}
+            # The fingers may stand open by the part it went for: they keep that opening
+            # until the arm is clear of it.
+            layout, keywords = config.layout(), {"start": q, "start_opening": opening}
         else:
             layout = {i: t for i, t in config.layout().items() if i != plan.instance}
             keywords = {"instance": plan.instance, "start": q, "held": True}
@@ -177,9 +180,10 @@ class Anticipation:
         return self._ask(
             s,
             request,
+            now,
             plan=None,
             q_hold=q,
-            opening_hold=plan.gripper_opening(tau),
+            opening_hold=opening,
             change=None,
             returning=turn == Turn.RETURN,
             events=(*s.events, event),
@@ -253,6 +257,7 @@ class Anticipation:
         return self._ask(
             s,
             s.turn_request,
+            now,
             plan_ready=s.turn_request.key() in s.retargets_ahead,
             plan=None,
             q_hold=q,

@@ -2,79 +2,35 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
+import math
 import signal
 import socket
 import sys
 import threading
-from pathlib import Path
 
 from hrc_drake.cell.run import run_scenario, scenario_policy
-from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+from hrc_drake.cell.scenario import scenario_from_args, scenario_options
 from hrc_drake.hri.faults import FaultError, check_faults
 from hrc_drake.hri.operator import ScriptedOperator
-from hrc_drake.hri.scenario import Scenario, with_operator_script
-from hrc_drake.paths import UsageError, check_output_path
+from hrc_drake.hri.scenario import Scenario
+from hrc_drake.paths import MESHCAT_RECORDING, PNG_FILE, UsageError, check_output_path
 from hrc_drake.robot_models import UR3_JOINTS
 from hrc_drake.tasks.decide import check_script_within_run, run_decisions
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.spec import load_spec
 from hrc_drake.tasks.tokens import UNDO
 
-DEFAULT_SCENARIO = "row1-optimal"
 EXIT_INTERRUPTED = 130  # the shell's status for a command ended by SIGINT (128 + 2)
-
-
-def _scenario(args) -> Scenario:
-    overrides = [t for t in (LEAN if args.lean else None, args.scenario_text) if t]
-    name = args.scenario
-    if name is None and args.assembly is None:
-        name = DEFAULT_SCENARIO
-    scenario = load_cell_scenario(name, overrides)
-    if args.assembly is not None:
-        # A missing file is refused by `load_spec`, before anything is built.
-        scenario = dataclasses.replace(scenario, assembly=str(args.assembly))
-        if args.scenario is None:
-            scenario.name = Path(args.assembly).stem
-            scenario.description = f"assembly {args.assembly}, operator follows the robot"
-    if args.operator is not None:
-        scenario = with_operator_script(scenario, args.operator)
-        # The file's description told of its own operator; say what will run instead.
-        steps = ", ".join(f"{d.task} at step {d.step}" for d in scenario.operator.deviations)
-        scenario.description = (
-            f"the operator performs {steps} instead of the robot's proposal, and otherwise "
-            "follows the robot (--operator)"
-        )
-    if args.policy is not None:
-        scenario = dataclasses.replace(scenario, policy=str(args.policy))
-    return _with_interaction(args, scenario)
-
-
-def _with_interaction(args, scenario: Scenario) -> Scenario:
-    """`--interaction` and `--interface` set the scenario's interaction (a delay the scenario
-    gives stays; left out, the interface's): in anticipate mode the robot starts on its
-    commitment and turns if the indication names another task; in wait mode it waits for it."""
-    from hrc_drake.evaluate_command import interaction_from_flags, separation_from_flags
-
-    interaction_from_flags(args)  # a bad mode or interface: one line, before anything is built
-    separation = separation_from_flags(args)
-    if separation is not None:
-        safety = dataclasses.replace(scenario.safety, separation=separation)
-        scenario = dataclasses.replace(scenario, safety=safety)
-    mode, interface = getattr(args, "interaction", None), getattr(args, "interface", None)
-    if mode is None and interface is None:
-        return scenario
-    it = scenario.interaction
-    changed = dataclasses.replace(it, mode=mode or it.mode, interface=interface or it.interface)
-    return dataclasses.replace(scenario, interaction=changed)
+DEFAULT_STILL_TIME = 10.0  # s, simulated: `--still` without `--still-time`
+_scenario = scenario_from_args  # the name tests and older scripts import
 
 
 def _known_decisions(scenario: Scenario, space, policy, live: bool):
     """The run's decisions when they are known in advance (a scripted or following operator,
     not live), else None."""
-    if live or scenario.stochastic or scenario.operator.model:
-        return None
+    if live or scenario.stochastic or scenario.operator.model or scenario.decider.name:
+        return None  # a decider's proposals depend on what it learns along the run
     return run_decisions(space, policy, ScriptedOperator(scenario.script))[1]
 
 
@@ -153,40 +109,97 @@ def _run(args, scenario, policy, record, still, live: bool, port):
     """The run: in this process, or (`--station-lcm URL`) the controller here against the
     station another process serves (`hrc-drake station`)."""
     url = getattr(args, "station_lcm", None)
+    # A scenario's decider learns from every task as the cell observed it (`DeciderPolicy`).
+    on_task = getattr(policy, "observe", None)
     if url is None:
         return run_scenario(
-            scenario, policy, record=record, progress=not live, still=still, live=live, port=port
-        )
+            scenario, policy, record=record, progress=not live, still=still, live=live,
+            port=port, on_task=on_task,
+        )  # fmt: skip
     if record is not None or still is not None or live:
         raise UsageError(
             "--station-lcm runs only the controller here; --record, --still and --live need "
             "the station in this process: drop them"
         )
     from hrc_drake.cell.remote import check_lcm_url, run_over_lcm
+    from hrc_drake.cell.scenario_identity import ScenarioIdentity
 
-    return run_over_lcm(scenario, check_lcm_url(url, "--station-lcm"), policy, progress=True)
+    # What the station must serve: this scenario, shown with the options that made it.
+    identity = ScenarioIdentity.of(scenario, scenario_options(args))
+    url = check_lcm_url(url, "--station-lcm")
+    return run_over_lcm(scenario, url, policy, progress=True, identity=identity, on_task=on_task)
 
 
 def _outputs(args):
-    """The checked `--record` path and `(time, path)` of `--still` (None when not asked)."""
-    record = check_output_path(args.record, "--record", (".html",)) if args.record else None
+    """The checked `--record` path and `(time, path)` of `--still` (None when not asked); an
+    existing file of another kind is refused unless `--force`."""
+    force = getattr(args, "force", False)
+    record = None
+    if args.record:
+        record = check_output_path(
+            args.record, "--record", (".html",), kind=MESHCAT_RECORDING, force=force
+        )
     still = None
+    if args.still is None and args.still_time is not None:
+        raise UsageError(
+            f"--still-time {args.still_time} without --still: add --still FILE.png to write the "
+            "still at that time, or drop --still-time"
+        )
     if args.still is not None:
-        if args.still_time < 0:
+        if args.still_time is None:
+            args.still_time = DEFAULT_STILL_TIME  # later checks and the summary read it
+        if not (math.isfinite(args.still_time) and args.still_time >= 0):
             raise UsageError(f"--still-time {args.still_time}: give a time >= 0 s")
-        still = (args.still_time, check_output_path(args.still, "--still", (".png",)))
+        still = (
+            args.still_time,
+            check_output_path(args.still, "--still", (".png",), kind=PNG_FILE, force=force),
+        )
     return record, still
+
+
+def check_assembly_matches(args) -> None:
+    """`--assembly` with `--scenario`: UsageError unless the scenario was written for the same
+    assembly spec (compared by content, so a path to the same file passes). Otherwise the run
+    would build the `--assembly` cell while the scenario's operator script, expected states and
+    description speak of its own assembly's tasks."""
+    if getattr(args, "assembly", None) is None or getattr(args, "scenario", None) is None:
+        return
+    from hrc_drake.hri.scenario import load_scenario
+
+    named = load_scenario(args.scenario)  # Drake-free; its own errors are one line
+    theirs, ours = load_spec(named.assembly_path), load_spec(args.assembly)
+    if theirs.spec_hash != ours.spec_hash:
+        raise UsageError(
+            f"--assembly {args.assembly}: scenario {args.scenario} is written for assembly "
+            f"{named.assembly!r} ({theirs.source}), whose tasks its operator and expectations "
+            "name; drop --assembly to run the scenario, or drop --scenario to run "
+            f"{args.assembly} with an operator who follows the robot"
+        )
+
+
+def _policy(scenario: Scenario, space):
+    """The scenario's decider (`decider:`, as `evaluate --cell` plays it; its cost table
+    planned with a progress line the first time), else its policy file or the exact policy."""
+    if not scenario.decider.name:
+        return scenario_policy(scenario, space)
+    from hrc_drake.cell.evaluate import decider_policy
+    from hrc_drake.progress import ProgressLine
+
+    label = f"cost table of {space.spec.name} (planned once, then cached)"
+    with ProgressLine(label, "plan") as bar:
+        return decider_policy(scenario, space, progress=bar.update)
 
 
 def _checked_run(args, live: bool, still):
     """The scenario and its policy, with the operator's script checked against the decision
     loop before anything is simulated (an infeasible task, or steps past the end of the run)."""
-    scenario = _scenario(args)
+    check_assembly_matches(args)
+    scenario = scenario_from_args(args)
     space = generate_states(load_spec(scenario.assembly_path))
     for d in scenario.operator.deviations:
         if d.task != UNDO:
             space.spec.placement(d.task)
-    policy = scenario_policy(scenario, space)
+    policy = _policy(scenario, space)
     # One decision loop serves every check that needs the run's tasks (a scripted operator is
     # never stochastic: the scenario check refuses both).
     decisions = _known_decisions(scenario, space, policy, live)
@@ -215,10 +228,14 @@ def _profile(args, scenario: Scenario):
 
 
 def _save_profile(args, profile, result) -> None:
-    """Learn the run's tasks (what the cell observed) into the profile and save it."""
-    from hrc_drake.tasks.profile import learn, save_profile
+    """Learn the run's tasks (what the cell observed) into the profile file as it is now (other
+    runs may have saved sessions since it was loaded) and save it, under the file's lock."""
+    from hrc_drake.tasks.profile import ProfileError, update_profile
 
-    save_profile(learn(profile, result.tasks), args.operator_profile)
+    try:
+        profile = update_profile(args.operator_profile, profile.space, result.tasks)
+    except ProfileError as err:  # the file was spoilt while this run went on
+        raise UsageError(f"--operator-profile: {err}") from None
     print(
         f"operator profile: {profile.assemblies} assemblies learned -> {args.operator_profile}",
         file=sys.stderr,
@@ -228,6 +245,11 @@ def _save_profile(args, profile, result) -> None:
 def _simulate(args) -> int:
     record, still = _outputs(args)
     live = getattr(args, "live", False)
+    if getattr(args, "port", None) is not None and not (live or record is not None):
+        raise UsageError(
+            f"--port {args.port}: Meshcat serves only with --live or --record; add one of "
+            "them, or drop --port"
+        )
     if live and args.operator is not None:
         raise UsageError("--live with --operator: in a live run you are the operator; drop one")
     scenario, policy = _checked_run(args, live, still)

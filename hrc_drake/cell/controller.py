@@ -78,6 +78,7 @@ def supervisor_limits(scenario: Scenario, options: MotionOptions) -> SupervisorL
         grip_force=station.rg2.grip_force,
         plan_ahead=run.plan_ahead,
         indication_timeout=run.indication_timeout,
+        indication_give_up=run.indication_give_up,
         recover_tries=run.recover_tries,
         path_timeout=run.path_timeout,
         anticipate=scenario.interaction_model().anticipates,

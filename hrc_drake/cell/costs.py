@@ -34,6 +34,7 @@ from hrc_drake.motion.scene import Layout
 from hrc_drake.motion.trajectory import free_path, retime
 from hrc_drake.resources import models_dir
 from hrc_drake.tasks.costs import (
+    COST_TABLE_FILE,
     BetKey,
     CostTable,
     CostTableError,
@@ -272,7 +273,7 @@ def costs_command(args) -> int:
     from hrc_drake.tasks.interaction import bet_summary
     from hrc_drake.tasks.spec import load_spec
 
-    check_output_path(args.out, "--out")
+    check_output_path(args.out, "--out", kind=COST_TABLE_FILE, force=getattr(args, "force", False))
     interaction = interaction_from_flags(args)
     space = generate_states(load_spec(args.assembly))
     start = time.perf_counter()

@@ -12,9 +12,15 @@ What a cell run reports, beside the task-level figures: its time is the cell's s
 (motion, bolting holds, the parts settling, and what the interaction adds: the indication's
 delay where the robot waits for it, a re-target or a swap where its bet was wrong); the
 boundaries where the robot started on the decider's bet, re-targeted and swapped, as the
-Supervisor recorded them; the robot's idle time at each boundary is the wall time it waited for
-the planner after the answer (0 when the task was planned ahead while the operator bolted), and
-whether that plan was ready is recorded per boundary.
+Supervisor recorded them; the robot's idle time at each boundary, in simulated seconds and in
+wall-clock seconds (`wall_idle`: how long it waited for the planner after the answer, near 0 when
+the task was planned ahead while the operator bolted), and whether that plan was ready is
+recorded per boundary.
+
+Every run is a scenario: the base scenario with one YAML text over it (`CellOptions.run_text`:
+the evaluation's overrides, the interaction, the run's operator with its seeds and the decider),
+exactly what `hrc-drake simulate --scenario BASE --scenario-text TEXT` loads, so a run that failed
+replays alone with the same result (`CellOptions.replay`).
 
 `CellOptions` is what `hrc_drake.evaluate.Setup.cell` holds: the task-level evaluation calls its
 methods and never imports this module; this module imports it (one way).
@@ -23,11 +29,15 @@ methods and never imports this module; this module imports it (one way).
 from __future__ import annotations
 
 import dataclasses
+import re
+import shlex
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from hrc_drake.evaluate import RunResult, predicted_tasks, simulate_run
+import yaml
+
+from hrc_drake.evaluate import RunResult, predicted_tasks, run_seed, simulate_run
 from hrc_drake.paths import UsageError
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.interaction import MODES, InteractionCosts, operator_delays
@@ -83,6 +93,9 @@ class CellOptions:
     scenario: str = DEFAULT_BASE_SCENARIO
     overrides: tuple[str, ...] = ()
     mode: str | None = None
+    costs: str = ""
+    """The cost table file the deciders were made with (`--costs`); empty: the cell's own,
+    cached (`default_cost_table`). Replays name it."""
 
     def __post_init__(self):
         if self.mode is not None and self.mode not in MODES:
@@ -96,9 +109,82 @@ class CellOptions:
         """UsageError for an operator model the cell cannot play (`check_cell_operator`)."""
         check_cell_operator(operator, model_name)
 
-    def play(self, scenario, space: StateSpace, decider, operator) -> RunResult:
-        """One run through the cell (`play_cell_run`)."""
-        return play_cell_run(scenario, space, decider, operator)
+    def play(self, scenario, setup, decider, run: int) -> RunResult:
+        """Run `run` of the evaluation `setup` (`hrc_drake.evaluate.Setup`) through the cell:
+        the scenario of `run_text`, its operator as the scenario builds it, and `decider`
+        (reset by the caller) proposing (`play_cell_run`)."""
+        scenario = self.run_scenario(setup, run)
+        operator = scenario.operator_for(setup.space)
+        return play_cell_run(scenario, setup.space, decider, operator)
+
+    def _lean(self) -> bool:
+        from hrc_drake.cell.scenario import LEAN
+
+        return bool(self.overrides) and self.overrides[0] == LEAN
+
+    def run_text(self, setup, run: int) -> str:
+        """The one YAML text over the base scenario that makes it run `run` of the evaluation
+        `setup`: the overrides (but `--lean`'s, a flag of its own), the evaluated assembly when
+        it is not the base's, the interaction the deciders price (mode, interface and delay:
+        the simulated operator draws from it and the forecast reads it), the run's operator (the
+        population's model and parameters, seeded `run_seed(seed, run)`, its delays drawn from
+        `delay_generator(seed, run)`, whatever the base's operator was) and the decider."""
+        from hrc_drake.hri.scenario import load_scenario
+
+        data: dict[str, Any] = {}
+        for text in self.overrides[1:] if self._lean() else self.overrides:
+            _merge(data, _numbers(yaml.safe_load(text) or {}))
+        spec = setup.space.spec
+        base = load_scenario(self.scenario)
+        source = Path(spec.source) if spec.source else None
+        own = source is None or not source.is_file()  # as `evaluation_scenario` decides
+        if not own and source.resolve() != base.assembly_path.resolve():
+            data["assembly"] = str(source.resolve())
+        it = setup.interaction
+        delay = {"distribution": it.delay.distribution, "median": it.delay.median}
+        delay["sigma"] = it.delay.sigma
+        params = {k: _param(v) for k, v in setup.params.items()}
+        operator = {
+            # Scripted deviations or a stochastic operator of the base would clash with the
+            # model (and are not what the evaluation played).
+            "deviations": [],
+            "override_prob": 0.0,
+            "mistake_prob": 0.0,
+            "model": setup.operator_model,
+            "params": params,
+            "seed": run_seed(setup.seed, run),
+            "delay_seed": [setup.seed, run],
+        }
+        _merge(
+            data,
+            {
+                "interaction": {"mode": it.mode, "interface": it.interface, "delay": delay},
+                "operator": operator,
+                "decider": {"name": setup.decider, "seed": setup.seed, "costs": self.costs},
+            },
+        )
+        return yaml.safe_dump(data, default_flow_style=True, width=10**6, sort_keys=False).strip()
+
+    def run_scenario(self, setup, run: int):
+        """The scenario of run `run`: the base with `--lean`'s text, then `run_text`, loaded as
+        `simulate` loads it."""
+        from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+
+        texts = [LEAN] if self._lean() else []
+        return load_cell_scenario(self.scenario, [*texts, self.run_text(setup, run)])
+
+    def replay(self, setup, run: int) -> str | None:
+        """The `hrc-drake simulate` command that plays run `run` of `setup` alone, shell-quoted;
+        None when no run plays alone: a decider that keeps its model across runs (after the
+        first), or one started from an operator profile."""
+        if setup.model is not None or (setup.keep_model and run > 0):
+            return None
+        base = self.scenario
+        if Path(base).suffix:  # a file: from anywhere
+            base = str(Path(base).resolve())
+        lean = ["--lean"] if self._lean() else []
+        args = ["hrc-drake", "simulate", "--scenario", base, *lean]
+        return shlex.join([*args, "--scenario-text", self.run_text(setup, run)])
 
     def playing(self, mode: str) -> CellOptions:
         """These options with the cell playing the interaction `mode`."""
@@ -119,6 +205,61 @@ class CellOptions:
             "scenario_overrides": list(self.overrides),
             "separation": load_scenario(self.scenario, list(self.overrides)).safety.separation,
         }
+
+
+def _merge(into: dict, data: dict) -> dict:
+    """`data` merged into `into` key by key (nested mappings merge, anything else replaces), as
+    the scenario loader applies one override after another."""
+    for key, value in data.items():
+        if isinstance(value, dict) and isinstance(into.get(key), dict):
+            _merge(into[key], value)
+        else:
+            into[key] = value
+    return into
+
+
+# A number PyYAML reads as text for want of a dot (5e-3); the scenario loaders read a number.
+_EXPONENT = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+$")
+
+
+def _numbers(data):
+    """`data` with every text that the scenario loaders read as a number made a number, so that
+    written out again it is not quoted (Drake's loader refuses a quoted number)."""
+    if isinstance(data, dict):
+        return {k: _numbers(v) for k, v in data.items()}
+    if isinstance(data, list):
+        return [_numbers(v) for v in data]
+    if isinstance(data, str) and _EXPONENT.match(data.strip()):
+        return float(data)
+    return data
+
+
+def _param(value):
+    """An operator model parameter as a scenario holds it: a number, else its text (`--param`
+    gives text: `p=0.3`, `order=S23`)."""
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return str(value)
+
+
+def decider_policy(scenario, space: StateSpace, progress=None) -> DeciderPolicy:
+    """The scenario's `decider` as the Supervisor's policy, made as `evaluate` makes it: its
+    name and seed, the cost table (`decider.costs`, else the cell's, cached; `progress` sees it
+    planned the first time) and the scenario's interaction."""
+    from hrc_drake.tasks.costs import load_cost_table
+    from hrc_drake.tasks.deciders import make_decider
+
+    config = scenario.decider
+    if config.costs:
+        costs = load_cost_table(config.costs, space)
+    else:
+        from hrc_drake.cell.costs import default_cost_table
+
+        costs = default_cost_table(space, progress=progress)
+    interaction = scenario.interaction_model()
+    decider = make_decider(config.name, space, costs, config.seed, interaction)
+    return DeciderPolicy(decider, space)
 
 
 def evaluation_scenario(options: CellOptions, spec: AssemblySpec):
@@ -189,6 +330,9 @@ def play_cell_run(scenario, space: StateSpace, decider, operator):
     result = run_scenario(
         scenario, policy, operator=operator, on_task=policy.observe, motion_planner=planner
     )
+    if result.interrupted:
+        # Ctrl-C in the middle of a run: the evaluation reports the runs done, not this one.
+        raise KeyboardInterrupt
     tasks = result.tasks
     return RunResult(
         completed=bool(result.done),
@@ -197,6 +341,7 @@ def play_cell_run(scenario, space: StateSpace, decider, operator):
         undos=sum(t.observed == UNDO for t in tasks),
         deviations=sum(t.indicated != t.proposed for t in tasks),
         idle=tuple(float(x) for x in result.idle[: len(tasks)]),
+        wall_idle=tuple(float(x) for x in result.wall_idle[: len(tasks)]),
         plan_ready=tuple(bool(x) for x in result.plan_ready[: len(tasks)]),
         error=result.error,
         collisions=len(result.collisions),
@@ -204,4 +349,6 @@ def play_cell_run(scenario, space: StateSpace, decider, operator):
         retargets=sum(bool(t.retargeted) for t in tasks),
         swaps=sum(bool(t.swapped) for t in tasks),
         indication_delay=float(getattr(operator, "total_delay", lambda: 0.0)()),
+        states=tuple(result.names),
+        violations=0 if result.safety is None else int(result.safety.violations),
     )

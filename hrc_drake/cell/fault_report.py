@@ -37,8 +37,9 @@ def fault_records(
     detections: Sequence[Detection],
     end_time: float,
 ) -> list[FaultRecord]:
-    """One record per scenario fault. `seconds_lost` runs from the injection to the recovery,
-    or to the end of the run for a fault handed over (0 for one never injected)."""
+    """One record per scenario fault. `seconds_lost` runs from the injection to the recovery
+    (the cell's, or the operator's when the task was handed over and done by hand), or to the
+    end of the run when nothing resolved it (0 for a fault never injected)."""
     records = []
     if not injections:  # a station that does not say
         injections = [Injection(f.kind, f.task) for f in faults]
@@ -57,7 +58,8 @@ def fault_records(
         )
         if injected is None:
             lost = 0.0
-        elif found is not None and found.recovered:
+        elif found is not None and found.resolved_at is not None:
+            # Recovered by the cell, or by the operator's hands (a task handed over, done).
             lost = found.resolved_at - injected
         else:
             lost = end_time - injected

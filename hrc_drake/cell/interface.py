@@ -13,6 +13,12 @@ order: publish events at the end of the step that reaches t, then every unrestri
 order across the two processes, so that each side reads at each t exactly what it would read in
 one diagram; the two-process run then equals the in-process one:
 
+0. Before the first step the controller says which scenario it runs (a "hello" session message
+   with its `ScenarioIdentity`, `hrc_drake.cell.scenario_identity`), sent again until the
+   station answers with its own; each side compares the two, and a pair that differs stops on
+   both sides with `ScenarioMismatch`, one line naming what differs. A station that serves no
+   scenario (identity None: a real cell's driver, a test's stand-in) answers `{}` and serves any
+   controller.
 1. At the end of the step reaching t (the interface's publish event) the controller sends its
    commands as they stand before its updates at t, on `<channel>_PRE`, stamped t, and waits for
    the answer (at every exchange, read or not: DrakeLcm keeps only the newest undelivered
@@ -42,6 +48,7 @@ run with the station's message.
 from __future__ import annotations
 
 import json
+import shlex
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -74,6 +81,7 @@ from hrc_drake.cell.lcm_messages import (
     session_message,
     utime,
 )
+from hrc_drake.cell.scenario_identity import ScenarioIdentity, mismatch
 from hrc_drake.hri.scenario import Scenario, ScenarioError
 
 # Host-local multicast (ttl=0: the datagrams never leave this machine), on a port of its own so
@@ -83,6 +91,30 @@ DEFAULT_LCM_URL = "udpm://239.241.129.92:20185?ttl=0"
 
 class StationLinkError(RuntimeError):
     """The other side of the station link is missing, died, or is out of step."""
+
+
+class ScenarioMismatch(StationLinkError):
+    """The station and the controller were started with different scenarios (or options):
+    refused before the first step, on both sides."""
+
+
+HELLO = "hello"
+"""The session message that carries a side's `ScenarioIdentity` (JSON; `{}` for none)."""
+
+
+def _identity_text(identity: ScenarioIdentity | None) -> str:
+    return "{}" if identity is None else identity.to_json()
+
+
+def _their_identity(message) -> ScenarioIdentity | None:
+    """The identity in the other side's hello; StationLinkError if it is not one."""
+    try:
+        return ScenarioIdentity.from_json(message.text)
+    except (ValueError, TypeError) as err:
+        raise StationLinkError(
+            f"the other side's hello is not a scenario identity ({err}); both sides must run "
+            "the same hrc_drake version"
+        ) from None
 
 
 @dataclass(frozen=True)
@@ -197,7 +229,8 @@ def _step_of(t: float, period: float) -> int:
 class StationClient(LeafSystem):
     """The controller's side of the lockstep (see the module docstring): input ports are the
     station's command ports, output ports its measured ports (and, with `sim_contacts`, the
-    simulation-only `sim.contacts`). One client serves one session with one station."""
+    simulation-only `sim.contacts`). One client serves one session with one station; it tells
+    the station `identity`, the scenario the controller runs, before the first exchange."""
 
     def __init__(
         self,
@@ -205,9 +238,11 @@ class StationClient(LeafSystem):
         period: float,
         timeouts: LockstepTimeouts | None = None,
         sim_contacts: bool = False,
+        identity: ScenarioIdentity | None = None,
     ):
         super().__init__()
         self._lcm, self._period = lcm, period
+        self._identity, self._greeted = identity, False
         self._timeouts = timeouts if timeouts is not None else LockstepTimeouts()
         self._measured = [*MEASUREMENTS, *([SIM_CONTACTS] if sim_contacts else [])]
         self._inbox = _Inbox(lcm, {c.channel: c for c in self._measured}, REPORT_CHANNEL)
@@ -283,6 +318,8 @@ class StationClient(LeafSystem):
         k = _step_of(context.get_time(), self._period)
         if self._values is not None and self._values[0] == k:
             return self._values[1]
+        if not self._greeted:
+            self._greet()
         # Whatever reads a measurement before this client's publish event at this time (another
         # system's publish event) reads it in the same state: send the commands from here.
         self._send_pre(context)
@@ -290,6 +327,36 @@ class StationClient(LeafSystem):
         values = {c.channel: self._inbox.decoded(c.channel, c) for c in self._measured}
         self._values = (k, values)
         return values
+
+    def _greet(self) -> None:
+        """Step 0 of the protocol: send this controller's identity until the station answers
+        with its own (a station started later, or a lost datagram, needs it again);
+        ScenarioMismatch, naming what differs, if the two run different scenarios."""
+        hello = session_message(0, HELLO, _identity_text(self._identity))
+        limit, start = self._timeouts.start, time.monotonic()
+        resend_at = start
+        while True:
+            self._inbox.raise_errors()
+            answers = [m for m in self._inbox.session if m.kind == HELLO]
+            if answers:
+                theirs = _their_identity(answers[-1])
+                problem = (
+                    None
+                    if self._identity is None
+                    else mismatch(self._identity, theirs, "controller")
+                )
+                if problem is not None:
+                    raise ScenarioMismatch(problem)
+                self._greeted = True
+                return
+            now = time.monotonic()
+            if now - start > limit:
+                raise StationLinkError(self._silence([REPORT_CHANNEL], 0, limit, first=True))
+            if now >= resend_at:
+                _publish(self._lcm, END_CHANNEL, hello)
+                resend_at = now + self._timeouts.resend
+            wait = min(limit - (now - start), resend_at - now)
+            self._lcm.HandleSubscriptions(max(1, int(wait * 1000)))
 
     def _wait(self, names: list[str], stamp: int, first: bool) -> None:
         limit = self._timeouts.start if first else self._timeouts.step
@@ -318,7 +385,7 @@ class StationClient(LeafSystem):
             return (
                 f"no cell station answered on {url} within {limit:g} s (nothing on "
                 f"{', '.join(missing)}): start one with `hrc-drake station --scenario S "
-                f"--lcm {url}`"
+                f"--lcm {shlex.quote(url)}`"
             )
         return (
             f"the cell station stopped answering on {url}: nothing on {', '.join(missing)} "
@@ -350,15 +417,20 @@ def make_cell_station_interface(
     *,
     timeouts: LockstepTimeouts | None = None,
     sim_contacts: bool = False,
+    identity: ScenarioIdentity | None = None,
 ) -> Diagram:
     """The station of `scenario` as seen over `lcm` (see the module docstring): the
     controller-facing ports of `make_cell_station`, same names and types; with `sim_contacts`
     also `sim.contacts` (the touching pairs by owner, for a run's collision watch). Its
-    client system is named "station_client" (`end_station_session` finds it)."""
+    client system is named "station_client" (`end_station_session` finds it). Before the
+    first step it tells the station `identity` (default: `scenario`'s) and refuses a station
+    that serves another scenario (`ScenarioMismatch`)."""
+    if identity is None:
+        identity = ScenarioIdentity.of(scenario)
     builder = DiagramBuilder()
     client = builder.AddNamedSystem(
         "station_client",
-        StationClient(lcm, exchange_period(scenario), timeouts, sim_contacts),
+        StationClient(lcm, exchange_period(scenario), timeouts, sim_contacts, identity),
     )
     for index in range(client.num_input_ports()):
         port = client.get_input_port(index)
@@ -457,7 +529,9 @@ def _check_station_ports(diagram: Diagram) -> None:
 class CellStationServer:
     """The station's side of the lockstep (see the module docstring). It works from the LCM
     handlers: `serve()` pumps `lcm` until the controller ends the session; over `memq://` the
-    controller's client pumps the same `lcm` and so drives it (a one-process test)."""
+    controller's client pumps the same `lcm` and so drives it (a one-process test). `identity`
+    is the scenario it serves: a controller of another is refused (`ScenarioMismatch`); None
+    (a stand-in, a real cell) serves any controller."""
 
     def __init__(
         self,
@@ -466,8 +540,10 @@ class CellStationServer:
         period: float,
         hooks: StationHooks | None = None,
         timeouts: LockstepTimeouts | None = None,
+        identity: ScenarioIdentity | None = None,
     ):
         _check_station_ports(station)
+        self._identity, self._greeted, self._hellos = identity, False, 0
         self._lcm, self._period, self._station = lcm, period, station
         self._hooks = hooks if hooks is not None else StationHooks()
         self._timeouts = timeouts if timeouts is not None else LockstepTimeouts()
@@ -518,11 +594,16 @@ class CellStationServer:
             self._fail(err)
 
     def _fail(self, err: Exception) -> None:
+        self.error = err
+        if isinstance(err, ScenarioMismatch):
+            # The controller finds the mismatch in the hello just sent, and says it its own
+            # way; an error sent now could replace that hello before it is read (DrakeLcm keeps
+            # only a channel's newest undelivered message).
+            return
         lines = str(err).strip().splitlines() or [type(err).__name__]
         text = f"{type(err).__name__}: {lines[-1]}" if len(lines) > 1 else lines[0]
         stamp = utime(self._root.get_time())
         _publish(self._lcm, REPORT_CHANNEL, session_message(stamp, "error", text))
-        self.error = err
 
     def _progress(self) -> None:
         """Take every step of the protocol whose messages are in."""
@@ -530,6 +611,10 @@ class CellStationServer:
             self._inbox.raise_errors(session_errors=False)
             if self._inbox.has_session("end"):
                 self._end()
+                return
+            if not self._started:
+                self._answer_hellos()
+            if not self._greeted:
                 return
             stamp = utime(self._k * self._period)
             if self._awaiting == "pre":
@@ -544,6 +629,23 @@ class CellStationServer:
                 self._advance()
                 self._k, self._awaiting = self._k + 1, "pre"
             self._last_progress = time.monotonic()
+
+    def _answer_hellos(self) -> None:
+        """Step 0 of the protocol: answer each hello that came with this station's identity
+        (a repeated hello means the answer was lost); ScenarioMismatch, naming what differs,
+        if the controller runs another scenario."""
+        hellos = [m for m in self._inbox.session if m.kind == HELLO]
+        for message in hellos[self._hellos :]:
+            stamp = utime(self._root.get_time())
+            reply = session_message(stamp, HELLO, _identity_text(self._identity))
+            _publish(self._lcm, REPORT_CHANNEL, reply)
+            theirs = _their_identity(message)
+            if self._identity is not None and theirs is not None:
+                problem = mismatch(self._identity, theirs, "station")
+                if problem is not None:
+                    raise ScenarioMismatch(problem)
+            self._greeted = True
+        self._hellos = len(hellos)
 
     def _commands(self, suffix: str) -> dict[str, object]:
         values = {}
@@ -627,7 +729,7 @@ class CellStationServer:
         if first:
             return (
                 f"no controller came on {url} within {limit:g} s: run `hrc-drake simulate "
-                f"--scenario S --station-lcm {url}`"
+                f"--scenario S --station-lcm {shlex.quote(url)}`"
             )
         return (
             f"the controller stopped answering on {url} at t = {self._root.get_time():.3f} s "
@@ -663,11 +765,14 @@ def serve_cell_station(
     lcm: DrakeLcm,
     period: float,
     timeouts: LockstepTimeouts | None = None,
+    identity: ScenarioIdentity | None = None,
 ) -> dict:
     """Serve `station` (a `CellStation`, or a bare station diagram with the same ports) over
     `lcm` until the controller ends the session, exchanging every `period` (the plant's time
-    step: `exchange_period(scenario)`); the session's report."""
+    step: `exchange_period(scenario)`); the session's report. `identity`: the scenario it
+    serves, which the controller must run (`ScenarioMismatch` otherwise)."""
     if isinstance(station, Diagram):
-        return CellStationServer(station, lcm, period, timeouts=timeouts).serve()
+        server = CellStationServer(station, lcm, period, timeouts=timeouts, identity=identity)
+        return server.serve()
     hooks = cell_station_hooks(station)
-    return CellStationServer(station.diagram, lcm, period, hooks, timeouts).serve()
+    return CellStationServer(station.diagram, lcm, period, hooks, timeouts, identity).serve()

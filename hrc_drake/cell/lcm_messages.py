@@ -120,11 +120,13 @@ struct lcmt_contacts {
     string pairs[num_contacts][4];  // model, body, model, body of each touching pair
 }
 
-// The co-simulation session: "end" (controller), "report" and "error" (station).
+// The co-simulation session: "hello" (both, before the first step), "end" (controller),
+// "report" and "error" (station).
 struct lcmt_station_session {
     int64_t utime;
     string kind;
-    string text;            // JSON for "report", the message for "error"
+    string text;            // JSON for "hello" (the scenario's identity) and "report", the
+                            // message for "error"
 }
 """
 
@@ -719,11 +721,12 @@ SIM_CONTACTS = StationChannel(
 """Simulation only: the touching pairs, for a run's collision watch."""
 
 END_CHANNEL = "CELL_STATION_END"
-"""The controller ends the session ("end")."""
+"""The controller's session messages: its "hello" (the scenario it runs), and "end"."""
 REPORT_CHANNEL = "CELL_STATION_REPORT"
-"""The station's last word: its "report", or the "error" that stopped it. (Each direction has its
-own channels: DrakeLcm keeps only the newest undelivered message of a channel, and a process
-also hears what it publishes itself.)"""
+"""The station's session messages: its "hello" (the scenario it serves), and its last word, its
+"report" or the "error" that stopped it. (Each direction has its own channels: DrakeLcm keeps
+only the newest undelivered message of a channel, and a process also hears what it publishes
+itself.)"""
 PRE_SUFFIX = "_PRE"
 """Lockstep: the commands as they stand just before the controller's update at a time (see
 `hrc_drake.cell.interface`) go on `<channel>_PRE`."""

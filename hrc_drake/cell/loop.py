@@ -7,8 +7,9 @@ when the Supervisor is done or has stopped, stops at the step where the station'
 (the loop applies them and goes on), watches the robot's contacts, lights the stack light and
 takes the still. Unless the run is live, simulated time stands still while the planner works, so
 that a run is the same whatever the machine does (same seed, same result); the robot's idle time
-at a boundary is then the wall time it waited. Ctrl-C ends a run where it is: the recording and
-the report of what ran are still written, marked interrupted.
+at a boundary is then one update of simulated time, and the wall-clock wait is reported apart
+(`wall_idle`). Ctrl-C ends a run where it is: the recording and the report of what ran are still
+written, marked interrupted.
 """
 
 from __future__ import annotations
@@ -87,8 +88,18 @@ class RunResult:
 
     @property
     def idle(self) -> tuple[float, ...]:
-        """Per task: wall seconds the robot waited on the planner after the indication."""
+        """Per task: simulated seconds the robot waited on the planner after the indication."""
         return tuple(t.idle for t in self.tasks)
+
+    @property
+    def wall_idle(self) -> tuple[float, ...]:
+        """Per task: the same wait in wall-clock seconds (the machine's planning time)."""
+        return tuple(t.wall_idle for t in self.tasks)
+
+    @property
+    def handovers(self) -> int:
+        """Tasks the robot handed over and the operator did by hand."""
+        return sum(1 for t in self.tasks if t.handed_over)
 
     @property
     def plan_ready(self) -> tuple[bool, ...]:
@@ -114,6 +125,7 @@ class RunResult:
             "contacts": list(self.collisions),
             "steps": [_step_json(t) for t in self.tasks],
             "mean_idle": round(float(np.mean(self.idle)), 4) if self.tasks else 0.0,
+            "wall_mean_idle": round(float(np.mean(self.wall_idle)), 4) if self.tasks else 0.0,
             "error": self.error,
             "interrupted": self.interrupted,
             "sim_time": round(self.sim_time, 3),
@@ -122,6 +134,7 @@ class RunResult:
             "recording": str(self.recording) if self.recording else None,
             "safety": self._safety_json(),
             "faults": [f.to_json() for f in self.faults],
+            "handovers": self.handovers,
             "interaction": self.interaction,
             "separation": self.separation,
         }
@@ -146,12 +159,15 @@ def _step_json(t: TaskRecord) -> dict:
         "part": t.part,
         "sim_time": round(t.end_time - t.start_time, 3),
         "idle_time": round(t.idle, 4),
+        "wall_idle_time": round(t.wall_idle, 4),
         "plan_ready": t.plan_ready,
         "committed": t.committed,
         "indicated_at": None if t.indicated_at is None else round(t.indicated_at, 3),
         "held_at": None if t.held_at is None else round(t.held_at, 3),
         "retargeted": t.retargeted,
         "swapped": t.swapped,
+        "handed_over": bool(t.handed_over),
+        "handover_reason": t.handed_over or None,
     }
 
 

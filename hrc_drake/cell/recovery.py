@@ -1,6 +1,8 @@
 """How the Supervisor finds faults and survives them: a lost or unseated part picked again from
 where it lies, a path blocked by an obstacle waited out, a protective stop and an operator's
-silence noted (each a `Detection`). A mixin of `hrc_drake.cell.supervisor.Supervisor`: it uses
+silence noted (each a `Detection`); and, when the robot cannot do the task but is itself sound,
+the task handed over to the operator, who does it by hand while the arm holds still, after
+which the assembly goes on. A mixin of `hrc_drake.cell.supervisor.Supervisor`: it uses
 the Supervisor's ports (`_arm_port`, `_gripper_port`, `_grip_port`), its `_ask` of the
 planner, limits (`_limits`) and task space (`_space`).
 """
@@ -21,7 +23,7 @@ from hrc_drake.cell.supervisor_state import (
     SupervisorStatus,
     obstacle_moved,
 )
-from hrc_drake.hri.messages import PromptKind
+from hrc_drake.hri.messages import Indication, Prompt, PromptKind
 from hrc_drake.motion.plan import Stage
 from hrc_drake.motion.service import PlanFailure, PlanRequest
 
@@ -65,6 +67,13 @@ class FaultRecovery:
         slipped = cause == "grip" and opening < width
         if slipped and s.recoveries < self._limits.recover_tries:
             return self._lose_part(s, context, now, "grip", "regrasp")
+        if slipped:  # it keeps slipping: the part is out of the gripper, the operator seats it
+            raise SupervisorError(
+                f"step {s.step}: {plan.instance} slipped out of the gripper "
+                f"{s.recoveries + 1} times; the task is handed over",
+                cause=cause,
+                hand_over=True,
+            )
         raise SupervisorError(
             f"step {s.step}: the gripper stands at {opening * 1000:.1f} mm {what}; the task is "
             "stopped",
@@ -122,9 +131,10 @@ class FaultRecovery:
             source_pose=tuple(placement.pose),
             start=s.q_hold,
             obstacle=config.obstacle,
+            start_opening=s.opening_hold,
         )
         event = f"{now:.2f}: plans to pick {part} from where it lies ({placement.status.value})"
-        return self._ask(s, request, events=(*s.events, event))
+        return self._ask(s, request, now, events=(*s.events, event))
 
     def _blocked(self, s: SupervisorStatus, failure: PlanFailure, now: float):
         """No path while an obstacle is in the cell: hold still and wait for it to move."""
@@ -147,12 +157,13 @@ class FaultRecovery:
                 f"step {s.step}: an obstacle has blocked the path for {timeout:g} s "
                 "(run.path_timeout): clear the cell; the task is handed over",
                 cause="plan",
+                hand_over=True,
             )
         if not obstacle_moved(s.request.obstacle, config.obstacle):
             return s
         request = replace(s.request, obstacle=config.obstacle or None)
         event = f"{now:.2f}: the obstacle " + ("moved" if config.obstacle else "is gone")
-        return self._ask(s, request, events=(*s.events, f"{event}: plans again"))
+        return self._ask(s, request, now, events=(*s.events, f"{event}: plans again"))
 
     def _watch_obstacle(self, s: SupervisorStatus, config: CellConfiguration, now: float):
         """An obstacle seen that the plan did not know (it came after the plan was made): stop
@@ -180,15 +191,81 @@ class FaultRecovery:
         return self._resolve(s, "stop", now, "resume")
 
     def _note_silence(self, s: SupervisorStatus, now: float) -> SupervisorStatus:
-        """No answer within the timeout: the robot holds still where it is and asks again
-        (the prompt stays up; the wait starts over)."""
+        """No answer within the timeout: the robot holds still where it is and asks again (the
+        same prompt, its `asked` count one up, so that an interface shows it afresh; the wait
+        starts over). No answer `indication_give_up` seconds after the question was first
+        asked: SupervisorError, the run stops (a question nobody answers, or whose answer was
+        lost, never leaves a run looping)."""
+        give_up = self._limits.indication_give_up
+        if now - s.prompted_at >= give_up:
+            what = "confirmation" if s.prompt.kind == PromptKind.HANDOVER else "indication"
+            raise SupervisorError(
+                f"step {s.step}: no {what} from the operator in {give_up:g} s of simulated "
+                f"time (asked {s.prompt.asked + 1} times; run.indication_give_up): the run "
+                "stops",
+                cause="silence",
+            )
         timeout = self._limits.indication_timeout
         if now - s.asked_at < timeout:
             return s
         event = f"{now:.2f}: no indication for step {s.step} in {timeout:g} s: asks again"
         found = Detection("silence", s.step, now)
         detections = s.detections if s.open_detection("silence") else (*s.detections, found)
-        return replace(s, asked_at=now, detections=detections, events=(*s.events, event))
+        prompt = replace(s.prompt, asked=s.prompt.asked + 1)
+        return replace(
+            s, asked_at=now, prompt=prompt, detections=detections, events=(*s.events, event)
+        )
+
+    def _hand_over(self, s: SupervisorStatus, context, now: float, err: SupervisorError):
+        """The robot cannot do the task (`err`) but is itself sound: the arm holds where it is
+        measured, the fingers keep their command (open: the part is out of them), and the
+        interface asks the operator to do the task by hand (`HANDOVER`: the task, its part if
+        the robot chose one, and why). A task the operator already did, or a step with no task,
+        is not handed over again: the run stops (`_stop`)."""
+        if s.handover or s.pending is None or s.mode in (Mode.DONE, Mode.FAILED):
+            return self._stop(s, context, now, err)
+        _proposed, indicated, part = s.pending
+        q = self._arm_port.Eval(context)[:N_JOINTS]
+        if not s.open_detection():
+            s = replace(s, detections=(*s.detections, Detection(err.cause, s.step, now)))
+        reason = str(err)
+        prompt = Prompt(s.step, PromptKind.HANDOVER, s.state, indicated, part, reason=reason)
+        event = f"{now:.2f}: hands {indicated} over to the operator: {reason}"
+        home = max(abs(a - b) for a, b in zip(q, self._home, strict=True)) < 1e-3
+        return replace(
+            s,
+            mode=Mode.HANDOVER,
+            plan=None,
+            change=None,
+            awaiting=False,
+            q_hold=tuple(float(x) for x in q),
+            opening_hold=float(s.command(now)[2]),
+            prompt=prompt,
+            handover=reason,
+            away=not home,
+            asked_at=now,
+            prompted_at=now,
+            grip_lost_at=None,
+            events=(*s.events, event),
+        )
+
+    def _wait_for_operator(self, s: SupervisorStatus, context, now: float):
+        """Handed over: hold still until the operator says the task is done (asking again
+        while they are silent, giving up as for an indication); then let the parts settle and
+        read the cell as after any task (`_observe`)."""
+        indication: Indication = self._indication_port.Eval(context)
+        if not indication.answers(s.prompt):
+            return self._note_silence(s, now)
+        s = self._resolve(s, None, now, "operator")
+        event = f"{now:.2f}: the operator has done {s.pending[1]} by hand"
+        return replace(
+            s,
+            mode=Mode.SETTLE,
+            settle_until=now + self._limits.settle_time,
+            prompt=replace(s.prompt, kind=PromptKind.NONE),
+            recovering="",
+            events=(*s.events, event),
+        )
 
     @staticmethod
     def _resolve(s: SupervisorStatus, cause: str | None, now: float, recovery: str):

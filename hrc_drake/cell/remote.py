@@ -5,7 +5,9 @@
 (`run_over_lcm`). Both sides build what a one-process run (`hrc_drake.cell.run`) builds from
 the same scenario (the station with the arm at the motion planner's home; the controller with
 its policy and planner), and the lockstep keeps the order of its events: the two-process run
-has the same states, terminal and collisions as the one-process run.
+has the same states, terminal and collisions as the one-process run. Before the first step the
+two compare the scenarios they were started with (`hrc_drake.cell.scenario_identity`) and
+refuse, on both sides, a pair that differs (`ScenarioMismatch`).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from __future__ import annotations
 import ipaddress
 import json
 import re
+import shlex
 import sys
 
 from pydrake.lcm import DrakeLcm
@@ -21,6 +24,7 @@ from pydrake.systems.framework import Diagram
 from hrc_drake.cell.interface import (
     DEFAULT_LCM_URL,
     LockstepTimeouts,
+    ScenarioMismatch,
     StationLinkError,
     end_station_session,
     exchange_period,
@@ -29,7 +33,16 @@ from hrc_drake.cell.interface import (
 )
 from hrc_drake.cell.loop import ClosedLoop, RunResult
 from hrc_drake.cell.run import controller_of, prepare_run
-from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
+from hrc_drake.cell.scenario import (
+    LEAN,
+    cell_design,
+    load_cell_scenario,
+    motion_options,
+    scenario_argv,
+    scenario_from_args,
+    scenario_options,
+)
+from hrc_drake.cell.scenario_identity import ScenarioIdentity
 from hrc_drake.cell.station import CellStation, make_cell_station
 from hrc_drake.hri.scenario import Scenario
 from hrc_drake.motion.planner import MotionPlanner
@@ -65,11 +78,20 @@ def station_of(scenario: Scenario) -> tuple[CellStation, Scenario]:
     return make_cell_station(setup.scenario), setup.scenario
 
 
-def serve_scenario(scenario: Scenario, url: str, timeouts: LockstepTimeouts | None = None) -> dict:
+def serve_scenario(
+    scenario: Scenario,
+    url: str,
+    timeouts: LockstepTimeouts | None = None,
+    identity: ScenarioIdentity | None = None,
+) -> dict:
     """Serve the station of `scenario` on the LCM `url` until a controller ends its session;
-    the session's report (see `serve_cell_station`)."""
+    the session's report (see `serve_cell_station`). A controller that runs another scenario
+    than `identity` (default: `scenario`'s) is refused with `ScenarioMismatch`."""
+    if identity is None:
+        identity = ScenarioIdentity.of(scenario)
     station, built = station_of(scenario)
-    return serve_cell_station(station, DrakeLcm(url), exchange_period(built), timeouts)
+    period = exchange_period(built)
+    return serve_cell_station(station, DrakeLcm(url), period, timeouts, identity)
 
 
 class RemoteCell:
@@ -124,38 +146,60 @@ def run_over_lcm(
     scenario_text: str | None = None,
     timeouts: LockstepTimeouts | None = None,
     on_task=None,
+    identity: ScenarioIdentity | None = None,
 ) -> RunResult:
     """Run the controller of `scenario` against the station served on the LCM `url` (by
     `hrc-drake station` or `serve_scenario`), as `run_scenario` runs both in one process.
-    StationLinkError if the station is not there, stops answering, or fails."""
+    StationLinkError if the station is not there, stops answering, or fails;
+    ScenarioMismatch, before the first step, if it serves another scenario than `identity`
+    (default: `scenario`'s, shown with `scenario_text`)."""
     if not isinstance(scenario, Scenario):
         scenario = load_cell_scenario(scenario, scenario_text)
+    if identity is None:
+        shown = [] if not scenario_text else ["--scenario-text", scenario_text]
+        identity = ScenarioIdentity.of(scenario, ["--lean"] if scenario_text == LEAN else shown)
     setup = prepare_run(scenario, policy)
     interface = make_cell_station_interface(
-        setup.scenario, DrakeLcm(url), timeouts=timeouts, sim_contacts=True
+        setup.scenario, DrakeLcm(url), timeouts=timeouts, sim_contacts=True, identity=identity
     )
     loop = ClosedLoop(setup, RemoteCell(interface), controller_of(setup, on_task))
     return loop.run(progress=progress)
 
 
+EXIT_MISMATCH = 2
+"""The exit status of either side of a refused station-controller pair: as for an option
+refused (the two command lines must be made to agree), not 1, a link that failed."""
+
+
+def controller_hint(args, url: str) -> str:
+    """The command that runs the controller against a station started with `args` on `url`,
+    to paste as it is into a POSIX shell or zsh (the URL's `?` quoted)."""
+    argv = ["hrc-drake", "simulate", *scenario_argv(args), "--station-lcm", url]
+    return shlex.join(argv)
+
+
 def station_command(args) -> int:
     """`hrc-drake station`: serve the scenario's simulated station over LCM until a controller
-    (`hrc-drake simulate --station-lcm URL`) has run against it."""
-    from hrc_drake.cell.command import _scenario
-
+    (`hrc-drake simulate --station-lcm URL`) has run against it. Exit status 0; 1 if no
+    controller came, it stopped answering or the station failed; `EXIT_MISMATCH` (2) if the
+    controller runs another scenario."""
     url = check_lcm_url(args.lcm or DEFAULT_LCM_URL, "--lcm")
     if not args.timeout > 0:
         raise UsageError(f"--timeout {args.timeout}: give a number of seconds > 0")
-    scenario = _scenario(args)
+    scenario = scenario_from_args(args)
+    identity = ScenarioIdentity.of(scenario, scenario_options(args))
     timeouts = LockstepTimeouts(start=args.timeout, step=args.timeout)
     print(
-        f"station {scenario.name}: serving on {url}; run `hrc-drake simulate "
-        f"--scenario {args.scenario or scenario.name} --station-lcm {url}` (same options)",
+        f"station {scenario.name}: serving on {url}; start the controller with: "
+        f"{controller_hint(args, url)}",
         file=sys.stderr,
         flush=True,
     )
     try:
-        report = serve_scenario(scenario, url, timeouts)
+        report = serve_scenario(scenario, url, timeouts, identity)
+    except ScenarioMismatch as err:
+        print(f"hrc-drake station: error: {err}", file=sys.stderr)
+        return EXIT_MISMATCH
     except StationLinkError as err:
         print(f"hrc-drake station: error: {err}", file=sys.stderr)
         return 1
@@ -170,8 +214,10 @@ def station_command(args) -> int:
 
 
 __all__ = [
+    "EXIT_MISMATCH",
     "RemoteCell",
     "check_lcm_url",
+    "controller_hint",
     "run_over_lcm",
     "serve_scenario",
     "station_command",

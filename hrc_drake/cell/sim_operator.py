@@ -11,7 +11,11 @@ on a `BOLT` prompt it bolts the held part for `bolt_time` seconds (its body reac
 the part go and it rests (`resting`) where the configuration sensor reads it in a seat, and
 fix it where it sits then, not at the nominal seat (`hrc_drake.cell.welds`): a part released
 settles in its pocket under contact first. Before an undo it takes the bolts out of the part
-that goes back.
+that goes back. On a `HANDOVER` prompt it does the task by hand: it takes `handover_time`
+seconds to fetch the part and put it in its seat, then bolts it (`bolt_time`) and says it is
+done (a person in the browser clicks "I did ..." instead, in their own time); the station then
+puts the part in its seat (`placements`, applied by `CellStation.apply_welds`, as the welds
+are) and the bolt takes once it rests there.
 
 What it does is its `activity` output (for the body) and its `bolts` output (the bolt welds the
 station applies: simulator only). The controller sees none of this: only `hri.indication`.
@@ -76,7 +80,8 @@ class SimulatedOperator(LeafSystem):
     Input ports: `hri.prompt` (Prompt), `configuration` (CellConfiguration), `resting`
     (frozenset of the parts at rest and out of the gripper; unconnected: all). Output ports:
     `hri.indication` (Indication), `activity` (OperatorActivity), `bolts` (frozenset[Weld]).
-    Updated every `period` seconds."""
+    Updated every `period` seconds. `handover_time`: seconds a task handed over takes by hand
+    before its bolting."""
 
     def __init__(
         self,
@@ -84,9 +89,11 @@ class SimulatedOperator(LeafSystem):
         bolt_time: float,
         period: float,
         busy_until: Callable[[OperatorActivity], float] | None = None,
+        handover_time: float = 5.0,
     ):
         super().__init__()
         self._operator, self._bolt_time = operator, bolt_time
+        self._handover_time = handover_time
         # When the hands are free to bolt (an operator still fetching bolts starts after).
         self._busy_until = busy_until
         self._prompt = self.DeclareAbstractInputPort("hri.prompt", AbstractValue.Make(Prompt()))
@@ -102,6 +109,10 @@ class SimulatedOperator(LeafSystem):
         self._pending = self.DeclareAbstractState(AbstractValue.Make(frozenset()))
         # (step, time) the indication of the step is due: the prompt seen plus the delay.
         self._asked = self.DeclareAbstractState(AbstractValue.Make((0, 0.0)))
+        # A task handed over: (step, when it is done by hand); and the placements done by hand
+        # that the station has still to make, (task, part or "", state) each.
+        self._by_hand = self.DeclareAbstractState(AbstractValue.Make((0, 0.0)))
+        self._placements = self.DeclareAbstractState(AbstractValue.Make(()))
         self.DeclareStateOutputPort("hri.indication", self._indication)
         self.DeclareStateOutputPort("activity", self._activity)
         self.DeclareStateOutputPort("bolts", self._bolts)
@@ -145,6 +156,10 @@ class SimulatedOperator(LeafSystem):
                 pending = pending | {activity.part}
                 indication = replace(indication, bolted=True, time=now)
                 activity = replace(activity, kind=ActivityKind.REST)
+        elif prompt.kind == PromptKind.HANDOVER and not (
+            indication.step == prompt.step and indication.done
+        ):
+            indication, activity = self._do_by_hand(context, state, prompt, indication, activity)
         elif activity.kind == ActivityKind.BOLT and not indication.bolted:
             # The robot withdrew its prompt (it lost the part): hands off, back to rest.
             activity = replace(activity, kind=ActivityKind.REST)
@@ -153,6 +168,52 @@ class SimulatedOperator(LeafSystem):
         state.get_mutable_abstract_state(self._activity).set_value(activity)
         state.get_mutable_abstract_state(self._bolts).set_value(bolts)
         state.get_mutable_abstract_state(self._pending).set_value(pending)
+
+    def _do_by_hand(self, context, state, prompt: Prompt, indication, activity):
+        """A task handed over: (indication, activity). The simulated operator reaches in for
+        `handover_time` plus the bolting time, then says it is done; a person in the browser
+        (an operator asked without blocking, `poll`) says so with a click. Done, the placement
+        goes to the station (`placements`)."""
+        now = context.get_time()
+        poll = getattr(self._operator, "poll", None)
+        if poll is not None:
+            done = poll(prompt) is not None
+        else:
+            step, due = context.get_abstract_state(self._by_hand).get_value()
+            if step != prompt.step:
+                due = now + self._handover_time + self._bolt_time
+                state.get_mutable_abstract_state(self._by_hand).set_value((prompt.step, due))
+                activity = replace(
+                    activity,
+                    kind=ActivityKind.BOLT,  # the hands in the cell, at the part
+                    part=prompt.part,
+                    start=now,
+                    duration=due - now,
+                    step=prompt.step,
+                )
+            done = now >= due
+        if not done:
+            return indication, activity
+        placements = context.get_abstract_state(self._placements).get_value()
+        placement = (prompt.proposal, prompt.part, prompt.state)
+        state.get_mutable_abstract_state(self._placements).set_value((*placements, placement))
+        indication = Indication(prompt.step, prompt.proposal, True, now, done=True)
+        return indication, replace(activity, kind=ActivityKind.REST)
+
+    def placements(self, context) -> tuple[tuple[str, str, tuple[str, ...]], ...]:
+        """Sim only: the tasks done by hand whose part the station has still to put in place,
+        (task, part instance or "" for any free one, the MDP state before) each."""
+        return context.get_abstract_state(self._placements).get_value()
+
+    def placed(self, context, part: str) -> None:
+        """Sim only: the station has put `part` in place for a task done by hand (the oldest
+        of `placements`); its bolt takes once it rests in its seat. `context` is this system's
+        mutable context."""
+        placements = context.get_abstract_state(self._placements).get_value()
+        context.get_mutable_abstract_state(self._placements).set_value(placements[1:])
+        if part:
+            pending = context.get_abstract_state(self._pending).get_value()
+            context.get_mutable_abstract_state(self._pending).set_value(pending | {part})
 
     def _answer(self, prompt: Prompt) -> str | None:
         """The operator's answer to a `CHOOSE` prompt: at once from an operator callable, or,

@@ -70,19 +70,25 @@ from hrc_drake.cell.obstacle import (
 from hrc_drake.cell.operator_body import BodyScript, BodySpheres, OperatorBody
 from hrc_drake.cell.scenario import cell_design, plant_config, scene_graph_config
 from hrc_drake.cell.sim_operator import SimulatedOperator
-from hrc_drake.cell.slot_monitor import CellConfiguration, SlotMonitor
+from hrc_drake.cell.slot_monitor import (
+    CellConfiguration,
+    PartStatus,
+    SlotMonitor,
+    placement_transform,
+)
 from hrc_drake.cell.welds import Bolts, Weld
 from hrc_drake.cell_models import CellDesign, add_cell_models
 from hrc_drake.hri.faults import check_faults
 from hrc_drake.hri.messages import Prompt
 from hrc_drake.hri.scenario import CameraSettings, Scenario
-from hrc_drake.motion.poses import IN_TRAY, CellFrames, layout_poses
+from hrc_drake.motion.poses import IN_TRAY, CellFrames, layout_poses, part_pose
 from hrc_drake.motion.scene import read_cell_frames
 from hrc_drake.obstacle_models import DEBRIS, OBSTACLE
 from hrc_drake.robot_models import GRIPPER, UR3, UR3_JOINTS
 from hrc_drake.tasks.decide import Operator
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.spec import SpecError, load_spec
+from hrc_drake.tasks.tokens import UNDO
 
 _SAP_FAMILY = ("sap", "similar", "lagged")
 
@@ -102,6 +108,7 @@ class CellStation:
     meshcat: Meshcat | None = None
     visualizer: MeshcatVisualizer | None = None
     injector: FaultInjector | None = None  # with the robot
+    operator: SimulatedOperator | None = None
 
     @property
     def has_robot(self) -> bool:
@@ -135,13 +142,18 @@ class CellStation:
         """Whether the wanted welds differ from `applied` (what `apply_welds` returned last),
         or a fault wants a part moved: a `Simulator` monitor returns ReachedTermination then,
         and the runner applies them."""
-        return self.wanted_welds(context) != applied or bool(self._pending_shifts(context))
+        return (
+            self.wanted_welds(context) != applied
+            or bool(self._pending_shifts(context))
+            or bool(self._hand_placements(context))
+        )
 
     def apply_welds(self, context: Context) -> frozenset[Weld]:
         """Make the wanted bolts the ones that hold in the root `context` (a new one fixes its
         part where it sits now), and move the parts the no-seat faults slide in the fingers;
         returns the bolts."""
         plant_context = self.plant.GetMyMutableContextFromRoot(context)
+        self._place_by_hand(context, plant_context)
         wanted = self.wanted_welds(context)
         filters = self.scene_graph.collision_filter_manager(
             self.scene_graph.GetMyMutableContextFromRoot(context)
@@ -151,6 +163,65 @@ class CellStation:
             self._slide_in_fingers(plant_context, fault.offset)
             self.injector.mark_shifted(self.injector.GetMyMutableContextFromRoot(context), index)
         return wanted
+
+    def _hand_placements(self, context: Context) -> tuple:
+        if self.operator is None:
+            return ()
+        return self.operator.placements(self.operator.GetMyContextFromRoot(context))
+
+    def _place_by_hand(self, context: Context, plant_context) -> None:
+        """Put the parts of the tasks the operator did by hand where the task puts them, at
+        rest (a placement: its seat, on the plate or where the host part measured under it
+        sits; an undo: its tray home), and tell the operator, whose bolt then takes."""
+        operator_context = (
+            self.operator.GetMyMutableContextFromRoot(context) if self.operator else None
+        )
+        for task, part, state in self._hand_placements(context):
+            config = self.configuration(context)
+            part = part or self._part_for(config, task, state)
+            if part:
+                body = self.part_body(part)
+                X = self.frames.homes[part] if task == UNDO else self._seat_by_hand(config, task)
+                self.plant.SetFreeBodyPose(plant_context, body, X)
+                self.plant.SetFreeBodySpatialVelocity(plant_context, body, SpatialVelocity.Zero())
+            self.operator.placed(operator_context, part)
+
+    def _part_for(self, config: CellConfiguration, task: str, state: tuple[str, ...]) -> str:
+        """The part the operator takes for `task` when the robot chose none: for an undo the
+        one at the last token; else the lowest-numbered of the task's kind in the tray (""
+        if none)."""
+        if task == UNDO:
+            at = state[-1] if state else None
+            return next((i for i, t in config.layout().items() if t == at), "")
+        symbol = self.design.spec.placement(task).part
+        free = [
+            i
+            for i in self.design.instance_names
+            if self.design.symbol_of(i) == symbol and config.placement(i).status == PartStatus.TRAY
+        ]
+        return min(free, default="")
+
+    def _seat_by_hand(self, config: CellConfiguration, task: str) -> RigidTransform:
+        """Where a part put in place by hand for `task` sits: its seat on the plate, or its
+        row on the host part as the host measurably sits (bolted where it came to rest, not at
+        its nominal seat)."""
+        tokens = sorted(config.tokens())
+        X_nominal = part_pose(self.frames, task, tokens)
+        host = self.design.spec.placement(task).host
+        if host is None:
+            return X_nominal
+        for instance, token in config.layout().items():
+            placement = self.design.spec.placement(token)
+            if (
+                placement.part == host
+                and placement.host is None
+                and config.placement(instance).pose
+            ):
+                X_host = part_pose(self.frames, token, tokens)
+                if set(self.design.spec.placement(task).slots) <= set(placement.slots):
+                    X_measured = placement_transform(config.placement(instance))
+                    return X_measured @ X_host.inverse() @ X_nominal
+        return X_nominal
 
     def _pending_shifts(self, context: Context) -> list:
         if not self.scenario.faults or self.injector is None:
@@ -345,7 +416,8 @@ def _add_operator(builder, plant, scene_graph, parts, scenario: Scenario, operat
     run = scenario.run
     busy = getattr(body_script, "busy_until", None)
     person = builder.AddNamedSystem(
-        "operator", SimulatedOperator(operator, scenario.motion.hold_time, run.period, busy)
+        "operator",
+        SimulatedOperator(operator, scenario.motion.hold_time, run.period, busy, run.handover_time),
     )
     builder.ExportInput(person.GetInputPort("hri.prompt"), "hri.prompt")
     builder.ExportOutput(person.GetOutputPort("hri.indication"), "hri.indication")
@@ -564,6 +636,7 @@ def make_cell_station(
         meshcat,
         visualizer,
         injector,
+        person,
     )
 
 

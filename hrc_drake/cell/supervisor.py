@@ -17,12 +17,15 @@ It is the controller's task level and sees the cell only through what a real cel
 It checks what it commands against what it measures: a joint farther from its command than
 `station.ur3.tracking_tolerance`, fingers that do not stand at the width of the part they
 should hold (and have not stalled on it), or that have not left it after the release, stop the
-task with the reason (handed over to the operator). A protective stop on the `safety.stop`
-input stops the robot on its path until it clears; an operator silent for
-`run.indication_timeout` is asked again. A task with no path while the configuration sensor
-sees an obstacle waits for it to move or go, planning again each time it does, for up to
-`run.path_timeout`. Each is recorded as a `Detection` (what the run
-reports of the scenario's faults, `hrc_drake.cell.fault_report`).
+task with the reason, and the run. A protective stop on the `safety.stop` input stops the robot
+on its path until it clears; an operator silent for `run.indication_timeout` is asked again,
+and after `run.indication_give_up` the run stops. A task with no path while the configuration
+sensor sees an obstacle waits for it to move or go, planning again each time it does, for up to
+`run.path_timeout`. A task the robot cannot do while it is itself sound (a part it dropped and
+cannot pick again, a path that stays blocked) is handed over: the arm holds still, the
+interface prompts `HANDOVER`, the operator does the task by hand and says so, and the robot
+reads the cell and goes on (`hrc_drake.cell.recovery`). Each is recorded as a `Detection`
+(what the run reports of the scenario's faults, `hrc_drake.cell.fault_report`).
 
 In `anticipate` mode it does not wait at step 3: it starts on the placement its policy commits
 to and turns when the indication names another task (`hrc_drake.cell.anticipation`). With
@@ -103,6 +106,7 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
         super().__init__()
         policy.matches(space.spec)
         self._space, self._policy, self._plans = space, policy, plans
+        self._home = tuple(float(x) for x in home)
         self._limits = limits if limits is not None else SupervisorLimits()
         self._on_task = on_task
         self._declare_inputs()
@@ -201,7 +205,10 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
             status = self._step(status, context, now)
             status = self._keep_clear(status, context, now)
         except SupervisorError as err:
-            status = self._stop(status, context, now, err)
+            if err.hand_over:
+                status = self._hand_over(status, context, now, err)
+            else:
+                status = self._stop(status, context, now, err)
         state.get_mutable_abstract_state(self._status_index).set_value(status)
 
     def _stop(self, s: SupervisorStatus, context, now: float, err: SupervisorError):
@@ -247,6 +254,8 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
             return self._observe(status, context, now)
         if mode == Mode.RECOVER and now >= status.settle_until:
             return self._pick_again(status, self._config_port.Eval(context), now)
+        if mode == Mode.HANDOVER:
+            return self._wait_for_operator(status, context, now)
         return status
 
     def _check_tracking(self, s: SupervisorStatus, context, now: float) -> None:
@@ -316,6 +325,7 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
             prompt=prompt,
             tokens_before=tokens,
             asked_at=now,
+            prompted_at=now,
             committed=committed,
             awaiting=committed is not None,
             indicated_at=None,
@@ -340,19 +350,34 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
         start: tuple[float, ...] | None = None,
     ):
         """Ask the planner for `task` from the boundary's layout, the arm at home (or at rest
-        at `start`)."""
+        at `start`, the gripper at its held opening there)."""
         last = s.state[-1] if s.state else None
+        if start is None and s.away:  # after a handover the arm holds where it stopped
+            start = s.q_hold
         request = PlanRequest.of(
-            s.tokens_before, task, last, config.layout(), obstacle=config.obstacle, start=start
+            s.tokens_before,
+            task,
+            last,
+            config.layout(),
+            obstacle=config.obstacle,
+            start=start,
+            start_opening=None if start is None else s.opening_hold,
         )
-        return self._ask(s, request, plan_ready=self._plans.is_cached(request))
+        return self._ask(s, request, now, plan_ready=self._plans.is_cached(request))
 
-    def _ask(self, s: SupervisorStatus, request: PlanRequest, **changes) -> SupervisorStatus:
-        """Ask the planner for `request`; the arm holds still until it answers (Mode.PLAN).
-        `changes`: other fields of the status to set."""
+    def _ask(
+        self, s: SupervisorStatus, request: PlanRequest, now: float, **changes
+    ) -> SupervisorStatus:
+        """Ask the planner for `request` at simulated time `now`; the arm holds still until it
+        answers (Mode.PLAN). `changes`: other fields of the status to set."""
         self._plans.request(request)
         return replace(
-            s, mode=Mode.PLAN, request=request, requested_wall=time.perf_counter(), **changes
+            s,
+            mode=Mode.PLAN,
+            request=request,
+            requested_at=now,
+            requested_wall=time.perf_counter(),
+            **changes,
         )
 
     def _indicated(self, s: SupervisorStatus, context, now: float):
@@ -402,6 +427,7 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
                 f"step {step}: the robot cannot pick {s.pending[2]} from where it lies "
                 f"({result.reason}); the task is handed over",
                 cause="plan",
+                hand_over=True,
             )
         if isinstance(result, PlanFailure):
             raise SupervisorError(f"step {step}: {result}", cause="plan")
@@ -424,12 +450,14 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
             rate=s.speed,
             pending=(proposed, indicated, plan.instance),
             bolted=False,
+            away=False,  # every plan ends at home
             planned_ahead=s.returning,  # a part put back: nothing to plan ahead for yet
             # Putting a part back, the arm stops above it, where the indicated task starts.
             turn_tau=back_above(plan) if s.returning else None,
             holds=(),
             held_since=None,
-            idle=time.perf_counter() - s.requested_wall,
+            idle=now - s.requested_at,
+            wall_idle=time.perf_counter() - s.requested_wall,
         )
         if started.awaiting and plan.task == started.committed:
             return self._plan_retargets(started, config)
@@ -451,7 +479,10 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
         above = back_above(plan) if s.returning else None
         if above is not None and tau >= above:  # the part is back: the indicated task
             q = tuple(float(x) for x in plan.trajectory.value(above).ravel())
-            s = replace(s, plan=None, q_hold=q, returning=False, turn_tau=None)
+            opening = plan.gripper_opening(above)
+            s = replace(
+                s, plan=None, q_hold=q, opening_hold=opening, returning=False, turn_tau=None
+            )
             config = self._config_port.Eval(context)
             return self._request(s, s.pending[1], config, now, start=q)
         if tau >= plan.duration:
@@ -516,16 +547,21 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
 
     def _observe(self, s: SupervisorStatus, context, now: float):
         """After the task: what the cell shows was done moves the MDP state on. A part let go
-        out of any seat is picked again and re-placed (up to `recover_tries` times)."""
+        out of any seat is picked again and re-placed (up to `recover_tries` times); then, or
+        when the robot cannot pick it, the task is handed over. A task the operator did by
+        hand is read the same way (and never handed over again)."""
         proposed, indicated, part = s.pending
         config: CellConfiguration = self._config_port.Eval(context)
-        unseated = indicated != UNDO and config.placement(part).status in (
-            PartStatus.MISPLACED,
-            PartStatus.TRANSIT,
+        unseated = (
+            indicated != UNDO
+            and not s.handover
+            and config.placement(part).status in (PartStatus.MISPLACED, PartStatus.TRANSIT)
         )
         if unseated and s.recoveries < self._limits.recover_tries:
             return self._lose_part(s, context, now, "seat", "replace")
         observed, next_state = self._observed(s, config)
+        if s.handover and not part:  # handed over before the robot chose a part
+            part = next((i for i, t in config.layout().items() if t == observed), "")
         if s.recovering:
             for cause in ("grip", "seat"):
                 s = self._resolve(s, cause, now, s.recovering)
@@ -541,12 +577,14 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
             start_time=s.plan_start,
             end_time=now,
             idle=s.idle,
+            wall_idle=s.wall_idle,
             plan_ready=s.plan_ready,
             committed=s.committed,
             indicated_at=s.indicated_at,
             held_at=s.held_at,
             retargeted=s.retargeted,
             swapped=s.swapped,
+            handed_over=s.handover,
         )
         if self._on_task is not None:
             self._on_task(record)
@@ -557,6 +595,7 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
             state=next_state,
             pending=None,
             request=None,
+            handover="",
             history=(*s.history, record),
             events=(*s.events, event),
         )
@@ -575,10 +614,14 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
                 )
             return UNDO, s.state[:-1]
         if removed or len(added) != 1:
+            where = config.placement(part).status.value if part else "not placed"
             raise SupervisorError(
-                f"after {indicated} the cell shows {sorted(tokens)}: {part} is "
-                f"{config.placement(part).status.value}, not in a seat",
+                f"after {indicated} the cell shows {sorted(tokens)}: {part or 'its part'} is "
+                f"{where}, not in a seat",
                 cause="seat",
+                # Out of its seat, out of the gripper, nothing else moved: the operator can
+                # seat it (unless they did the task already).
+                hand_over=not removed and not added and not s.handover,
             )
         (observed,) = added
         if observed not in {t for t, _ in self._space.tasks(self._space.index(s.state))}:

@@ -34,6 +34,7 @@ class Mode(enum.Enum):
     EXECUTE = "execute"  # following a plan (holding the part while the operator bolts it)
     SETTLE = "settle"  # plan done; let the parts come to rest before reading the cell
     RECOVER = "recover"  # a part lost or not seated: it comes to rest, then is picked again
+    HANDOVER = "handover"  # the task is the operator's: the arm holds still until it is done
     DONE = "done"  # a terminal state is reached
     FAILED = "failed"  # cannot go on (the reason is in `error`)
 
@@ -51,13 +52,18 @@ class TaskRecord:
     part: str
     start_time: float
     end_time: float
-    idle: float = 0.0  # wall seconds the robot waited for the planner after the indication
+    # Simulated seconds the arm held still for the planner after its last request; while
+    # simulated time stands still for the planner that is one update, and the machine's own
+    # planning time is `wall_idle` (wall-clock seconds, not reproducible from run to run).
+    idle: float = 0.0
+    wall_idle: float = 0.0
     plan_ready: bool = False  # the plan was made ahead of the indication
     committed: str | None = None  # the task the robot started on before the indication
     indicated_at: float | None = None  # when the indication came [s]
     held_at: float | None = None  # when the part was in place, held for the bolts [s]
     retargeted: bool = False  # the robot turned to another seat for the same kind of part
     swapped: bool = False  # the robot turned to another part (putting a carried one back)
+    handed_over: str = ""  # why the operator did the task by hand ("": the robot did it)
 
 
 @dataclass(frozen=True)
@@ -69,7 +75,7 @@ class Detection:
     (the fingers do not open), `seat` (a part let go does not sit in its seat), `plan` (no
     plan), `configuration` (the cell shows what no task explains). `recovery`: `resume`, `ask`,
     `regrasp`, `replace` (the cell went on by itself), or `operator` (the task is handed
-    over)."""
+    over: `resolved_at` is when the operator said it is done, or when the run stopped)."""
 
     cause: str
     step: int
@@ -92,6 +98,7 @@ class SupervisorStatus:
     step: int = 0
     prompt: Prompt = field(default_factory=Prompt)
     request: PlanRequest | None = None
+    requested_at: float = 0.0  # simulated time when the plan was asked for
     requested_wall: float = 0.0  # perf_counter() when the plan was asked for
     plan_ready: bool = False
     plan: Plan | None = None
@@ -110,9 +117,11 @@ class SupervisorStatus:
     tau_time: float = 0.0
     rate: float = 1.0  # d tau / dt from `tau_time` on
     speed: float = 1.0  # the speed scale s the robot runs at (1: the plan's own speed)
-    idle: float = 0.0  # wall seconds waited on the planner for the current task
+    idle: float = 0.0  # simulated seconds waited on the planner for the current task
+    wall_idle: float = 0.0  # the same wait in wall-clock seconds
     grip_lost_at: float | None = None  # when the grasp (or the release) started to look wrong
     asked_at: float = 0.0  # when the operator was last asked to choose
+    prompted_at: float = 0.0  # when the question now up was first asked (for the give-up)
     blocked_at: float = 0.0  # when the task's path was found blocked
     committed: str | None = None  # anticipating: the task the robot started on
     awaiting: bool = False  # started on `committed`; the indication is not in yet
@@ -130,6 +139,8 @@ class SupervisorStatus:
     recovering: str = ""  # "regrasp" or "replace" while the task's part is picked again
     recoveries: int = 0  # how often the task's part was picked again
     stopped: bool = False  # the protective-stop input is on
+    handover: str = ""  # why the task is handed over to the operator ("": it is not)
+    away: bool = False  # the arm holds away from home: the next plan starts where it holds
     detections: tuple[Detection, ...] = ()
     # Predictive separation (`hrc_drake.cell.keep_clear`): where the plan waits for the
     # operator (rest points and until when), what the waits were timed for, and what the
@@ -217,11 +228,14 @@ def obstacle_moved(planned: tuple[float, ...] | None, seen: tuple[float, ...]) -
 
 
 class SupervisorError(RuntimeError):
-    """The supervisor cannot go on; `cause` is the Detection cause it reports."""
+    """The supervisor cannot go on; `cause` is the Detection cause it reports. With
+    `hand_over` the operator can do the task by hand (the part is out of the gripper, the robot
+    itself is sound) and the assembly goes on; without, the run stops."""
 
-    def __init__(self, message: str, cause: str = "configuration"):
+    def __init__(self, message: str, cause: str = "configuration", hand_over: bool = False):
         super().__init__(message)
         self.cause = cause
+        self.hand_over = hand_over
 
 
 @dataclass(frozen=True)
@@ -237,6 +251,7 @@ class SupervisorLimits:
     grip_force: float = 20.0
     plan_ahead: bool = True
     indication_timeout: float = 10.0
+    indication_give_up: float = 120.0
     recover_tries: int = 2
     path_timeout: float = 10.0
     anticipate: bool = False  # start on the policy's commitment before the indication

@@ -14,6 +14,18 @@ callable, `hrc_drake.tasks.decide.Operator`, it blocks until a click.) The butto
 - "mistake: F03 lands in F02" when the spec lists a mistake for the proposal (the part goes to
   the mistaken alternative, the other row);
 - "undo the last part" when undo is feasible and not the proposal.
+When the robot hands a task over (a `HANDOVER` prompt: it cannot do it, e.g. a part it dropped
+and cannot pick again), the panel shows one button, "I did F1", and the terminal says what to
+do and why: the person does the task by hand, clicks, and the run goes on.
+
+A question left unanswered is asked again (the Supervisor's prompt comes back with its `asked`
+count one up, every `run.indication_timeout`): the terminal says so and the panel's buttons are
+deleted and added afresh, so that a browser that missed them (or a click lost on its way) gets
+them again. (Drake's `Meshcat.AddButton` of a name already registered only resets its count and
+sends nothing to the browser: a button is re-sent only by deleting it first.) Clicks are read
+against each button's count when it was shown; a button found missing is added again rather
+than failing the run. After `run.indication_give_up` the Supervisor gives up and the run ends.
+
 In the scene, a proposed placement shows as a translucent blue ghost of the part at its place
 with a blue cone pointing down at it; a proposed undo as a red ghost over the last part placed
 with a red cone pointing up (the part comes off). Once a button is clicked the marker goes and a
@@ -147,13 +159,16 @@ def live_banner(url: str) -> str:
 
 @dataclass
 class _Shown:
-    """The buttons up for a step: name -> task, each button's clicks before it was shown, and
-    the proposal's marker in the scene (None: nothing shown)."""
+    """The buttons up for a question (a step's `CHOOSE` or `HANDOVER`): name -> task, each
+    button's clicks when it was shown, the proposal's marker in the scene (None: nothing
+    shown) and how often the question had been asked again then."""
 
     step: int
     buttons: dict[str, str]
     clicks: dict[str, int]
     marker: str | None
+    kind: PromptKind = PromptKind.CHOOSE
+    asked: int = 0
 
 
 class LiveOperator:
@@ -208,41 +223,102 @@ class LiveOperator:
         return chosen
 
     def poll(self, prompt: Prompt) -> str | None:
-        """The task clicked for `prompt` (a `CHOOSE`), or None while no button is clicked: the
-        first call of a step shows the proposal and the buttons, and the one that finds a click
-        takes them down."""
-        if self._shown is None or self._shown.step != prompt.step:
+        """The task clicked for `prompt` (a `CHOOSE`; for a `HANDOVER`, its task once the
+        person says they did it), or None while no button is clicked: the first call of a
+        question shows it, a call for a question asked again shows it afresh (after a last look
+        for a click), and the one that finds a click takes the buttons down."""
+        shown = self._shown
+        if shown is None or (shown.step, shown.kind) != (prompt.step, prompt.kind):
             self.close()
             self._show(prompt)
+        elif prompt.asked > shown.asked:
+            chosen = self._clicked(prompt)
+            if chosen is not None:
+                return chosen
+            self._ask_again(prompt)
+        return self._clicked(prompt)
+
+    def _clicked(self, prompt: Prompt) -> str | None:
+        """The task of the first button clicked since it was shown (and the click's marks),
+        or None."""
         shown = self._shown
         for name, task in shown.buttons.items():
-            if self.meshcat.GetButtonClicks(name) > shown.clicks[name]:
-                chosen = task
-                self._answered(prompt, chosen)
-                return chosen
+            if self._clicks(name) > shown.clicks[name]:
+                if prompt.kind == PromptKind.HANDOVER:
+                    self.close()
+                    self.say(f"step {prompt.step}: you did {task}; the robot goes on")
+                else:
+                    self._answered(prompt, task)
+                return task
         return None
+
+    def _clicks(self, name: str) -> int:
+        """The button's click count; a button that has gone from the panel (deleted by
+        another hand) is added again, counted from there."""
+        try:
+            return self.meshcat.GetButtonClicks(name)
+        except RuntimeError:
+            add_button(self.meshcat, name)
+            self._shown.clicks[name] = self.meshcat.GetButtonClicks(name)
+            return self._shown.clicks[name]
+
+    def _ask_again(self, prompt: Prompt) -> None:
+        """The question is asked again: say so, and send its buttons to the browser afresh
+        (deleted first: re-adding a registered name sends nothing)."""
+        shown = self._shown
+        for name in shown.buttons:
+            self.meshcat.DeleteButton(name, strict=False)
+            add_button(self.meshcat, name)
+            shown.clicks[name] = self.meshcat.GetButtonClicks(name)
+        shown.asked = prompt.asked
+        self.say(
+            f"step {prompt.step}: still no answer (asked again, {prompt.asked} time"
+            f"{'s' if prompt.asked > 1 else ''}); the buttons are shown afresh: "
+            + self.question_text(prompt, shown.buttons)
+        )
 
     def close(self) -> None:
         """Take down the buttons of a step still unanswered (a run that ends or is stopped
         leaves none in the panel)."""
         if self._shown is not None:
             for name in self._shown.clicks:
-                self.meshcat.DeleteButton(name)
+                self.meshcat.DeleteButton(name, strict=False)
             self._shown = None
+
+    def handover_buttons(self, prompt: Prompt) -> dict[str, str]:
+        """Button name -> task for a task handed over: one, "I did F1"."""
+        return {control_name(f"I did {prompt.proposal}"): prompt.proposal}
+
+    def question_text(self, prompt: Prompt, buttons: dict[str, str]) -> str:
+        """What the terminal says of a question: a proposal (`prompt_text`) or a task handed
+        over, what to do and why."""
+        if prompt.kind != PromptKind.HANDOVER:
+            text = self.prompt_text(prompt.step, prompt.state, prompt.proposal, buttons)
+            if prompt.committed:
+                text += f"; the robot is already on its way with {prompt.committed}"
+            return text
+        task = describe_task(self.space, prompt.proposal, prompt.state)
+        why = f" ({prompt.reason})" if prompt.reason else ""
+        return (
+            f"step {prompt.step}: the robot hands {task} over to you{why}; do it by hand, then "
+            f'click "{next(iter(buttons))}" under {WHERE_THE_BUTTONS_ARE}'
+        )
 
     def _show(self, prompt: Prompt) -> None:
         now = self.clock()
-        buttons = self.buttons(prompt.state, prompt.proposal, prompt.committed)
-        mark = self._show_proposal(prompt.state, prompt.proposal, now)
+        if prompt.kind == PromptKind.HANDOVER:
+            buttons, mark = self.handover_buttons(prompt), None
+        else:
+            buttons = self.buttons(prompt.state, prompt.proposal, prompt.committed)
+            mark = self._show_proposal(prompt.state, prompt.proposal, now)
         base = {}
         for text in buttons:
             name = add_button(self.meshcat, text)
+            # Counted from here: a name left registered is reset by AddButton, and a click
+            # that came before the question is not an answer to it.
             base[name] = self.meshcat.GetButtonClicks(name)
-        self._shown = _Shown(prompt.step, buttons, base, mark)
-        text = self.prompt_text(prompt.step, prompt.state, prompt.proposal, buttons)
-        if prompt.committed:
-            text += f"; the robot is already on its way with {prompt.committed}"
-        self.say(text)
+        self._shown = _Shown(prompt.step, buttons, base, mark, prompt.kind, prompt.asked)
+        self.say(self.question_text(prompt, buttons))
         if self.on_prompt is not None:
             self.on_prompt(
                 PanelPrompt(

@@ -12,6 +12,12 @@ A task boundary, in messages:
 2. The robot picks, carries and places the part and prompts `BOLT` at step k while it holds the
    part still; the operator bolts it and indicates `bolted` for step k; the robot releases.
    (For an undo the operator takes the bolts out before the robot takes the part back.)
+3. When the robot cannot do the task (a part it dropped and cannot pick again, a path that
+   stays blocked), it prompts `HANDOVER` at step k: the operator does the task by hand (places
+   and bolts the part) and indicates `done` for step k; the robot reads the cell and goes on.
+
+A prompt left unanswered is asked again (`asked` counts how often), so that an interface that
+lost the question, or a click, shows it afresh.
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ class PromptKind(StrEnum):
     NONE = "none"  # nothing asked
     CHOOSE = "choose"  # a task boundary: confirm the proposal or indicate another task
     BOLT = "bolt"  # the robot holds the part in place: bolt it, then say so
+    HANDOVER = "handover"  # the robot cannot do the task: do it by hand, then say so
 
 
 @dataclass(frozen=True)
@@ -33,7 +40,9 @@ class Prompt:
     """What the interface shows: the step (decision steps count from 1), the kind of question,
     the MDP state (the sequence of tasks so far), the robot's proposal, the part moved (the
     part instance, once known) and, at a `CHOOSE`, the task the robot has already started on
-    while it waits for the answer ("": it waits, still)."""
+    while it waits for the answer ("": it waits, still). `asked` counts how often the same
+    question was asked again for want of an answer (0: the first time); `reason` says why a
+    `HANDOVER` is handed over."""
 
     step: int = 0
     kind: PromptKind = PromptKind.NONE
@@ -41,6 +50,8 @@ class Prompt:
     proposal: str = ""
     part: str = ""
     committed: str = ""
+    asked: int = 0
+    reason: str = ""
 
     def __deepcopy__(self, memo) -> Prompt:
         return self  # immutable (Drake copies abstract values often)
@@ -48,13 +59,15 @@ class Prompt:
 
 @dataclass(frozen=True)
 class Indication:
-    """The operator's latest word: the task indicated at `step` (None: not yet), and whether the
-    part of `step` is bolted. `time` is when it was given (seconds, the station's clock)."""
+    """The operator's latest word: the task indicated at `step` (None: not yet), whether the
+    part of `step` is bolted, and whether the operator has done the task of `step` by hand (a
+    `HANDOVER`). `time` is when it was given (seconds, the station's clock)."""
 
     step: int = 0
     task: str | None = None
     bolted: bool = False
     time: float = 0.0
+    done: bool = False
 
     def __deepcopy__(self, memo) -> Indication:
         return self
@@ -65,6 +78,8 @@ class Indication:
             return self.step == prompt.step and self.task is not None
         if prompt.kind == PromptKind.BOLT:
             return self.step == prompt.step and self.bolted
+        if prompt.kind == PromptKind.HANDOVER:
+            return self.step == prompt.step and self.done
         return False
 
 

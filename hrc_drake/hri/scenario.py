@@ -22,6 +22,8 @@ more YAML merged on top (`--scenario-text "{motion: {hold_time: 0.5}}"`).
 """
 
 import dataclasses
+import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +33,7 @@ from hrc_drake.hri.faults import FaultConfig, FaultError, check_faults
 from hrc_drake.hri.operator import ScriptedOperator, StochasticOperator, parse_operator_script
 from hrc_drake.layout import CellLayout
 from hrc_drake.motion.options import MotionOptions
+from hrc_drake.paths import not_a_file
 from hrc_drake.resources import models_dir, scenarios_dir
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.interaction import (
@@ -43,6 +46,7 @@ from hrc_drake.tasks.interaction import (
     IndicationDelay,
     Interaction,
     InteractionError,
+    delay_generator,
     make_interaction,
 )
 from hrc_drake.typed_yaml import TypedYamlError, YamlSyntaxError, load_typed
@@ -50,6 +54,59 @@ from hrc_drake.typed_yaml import TypedYamlError, YamlSyntaxError, load_typed
 
 class ScenarioError(ValueError):
     """A scenario that cannot be used; the message names the file and the key."""
+
+
+# The source `check_scenario` names when a value came from the command line's YAML overrides.
+TEXT_SOURCE = "--scenario-text"
+
+
+def _check_finite(value, key: str, fail) -> None:
+    """Refuse NaN and infinity anywhere in a scenario (YAML's `.nan`, `.inf`): every number of a
+    scenario is a quantity of the cell, and a NaN passes every `<` and `>` check below, to fail
+    later in Drake (a NaN hold time is an assertion in the planning worker, an infinite one a
+    run that never ends)."""
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            raise fail(key, f"{value} is not a number the cell can use; give a finite number")
+    elif dataclasses.is_dataclass(value):
+        for f in dataclasses.fields(value):
+            _check_finite(getattr(value, f.name), f"{key}.{f.name}" if key else f.name, fail)
+    elif isinstance(value, list | tuple):
+        for i, item in enumerate(value):
+            _check_finite(item, f"{key}[{i}]", fail)
+    elif isinstance(value, dict):
+        for k, item in value.items():
+            _check_finite(item, f"{key}.{k}", fail)
+
+
+def _check_limits(scenario, fail) -> None:
+    """The signs and ranges of the numbers no other check covers: each of these, out of range,
+    fails only once the cell is built or the run has started (or never, silently)."""
+    if scenario.run.max_steps < 1:
+        raise fail("run.max_steps", f"a run takes at least 1 step, got {scenario.run.max_steps}")
+    for key in ("robot_uncertainty", "slow_band", "moving_speed"):
+        if getattr(scenario.safety, key) < 0:
+            raise fail(f"safety.{key}", f"must be >= 0, got {getattr(scenario.safety, key)}")
+    arm, rg2, camera = scenario.station.ur3, scenario.station.rg2, scenario.station.camera
+    if arm.tracking_tolerance <= 0:
+        raise fail("station.ur3.tracking_tolerance", "give an angle > 0 rad (0.05)")
+    for key in ("kp", "kd"):
+        if any(g < 0 for g in getattr(arm, key)):
+            raise fail(f"station.ur3.{key}", "gains are >= 0")
+    if not 0 <= rg2.initial_opening <= 0.110:
+        raise fail("station.rg2.initial_opening", "the RG2 opens 0 to 0.110 m")
+    if rg2.kp <= 0 or rg2.kd < 0:
+        raise fail("station.rg2.kp" if rg2.kp <= 0 else "station.rg2.kd", "give kp > 0, kd >= 0")
+    if rg2.grip_tolerance <= 0:
+        raise fail("station.rg2.grip_tolerance", "give a distance > 0 m (0.004)")
+    if camera.width < 1 or camera.height < 1:
+        raise fail(
+            "station.camera", f"give an image size >= 1 px, got {camera.width}x{camera.height}"
+        )
+    if not 0 < camera.fov_y < 180:
+        raise fail(
+            "station.camera.fov_y", f"give a field of view in (0, 180) deg, got {camera.fov_y}"
+        )
 
 
 @dataclass
@@ -70,7 +127,10 @@ class OperatorConfig:
         mistake_prob: probability of misplacing a part the spec lists under `mistakes`.
         seed: seed of the stochastic operator.
         model: a named operator model (`hrc_drake.hri.populations`), with `params`.
-        params: parameters of `model`.
+        params: parameters of `model` (numbers, or text such as habitual's `order: S23`).
+        delay_seed: where the indication delays are drawn from: empty, the operator's own
+            stream (`operator_delays(seed)`); `[S, i]`, those of run i of an evaluation seeded
+            S (`delay_generator(S, i)`), so that one run of `evaluate --cell` replays alone.
     """
 
     deviations: list[Deviation] = field(default_factory=list)
@@ -78,7 +138,24 @@ class OperatorConfig:
     mistake_prob: float = 0.0
     seed: int = 0
     model: str = ""
-    params: dict[str, float] = field(default_factory=dict)
+    params: dict[str, float | str] = field(default_factory=dict)
+    delay_seed: list[int] = field(default_factory=list)
+
+
+@dataclass
+class DeciderConfig:
+    """A decider (`hrc_drake.tasks.deciders`) proposing at every task boundary instead of the
+    scenario's policy, learning from what the cell observed (as in `evaluate --cell`).
+
+    Attributes:
+        name: one of `hrc_drake.tasks.deciders.DECIDERS`; empty, the scenario's `policy`.
+        seed: the decider's seed (the evaluation's `--seed`).
+        costs: a cost table file (`hrc-drake costs`); empty, the cell's (computed once, cached).
+    """
+
+    name: str = ""
+    seed: int = 0
+    costs: str = ""
 
 
 @dataclass
@@ -182,7 +259,16 @@ class RunConfig:
             does not depend on the machine's speed (same seed, same result); False: time runs
             on and the robot holds still meanwhile, as on a real cell (live runs always).
         indication_timeout: seconds the robot waits for the operator's indication before it
-            notes the silence and asks again (holding still meanwhile).
+            notes the silence and asks again (holding still meanwhile); it asks again every
+            `indication_timeout` seconds.
+        indication_give_up: simulated seconds after a question was first asked (a `CHOOSE`,
+            or a `HANDOVER` to confirm) with no answer, when the robot gives up: the run ends,
+            not terminal, with the reason (a live prompt nobody answers, or whose click was
+            lost, never leaves a run looping). Simulated time: a live run is paced at real time
+            or slower, so it is at least as long on the wall clock.
+        handover_time: seconds the simulated operator takes to do a task handed over to them
+            by hand (fetch the part, put it in its seat) before bolting it
+            (`motion.hold_time`); a person in the browser takes their own time.
         recover_tries: how often, within one task, the robot picks its part again from where
             it lies (a part that slipped out of the gripper, or was let go out of its seat)
             before it hands the task over to the operator.
@@ -198,6 +284,8 @@ class RunConfig:
     plan_ahead: bool = True
     wait_for_planner: bool = True
     indication_timeout: float = 10.0
+    indication_give_up: float = 120.0
+    handover_time: float = 5.0
     recover_tries: int = 2
     path_timeout: float = 10.0
 
@@ -424,7 +512,8 @@ class Scenario:
     """One run of the cell (or of the decision loop): see the module docstring.
 
     `cell` is the cell's layout; left out, the assembly spec's `cell:` section (or the default
-    layout) is used. `policy` is a policy file; empty, the exact minimum-effort policy.
+    layout) is used. `policy` is a policy file; empty, the exact minimum-effort policy; a
+    `decider` replaces it.
     """
 
     name: str = ""
@@ -433,6 +522,7 @@ class Scenario:
     policy: str = ""
     table2_row: int | None = None
     operator: OperatorConfig = field(default_factory=OperatorConfig)
+    decider: DeciderConfig = field(default_factory=DeciderConfig)
     expected: Expected = field(default_factory=Expected)
     cell: CellLayout | None = None
     motion: MotionConfig = field(default_factory=MotionConfig)
@@ -448,7 +538,9 @@ class Scenario:
     def assembly_path(self) -> Path:
         """The assembly spec file: `assembly` as a path, or a name under models/assemblies/."""
         path = Path(self.assembly)
-        if path.suffix:
+        # A path to something that exists is that path, suffix or not (`--assembly /dev/null`
+        # is then reported as the device it is, not as a missing /dev/null.yaml).
+        if path.suffix or (os.sep in self.assembly and path.exists()):
             return path
         return models_dir() / "assemblies" / f"{self.assembly}.yaml"
 
@@ -485,7 +577,11 @@ class Scenario:
             answers = StochasticOperator(space, op.override_prob, op.mistake_prob, op.seed)
         else:
             answers = ScriptedOperator(self.script)
-        return DelayedIndications(answers, self.interaction_model().delay, op.seed)
+        delay = self.interaction_model().delay
+        if op.delay_seed:
+            rng = delay_generator(*op.delay_seed)
+            return DelayedIndications(answers, delay, rng=rng)
+        return DelayedIndications(answers, delay, op.seed)
 
     def interaction_model(self) -> Interaction:
         """The `interaction` section as a checked `Interaction`."""
@@ -499,8 +595,13 @@ class Scenario:
 def check_scenario(scenario: Scenario, source: str) -> Scenario:
     """Value checks the types cannot express; ScenarioError naming the key."""
 
+    where = source if source == TEXT_SOURCE else f"scenario {source}"
+
     def fail(key: str, problem: str) -> ScenarioError:
-        return ScenarioError(f"scenario {source}: {key}: {problem}")
+        return ScenarioError(f"{where}: {key}: {problem}")
+
+    _check_finite(scenario, "", fail)
+    _check_limits(scenario, fail)
 
     op = scenario.operator
     for key in ("override_prob", "mistake_prob"):
@@ -518,9 +619,21 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
         steps.add(d.step)
     if op.deviations and (scenario.stochastic or op.model):
         raise fail("operator", "give scripted deviations or a stochastic operator, not both")
-    for key in ("hold_time", "tcp_speed_limit", "approach_distance"):
+    if op.delay_seed and len(op.delay_seed) != 2:
+        raise fail(
+            "operator.delay_seed",
+            f"give [evaluation seed, run], e.g. [0, 3], or leave it out; got {op.delay_seed}",
+        )
+    _check_decider(scenario.decider, fail)
+    for key in ("hold_time", "approach_distance"):
         if getattr(scenario.motion, key) < 0:
             raise fail(f"motion.{key}", "must be >= 0")
+    if scenario.motion.tcp_speed_limit <= 0:
+        raise fail(
+            "motion.tcp_speed_limit",
+            f"the robot cannot move at {scenario.motion.tcp_speed_limit} m/s; give a speed > 0 "
+            "(0.25: ISO 10218-1's reduced speed)",
+        )
     contact = scenario.physics.contact
     for key in ("hydroelastic_modulus", "resolution_hint"):
         if getattr(contact, key) <= 0:
@@ -535,6 +648,12 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
     for key in ("period", "settle_time", "max_sim_time", "indication_timeout", "path_timeout"):
         if getattr(scenario.run, key) <= 0:
             raise fail(f"run.{key}", "must be > 0")
+    give_up = scenario.run.indication_give_up
+    if not (math.isfinite(give_up) and give_up > 0):
+        raise fail("run.indication_give_up", f"give finite seconds > 0, got {give_up}")
+    handover = scenario.run.handover_time
+    if not (math.isfinite(handover) and handover >= 0):
+        raise fail("run.handover_time", f"give finite seconds >= 0, got {handover}")
     if scenario.run.recover_tries < 0:
         raise fail("run.recover_tries", "must be >= 0 (0: hand every lost part over)")
     for key in ("human_speed", "reaction_time", "intrusion", "human_uncertainty"):
@@ -550,7 +669,7 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
         try:
             scenario.cell.check("cell")
         except ValueError as err:
-            raise ScenarioError(f"scenario {source}: {err}") from err
+            raise ScenarioError(f"{where}: {err}") from err
     _check_body(scenario, fail)
     _check_separation(scenario.safety, fail)
     _check_interaction(scenario.interaction, fail)
@@ -559,6 +678,15 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
     except FaultError as err:
         raise ScenarioError(str(err)) from err
     return scenario
+
+
+def _check_decider(decider: DeciderConfig, fail) -> None:
+    """A known decider name (or none)."""
+    from hrc_drake.tasks.deciders import DECIDERS
+
+    if decider.name and decider.name not in DECIDERS:
+        known = ", ".join(DECIDERS)
+        raise fail("decider.name", f"unknown decider {decider.name!r}; use one of {known}")
 
 
 SEPARATION_MODES = ("predictive", "reactive")
@@ -646,10 +774,18 @@ def _check_interaction(it: InteractionConfig, fail) -> None:
 
 
 def scenario_file(name_or_path: str | Path) -> Path:
-    """The file of a scenario: a path, or a name under scenarios/; ScenarioError if missing."""
+    """The file of a scenario: a path, or a name under scenarios/; ScenarioError if missing, or
+    if what is there is not a regular file (a folder, a device such as /dev/null, a pipe)."""
     path = Path(name_or_path)
-    if not path.suffix:
+    # A name without a suffix is a scenario of the catalogue, unless it is a path to something
+    # that exists (`--scenario /bin/ls`): then say what that is, not "not found".
+    if not path.suffix and not (os.sep in str(name_or_path) and path.exists()):
         path = scenarios_dir() / f"{name_or_path}.yaml"
+    if path.exists() and not path.is_file():
+        raise ScenarioError(
+            f"scenario {name_or_path}: {not_a_file(path)}; give a scenario YAML file or the "
+            "name of one in scenarios/"
+        )
     if not path.is_file():
         known = ", ".join(sorted(p.stem for p in scenarios_dir().glob("*.yaml")))
         raise ScenarioError(f"scenario {name_or_path!r} not found; known scenarios: {known}")
@@ -667,13 +803,48 @@ def load_scenario(
     if name_or_path is not None:
         path = scenario_file(name_or_path)
         source = str(path)
-        scenario = _load_typed(path.read_text(), f"scenario {path}", None)
+        scenario = _load_typed(_read_text(path), f"scenario {path}", None)
         if not scenario.name:
             scenario.name = path.stem
     texts = [scenario_text] if isinstance(scenario_text, str) else list(scenario_text or ())
+    base = scenario
     for text in texts:
         scenario = _load_typed(text, "--scenario-text", scenario)
-    return check_scenario(scenario, source)
+    if scenario is base:
+        return check_scenario(scenario, source)
+    return _check_overridden(base, scenario, source)
+
+
+def _check_overridden(base: Scenario, scenario: Scenario, source: str) -> Scenario:
+    """`check_scenario` of `scenario`, the file `base` with `--scenario-text` over it. A problem
+    the file alone shows is the file's; any other came from the text, and the message names
+    `--scenario-text` (the user looks there, not in a file they did not touch)."""
+    try:
+        return check_scenario(scenario, source)
+    except ScenarioError as err:
+        try:
+            check_scenario(base, source)
+        except ScenarioError as own:
+            if str(own) == str(err):
+                raise
+        check_scenario(scenario, TEXT_SOURCE)  # the same problem, blamed on the text
+        raise  # not reached: the check above raises the same problem
+
+
+def _read_text(path: Path) -> str:
+    """The text of the scenario file `path`; ScenarioError if it cannot be read or is not text
+    (`--scenario /bin/ls`)."""
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as err:
+        raise ScenarioError(
+            f"scenario {path}: not a text file (byte {err.object[err.start]:#04x} at offset "
+            f"{err.start} is not UTF-8); give a scenario YAML file"
+        ) from None
+    except OSError as err:
+        raise ScenarioError(
+            f"scenario {path}: cannot be read ({err.strerror or err}); give a readable file"
+        ) from None
 
 
 def _load_typed(text: str, source: str, defaults: Scenario | None) -> Scenario:

@@ -21,6 +21,7 @@ from hrc_drake.motion.poses import (
     pose_from_values,
     pose_values,
     quantize_joints,
+    quantize_opening,
     quantize_pose,
     tcp_pose,
 )
@@ -50,9 +51,13 @@ from hrc_drake.tasks.tokens import UNDO
 _READY = np.array([0.0, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0])
 # Where home puts the tcp: above the work, between plate and tray [m above the seats].
 _HOME_HEIGHT = 0.20
-# A part lying tilted more than this from upright [rad] is not grasped from above: the
-# fingers would close on its slanted faces (and the tcp tilt past what the RG2's pads hold).
-_MAX_GRASP_TILT = 0.2
+# A loose part lying tilted up to this from upright [rad] is grasped with the gripper tilted to
+# the part's normal (its own grasp frame where it lies): the fingers close across the part's
+# width, square to its faces, as in the tray. Past it the approach leans so far that the
+# fingers going down along it meet what the part leans on, and the wrist's posture comes close
+# to the UR3's reach over the plate; the part is handed over. (It was 0.2 rad, with a vertical
+# approach in mind: a flange resting 0.21 rad tilted against the plate's edge was handed over.)
+_MAX_GRASP_TILT = 0.5
 # A loose part rests on, or leans against, what is this close to it [m] (measured poses are
 # a little off: a part may seem to float or sink by a millimetre or two).
 _RESTS_ON = 0.005
@@ -134,6 +139,7 @@ class _Measured:
     start: tuple[float, ...] | None = None
     obstacle: tuple[float, ...] = ()
     held: bool = False  # the part is in the gripper at `start` already
+    start_opening: float | None = None  # the gripper's opening at `start` (None: the pick's)
 
 
 @dataclass(frozen=True)
@@ -145,6 +151,7 @@ class _Given:
     q_start: np.ndarray | None = None
     obstacle: RigidTransform | None = None
     held: bool = False
+    start_opening: float | None = None
 
 
 @dataclass(frozen=True)
@@ -200,6 +207,12 @@ class _Timeline:
         self.wait(duration)
         self.gripper_times.append(self.t)
         self.gripper_values.append(opening)
+
+    def ramp_gripper(self, since: float, opening: float) -> None:
+        """The gripper goes to `opening` over the arm's motions since plan time `since` (no
+        wait: the fingers move while the arm does)."""
+        self.gripper_times += [since, self.t]
+        self.gripper_values += [self.gripper_values[-1], opening]
 
     def stage(self, stage: Stage, start: float) -> None:
         self.segments.append(Segment(stage, start, self.t))
@@ -339,6 +352,7 @@ class MotionPlanner:
         q_start: np.ndarray | None = None,
         obstacle: RigidTransform | None = None,
         held: bool = False,
+        start_opening: float | None = None,
     ) -> Plan:
         """The plan of `task` from `configuration` (the tokens in place), home to home.
 
@@ -368,7 +382,7 @@ class MotionPlanner:
             task,
             last_token,
             layout,
-            _Given(instance, source_pose, q_start, obstacle, held),
+            _Given(instance, source_pose, q_start, obstacle, held, start_opening),
         )
         key = self._key(move, measured)
         if key not in self._plans:
@@ -388,6 +402,7 @@ class MotionPlanner:
         q_start: np.ndarray | None = None,
         obstacle: RigidTransform | None = None,
         held: bool = False,
+        start_opening: float | None = None,
     ) -> bool:
         """Whether `plan_task` with these arguments would return a plan made earlier."""
         move, measured = self._resolve(
@@ -395,7 +410,7 @@ class MotionPlanner:
             task,
             last_token,
             layout,
-            _Given(instance, source_pose, q_start, obstacle, held),
+            _Given(instance, source_pose, q_start, obstacle, held, start_opening),
         )
         return self._key(move, measured) in self._plans
 
@@ -426,6 +441,9 @@ class MotionPlanner:
             None if q_start is None else quantize_joints(q_start, len(self.q_home)),
             () if obstacle is None else quantize_pose(pose_values(obstacle)),
             given.held,
+            None
+            if given.start_opening is None or q_start is None or given.held
+            else quantize_opening(given.start_opening),
         )
         return move, measured
 
@@ -460,13 +478,19 @@ class MotionPlanner:
             measured.start,
             measured.obstacle,
             measured.held,
+            measured.start_opening,
         )
 
-    def _loose_grasp(self, task: str, part: str, X_W_part: RigidTransform) -> RigidTransform:
-        """The tcp pose grasping `part` lying at a measured X_W_part: its grasp frame there, or
-        that turned a half turn about the approach axis (the parts are symmetric under it),
-        whichever is closer to the grasp at the part's tray home, so that the wrist does not
-        wind. UnreachableError when the part lies too tilted to be grasped from above."""
+    def _loose_grasps(
+        self, task: str, part: str, X_W_part: RigidTransform
+    ) -> tuple[RigidTransform, ...]:
+        """The tcp poses grasping `part` lying at a measured X_W_part: its grasp frame there,
+        and that turned a half turn about the approach axis (the parts are symmetric under it),
+        the one closer to the grasp at the part's tray home first, so that the wrist does not
+        wind; the other is tried when the first is out of reach (a tilted grasp often is).
+        The grasp tilts with the part (up to `_MAX_GRASP_TILT`), so the fingers close across
+        its width as in the tray; UnreachableError when the part lies more tilted, or is
+        wider than the gripper's stroke (its IK and the fingers' way down are checked after)."""
         frames = self.frames
         X_W_home = frames.homes[part]
         up = X_W_home.rotation().col(2)  # a part lies upright in its tray home
@@ -476,8 +500,17 @@ class MotionPlanner:
                 task,
                 "grasp",
                 "orientation",
-                f"{part} lies tilted {tilt:.2f} rad from upright; the gripper grasps from above, "
-                f"up to {_MAX_GRASP_TILT} rad",
+                f"{part} lies tilted {tilt:.2f} rad from upright; the gripper grasps a loose "
+                f"part tilted with it, up to {_MAX_GRASP_TILT} rad",
+            )
+        width = frames.widths[part] + 2.0 * self.options.finger_gap
+        if width > MAX_OPENING:  # the width across the grasp is the part's, at any tilt
+            raise UnreachableError(
+                task,
+                "grasp",
+                "stroke",
+                f"{part} needs {width * 1000:.0f} mm between the fingers, past the RG2's "
+                f"{MAX_OPENING * 1000:.0f} mm stroke",
             )
         X_grasp = tcp_pose(frames, part, X_W_part)
         turned = X_grasp @ RigidTransform(RotationMatrix.MakeZRotation(np.pi))
@@ -486,7 +519,10 @@ class MotionPlanner:
         def wind(X: RigidTransform) -> float:
             return (R_home_inv @ X.rotation()).ToAngleAxis().angle()
 
-        return min((X_grasp, turned), key=wind)
+        # Both hold the part in its own grasp frame, so that the place half (which seats the
+        # part held so) serves them. A level grasp straddling a tilted part would hold it tilted
+        # between the fingers and seat it so: not offered.
+        return tuple(sorted((X_grasp, turned), key=wind))
 
     def _check_start(self, scene: PlanningScene, q: np.ndarray, task: str) -> None:
         """A start posture other than home must be within the joint limits and clear of the
@@ -524,7 +560,8 @@ class MotionPlanner:
             supports = (self._support(move.source, move.before),)
         else:
             X_src = pose_from_values(measured.source)
-            X_grasp = self._loose_grasp(task, part, X_src)
+            candidates = self._loose_grasps(task, part, X_src)
+            X_grasp = candidates[0]
             scene = self.scene(
                 Layout.of(move.before, None, opening, {part: X_src}, measured.obstacle)
             )
@@ -542,7 +579,20 @@ class MotionPlanner:
             clear, near = self._clear_start(scene, q_start, task)
             q_start = q_start if clear is None else clear[-1]
             self._check_start(scene, q_start, task)
-        q_pregrasp = self._ik(scene, X_pregrasp, q_start, task, "pre-grasp")
+        try:
+            q_pregrasp = self._ik(scene, X_pregrasp, q_start, task, "pre-grasp")
+        except UnreachableError:
+            if measured.source is None:
+                raise
+            # A loose part: the other grasps, in order, until the wrist reaches one.
+            for k, X_grasp in enumerate(candidates[1:], start=2):
+                X_pregrasp = offset_along_approach(X_grasp, opts.approach_distance)
+                try:
+                    q_pregrasp = self._ik(scene, X_pregrasp, q_start, task, "pre-grasp")
+                    break
+                except UnreachableError:
+                    if k == len(candidates):
+                        raise
         approach = free_path(scene, q_start, q_pregrasp, self.limits, opts)
         scene.set_allowed_contacts(hand)
         down = straight_waypoints(scene, q_pregrasp, X_grasp, opts, task=task, waypoint="grasp")
@@ -598,17 +648,25 @@ class MotionPlanner:
             q_from = q_start
         else:
             pick = self._pick(move, measured, opening, q_start)
-            line = _Timeline(q_start, opening)
-            self._pick_into(line, pick, carry, width, "home" if measured.start is None else "start")
+            start_opening = opening if measured.start_opening is None else measured.start_opening
+            line = _Timeline(q_start, start_opening)
+            self._pick_into(
+                line, pick, carry, width, "home" if measured.start is None else "start", opening
+            )
             q_from = pick.q_pregrasp
         return self._place_into(line, configuration, move, measured, carry, q_from)
 
     def _timed(self, scene: PlanningScene, path) -> Retimed:
         return retime(scene, path, self.limits, self.options)
 
-    def _pick_into(self, line: _Timeline, pick: _Pick, carry, width: float, start: str) -> None:
+    def _pick_into(
+        self, line: _Timeline, pick: _Pick, carry, width: float, start: str, opening: float
+    ) -> None:
         """The pick half on `line`: (clear of the cell,) to the pre-grasp, down, grasp, lift;
-        the carry stage starts with the lift (it ends in `_place_into`)."""
+        the carry stage starts with the lift (it ends in `_place_into`). A gripper that starts
+        at another opening than the pick's keeps it until the arm is clear of the cell (its
+        fingers may be by a part it went for), then opens or closes to `opening` on the way to
+        the pre-grasp (or there, if that way is too short for the fingers)."""
         timed = self._timed
         t0 = line.t
         if pick.clear is not None:
@@ -617,6 +675,11 @@ class MotionPlanner:
         t1 = line.t
         line.move(f"{start} to pre-grasp", timed(pick.scene, pick.approach[0]), pick.approach)
         line.phase(t1, pick.scene.layout, ())
+        if abs(line.gripper_values[-1] - opening) > 1e-9:
+            if line.t - t1 >= self.options.gripper_time:
+                line.ramp_gripper(t1, opening)
+            else:
+                line.gripper(opening, self.options.gripper_time)
         t1 = line.t
         descend = timed(pick.scene, spline_through(pick.down))
         line.move("down to grasp", descend)

@@ -206,6 +206,12 @@ def quantize_joints(values: Sequence[float], count: int = 6) -> tuple[float, ...
     return tuple(round(v, KEY_DIGITS) + 0.0 for v in values)
 
 
+def quantize_opening(opening: float) -> float:
+    """A gripper opening [m] rounded to the plan cache's resolution (0.1 mm, `KEY_DIGITS`)."""
+    value = _finite((opening,), 1, "a gripper opening")[0]
+    return round(value, KEY_DIGITS) + 0.0
+
+
 def _finite(values: Sequence[float], count: int, what: str) -> tuple[float, ...]:
     values = tuple(float(v) for v in np.asarray(values, dtype=float).ravel())
     if len(values) != count or not all(np.isfinite(values)):
@@ -225,6 +231,7 @@ __all__ = [
     "pose_from_values",
     "pose_values",
     "quantize_joints",
+    "quantize_opening",
     "quantize_pose",
     "seat_pose",
     "tcp_pose",

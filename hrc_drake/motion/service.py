@@ -47,15 +47,21 @@ from hrc_drake.cell_models import CellDesign, CellModelError
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.plan import Plan
 from hrc_drake.motion.plan_io import plan_from_data_in_steps, plan_to_data
-from hrc_drake.motion.poses import pose_from_values, pose_values, quantize_joints, quantize_pose
+from hrc_drake.motion.poses import (
+    pose_from_values,
+    pose_values,
+    quantize_joints,
+    quantize_opening,
+    quantize_pose,
+)
 from hrc_drake.tasks.tokens import UNDO
 
 PlanFunction = Callable[..., Plan]
 """(configuration, task, last_token, layout) -> Plan: the Supervisor's planner signature. A
 request with a measured pick, start or obstacle, or a held part, calls it with the keywords of
 `PlanRequest.keywords` too (`instance`, `source_pose` as a RigidTransform, `q_start` as an array,
-`obstacle` as a RigidTransform, `held`), as `MotionPlanner.plan_task` takes them; an ordinary
-request never does."""
+`obstacle` as a RigidTransform, `held`, `start_opening`), as `MotionPlanner.plan_task` takes
+them; an ordinary request never does."""
 
 
 @dataclass(frozen=True)
@@ -78,6 +84,9 @@ class PlanRequest:
             measures (`hrc_drake.obstacle_models`); None: no obstacle.
         held: `instance` is in the gripper already, the arm at `start` (a re-target, or with
             `undo` a swap: the part goes back to its tray home).
+        start_opening: the gripper's opening at `start` [m] (None: the pick's own opening). A
+            plan that starts with the fingers by a part keeps it until the arm is clear of the
+            cell: closing them there at once would close them on that part.
     """
 
     configuration: frozenset[str]
@@ -89,6 +98,7 @@ class PlanRequest:
     start: tuple[float, ...] | None = None
     obstacle: tuple[float, ...] | None = None
     held: bool = False
+    start_opening: float | None = None
 
     @staticmethod
     def of(
@@ -102,10 +112,12 @@ class PlanRequest:
         start: Sequence[float] | None = None,
         obstacle: Sequence[float] | RigidTransform | None = None,
         held: bool = False,
+        start_opening: float | None = None,
     ) -> PlanRequest:
         """From the planner's arguments (`layout`: instance -> token, e.g. measured;
         `source_pose` and `obstacle`: 7 values or a RigidTransform, the latter empty for none;
-        `start`: 6 joint positions; `held`: the instance is in the gripper at `start`).
+        `start`: 6 joint positions; `held`: the instance is in the gripper at `start`;
+        `start_opening`: the gripper's opening there, with `start` only).
         ValueError for a source pose without its instance, a held part without its instance
         and start, or values of the wrong count."""
         placed = None if layout is None else tuple(sorted(layout.items()))
@@ -123,6 +135,10 @@ class PlanRequest:
             quantize_joints(start)
         if held and (instance is None or start is None):
             raise ValueError(f"task {task}: a held part needs its instance and start")
+        if start_opening is not None:
+            # Home's opening is the plan's own; a held part's grip sets it.
+            held_or_home = start is None or held
+            start_opening = None if held_or_home else quantize_opening(start_opening)
         if isinstance(obstacle, RigidTransform):
             obstacle = pose_values(obstacle)
         if obstacle is not None and len(obstacle) == 0:
@@ -140,6 +156,7 @@ class PlanRequest:
             start,
             obstacle,
             bool(held),
+            start_opening,
         )
 
     def layout_map(self) -> dict[str, str] | None:
@@ -161,6 +178,8 @@ class PlanRequest:
             keywords["obstacle"] = pose_from_values(self.obstacle)
         if self.held:
             keywords["held"] = True
+        if self.start_opening is not None:
+            keywords["start_opening"] = self.start_opening
         return keywords
 
     def _ordinary(self) -> bool:
@@ -183,7 +202,7 @@ class PlanRequest:
         source = None if self.source_pose is None else quantize_pose(self.source_pose)
         start = None if self.start is None else quantize_joints(self.start)
         obstacle = None if self.obstacle is None else quantize_pose(self.obstacle)
-        return (*key, self.instance, source, start, obstacle, self.held)
+        return (*key, self.instance, source, start, obstacle, self.held, self.start_opening)
 
 
 @dataclass(frozen=True)

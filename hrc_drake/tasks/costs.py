@@ -49,9 +49,11 @@ from typing import Any
 import numpy as np
 
 from hrc_drake.atomic import atomic_write_text
+from hrc_drake.paths import OutputKind, fresh_name
 from hrc_drake.tasks.datafile import (
     check_made_for,
     first_infeasible,
+    has_format,
     load_checked_json,
     with_checksum,
 )
@@ -286,6 +288,15 @@ def _number(value: Any, what: str) -> float:
     return float(value)
 
 
+def is_cost_table_file(path: str | Path) -> bool:
+    """Whether `path` is a cost table file (its `format` says so; of any version): `hrc-drake
+    costs` replaces it without `--force`."""
+    return has_format(path, FORMAT)
+
+
+COST_TABLE_FILE = OutputKind("cost table", is_cost_table_file, "costs.json")
+
+
 def load_cost_table(path: str | Path, space: StateSpace, cell_hash: str | None = None) -> CostTable:
     """Load a cost table made for `space`'s spec (and, if given, that cell hash).
 
@@ -294,7 +305,9 @@ def load_cost_table(path: str | Path, space: StateSpace, cell_hash: str | None =
     lacks an edge the MDP can take.
     """
     path = Path(path)
-    fix = f"make a new one with `hrc-drake costs --out {path}`"
+    # Never advise writing over a file that is not a cost table: a fresh name instead.
+    out = path if not path.exists() or is_cost_table_file(path) else None
+    fix = f"make a new one with `hrc-drake costs --out {out or fresh_name(path, 'costs', '.json')}`"
     payload = load_checked_json(
         path,
         what="cost table",

@@ -36,6 +36,18 @@ def save_checked_json(path: str | Path, payload: Mapping[str, Any]) -> None:
     atomic_write_text(Path(path), text)
 
 
+def has_format(path: str | Path, fmt: str) -> bool:
+    """Whether `path` is a JSON object whose `format` is `fmt` (a file `save_checked_json` wrote
+    in that format, perhaps of another version or corrupted since): a file a writer of `fmt` may
+    replace without `--force` (`hrc_drake.paths.check_output_path`)."""
+    try:
+        with open(path, "rb") as f:
+            payload = json.loads(f.read())
+    except (OSError, ValueError):  # unreadable, not UTF-8, not JSON
+        return False
+    return isinstance(payload, dict) and payload.get("format") == fmt
+
+
 def load_checked_json(
     path: str | Path,
     *,

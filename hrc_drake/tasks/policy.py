@@ -18,9 +18,11 @@ from typing import Any
 
 import numpy as np
 
+from hrc_drake.paths import OutputKind, fresh_name
 from hrc_drake.tasks.datafile import (
     check_made_for,
     first_infeasible,
+    has_format,
     load_checked_json,
     save_checked_json,
 )
@@ -34,6 +36,24 @@ VERSION = 1
 
 class PolicyFileError(ValueError):
     """A policy file that cannot be used: corrupted, of another version, or another spec."""
+
+
+def is_policy_file(path: str | Path) -> bool:
+    """Whether `path` is a policy file (its `format` says so; it may be of another version or
+    corrupted): `solve` and `train` replace it without `--force`."""
+    return has_format(path, FORMAT)
+
+
+POLICY_FILE = OutputKind("policy file", is_policy_file, "policy.json")
+
+
+def new_policy_hint(path: str | Path) -> str:
+    """How to make a policy for `path`'s use: `solve --out PATH` when writing there replaces
+    nothing but a policy; else a fresh name beside it, never a file that is not a policy."""
+    path = Path(path)
+    fresh = not path.exists() or is_policy_file(path)
+    out = path if fresh else fresh_name(path, "policy", ".json")
+    return f"make a new one with `hrc-drake solve --out {out}` (or `hrc-drake train`)"
 
 
 @dataclass(frozen=True)
@@ -115,7 +135,7 @@ def save_policy(policy: Policy, path: str | Path) -> None:
 def load_policy(path: str | Path, space: StateSpace) -> Policy:
     """Load a policy file made for `space`'s spec; PolicyFileError with the fix if unusable."""
     path = Path(path)
-    fix = f"make a new one with `hrc-drake solve --out {path}` (or `hrc-drake train`)"
+    fix = new_policy_hint(path)
     if path.is_dir():
         raise PolicyFileError(
             f"policy file {path} is a directory; pass a policy file (e.g. {path / 'policy.json'}"

@@ -4,7 +4,10 @@ A profile is an `OnlineOperatorModel` (Dirichlet counts of the task performed pe
 proposal) saved to a file, so that the same person working the cell all day is not a stranger at
 every run: `mpc` starts from it (`make_decider(..., model=profile.model)`), and a run adds what
 the person did (`learn`). The functions here are what `hrc-drake simulate --operator-profile
-FILE` calls: `load_or_new_profile` before the run, `learn` and `save_profile` after it.
+FILE` calls: `load_or_new_profile` before the run (to refuse an unusable file before any work),
+`update_profile` after it. The update is a read-modify-write under an exclusive lock on a file
+beside the profile (`FILE.lock`, `fcntl.flock`), so that runs ending at the same time each add
+their session: saving what each loaded before its run would keep only the last.
 
 A profile file is JSON, written atomically (`hrc_drake.tasks.datafile`)::
 
@@ -22,6 +25,7 @@ assembly are refused too.
 
 from __future__ import annotations
 
+import fcntl
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -142,6 +146,29 @@ def load_profile(path: str | Path, space: StateSpace) -> OperatorProfile:
     return OperatorProfile(model, assemblies)
 
 
+def lock_path(path: str | Path) -> Path:
+    """The lock file of the profile in `path`: beside it, `<name>.lock`. It is locked, never
+    written, and left in place (removing it could let two runs lock different files)."""
+    path = Path(path)
+    return path.with_name(path.name + ".lock")
+
+
+def update_profile(path: str | Path, space: StateSpace, tasks: Iterable[Any]) -> OperatorProfile:
+    """Add one assembly's `tasks` (as for `learn`) to the profile in `path` (a new one for
+    `space` if there is none) and save it; returns the saved profile. The file is read, learned
+    into and written while holding an exclusive lock on `lock_path(path)`, so concurrent updates
+    follow each other and none is lost; the write stays atomic for readers that do not lock.
+    ProfileError as for `load_profile`."""
+    path = Path(path)
+    tasks = list(tasks)  # read before the lock is taken: the lock is held for file work only
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(lock_path(path), "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file is closed
+        profile = learn(load_or_new_profile(path, space), tasks)
+        save_profile(profile, path)
+    return profile
+
+
 def load_or_new_profile(path: str | Path, space: StateSpace) -> OperatorProfile:
     """The profile in `path` if the file exists (`load_profile`: refused when it is unusable),
     else a new one for `space`."""
@@ -157,6 +184,8 @@ __all__ = [
     "learn",
     "load_or_new_profile",
     "load_profile",
+    "lock_path",
     "new_profile",
     "save_profile",
+    "update_profile",
 ]

@@ -43,9 +43,10 @@ from typing import Any
 
 import yaml
 
+from hrc_drake.paths import not_a_file
 from hrc_drake.resources import default_assembly
 from hrc_drake.tasks.tokens import UNDO, Placement, placement_token
-from hrc_drake.typed_yaml import yaml_error_line
+from hrc_drake.typed_yaml import safe_load_unique, yaml_error_line
 
 BASE = "base"
 # Seconds the operator takes to bolt a part when its spec gives no `bolt_time`: the robot's
@@ -590,10 +591,26 @@ def _check_precedence_cycles(before: list[tuple[str, str]], source: str) -> None
 def load_spec(path: str | Path | None = None) -> AssemblySpec:
     """Load and validate an assembly spec file (default: the flange case)."""
     path = Path(path) if path is not None else default_assembly()
+    fix = "pass --assembly PATH to an assembly spec .yaml (models/assemblies/flange.yaml)"
+    if not path.exists():
+        raise SpecError(f"assembly spec {path}: file not found; {fix}")
     if not path.is_file():
-        raise SpecError(f"assembly spec {path}: file not found; pass --assembly PATH to a .yaml")
+        raise SpecError(f"assembly spec {path}: {not_a_file(path)}; {fix}")
     try:
-        data = yaml.safe_load(path.read_text())
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise SpecError(f"assembly spec {path}: not a text file (not UTF-8); {fix}") from None
+    except OSError as err:
+        raise SpecError(f"assembly spec {path}: cannot be read ({err.strerror}); {fix}") from None
+    try:
+        data = safe_load_unique(text)
     except yaml.YAMLError as err:
         raise SpecError(f"assembly spec {yaml_error_line(err, str(path))}") from None
+    if data is None:
+        raise SpecError(f"assembly spec {path}: the file is empty; {fix}")
+    if not isinstance(data, dict):
+        raise SpecError(
+            f"assembly spec {path}: not a YAML mapping (the file is a {type(data).__name__}, "
+            f"not keys such as name:, base:, parts:); {fix}"
+        )
     return parse_spec(data, source=str(path))

@@ -1,0 +1,253 @@
+"""Issue 28, item 5: every careless input gets one line naming the key or flag, and exit 2,
+before any work (no planning, no simulation, no file written); output files that are not of the
+kind a command writes are kept unless `--force`."""
+
+import argparse
+import json
+from pathlib import Path
+
+import pytest
+
+from hrc_drake import evaluate_command
+from hrc_drake.cli import main
+from hrc_drake.hri.scenario import ScenarioError, load_scenario
+from hrc_drake.paths import check_output_path, fresh_name
+from hrc_drake.resources import models_dir
+from hrc_drake.tasks.policy import POLICY_FILE, is_policy_file, load_policy, save_policy
+from hrc_drake.tasks.solve import exact_policy
+
+FOUR_SLOT = str(models_dir() / "assemblies" / "four-slot.yaml")
+FLANGE = str(models_dir() / "assemblies" / "flange.yaml")
+
+
+def refused(capsys, *argv):
+    """Run `hrc-drake argv` in-process; (exit status, stdout, stderr), whether the status was
+    returned (a check in a command) or raised by argparse (a flag's type)."""
+    try:
+        code = main([str(a) for a in argv])
+    except SystemExit as stop:
+        code = stop.code
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def assert_one_line(code, out, err, *words):
+    """Exit 2, nothing on stdout, one `hrc-drake CMD: error:` line naming `words`."""
+    assert code == 2, (out, err)
+    assert out == ""
+    assert err.count("\n") == 1 and err.startswith("hrc-drake ") and ": error: " in err, err
+    assert "Traceback" not in err
+    for word in words:
+        assert word in err, (word, err)
+
+
+@pytest.mark.parametrize(
+    ("text", "key"),
+    [
+        ("{motion: {tcp_speed_limit: 0}}", "motion.tcp_speed_limit"),
+        ("{motion: {hold_time: .nan}}", "motion.hold_time"),
+        ("{motion: {hold_time: .inf}}", "motion.hold_time"),
+        ("{run: {max_sim_time: .inf}}", "run.max_sim_time"),
+        ("{physics: {time_step: .nan}}", "physics.time_step"),
+        ("{station: {ur3: {kp: [.nan, 1, 1, 1, 1, 1]}}}", "station.ur3.kp[0]"),
+        ("{run: {max_steps: 0}}", "run.max_steps"),
+        ("{safety: {slow_band: -1}}", "safety.slow_band"),
+        ("{station: {rg2: {grip_tolerance: 0}}}", "station.rg2.grip_tolerance"),
+        ("{station: {camera: {fov_y: 180}}}", "station.camera.fov_y"),
+    ],
+)
+def test_bad_scenario_numbers_are_one_line_naming_scenario_text(capsys, tmp_path, text, key):
+    record = tmp_path / "run.html"
+    argv = ["simulate", "--scenario", "row4-forces-4", "--scenario-text", text, "--record", record]
+    assert_one_line(*refused(capsys, *argv), "--scenario-text", key)
+    assert not record.exists()
+
+
+def test_a_bad_number_in_a_scenario_file_is_blamed_on_the_file(capsys, tmp_path):
+    scenario = tmp_path / "slow.yaml"
+    scenario.write_text("motion: {tcp_speed_limit: 0}\n")
+    code, out, err = refused(capsys, "simulate", "--scenario", scenario, "--lean")
+    assert_one_line(code, out, err, f"scenario {scenario}", "motion.tcp_speed_limit")
+    assert "--scenario-text" not in err
+    # The text that leaves the file's mistake alone does not take the blame for it ...
+    with pytest.raises(ScenarioError, match=f"scenario {scenario}: motion.tcp_speed_limit"):
+        load_scenario(scenario, "{motion: {hold_time: 1.0}}")
+    # ... and one that corrects it is used.
+    assert load_scenario(scenario, "{motion: {tcp_speed_limit: 0.2}}").motion.tcp_speed_limit == 0.2
+
+
+@pytest.mark.parametrize("where", ["bin/ls", "tmp/binary", "tmp/binary.yaml"])
+def test_a_binary_scenario_file_is_one_line(capsys, tmp_path, where):
+    if where == "bin/ls":
+        path = Path("/bin/ls")
+        if not path.is_file():
+            pytest.skip("no /bin/ls here")
+    else:
+        path = tmp_path / where.split("/")[1]
+        path.write_bytes(bytes(range(256)) * 4)
+    code, out, err = refused(capsys, "simulate", "--scenario", path)
+    assert_one_line(code, out, err, f"scenario {path}", "not a text file")
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["solve", "--gamma", "-1", "--out", "{tmp}/p.json"],
+        ["solve", "--gamma", "nan", "--out", "{tmp}/p.json"],
+        ["train", "--gamma", "5", "--out", "{tmp}/p.json"],
+        ["react", "--mistake-prob", "-1"],
+        ["react", "--mistake-prob", "nan"],
+        ["costs", "--gamma", "2", "--out", "{tmp}/c.json"],
+        ["simulate", "--mistake-prob", "1.5", "--record", "{tmp}/r.html"],
+        ["simulate", "--gamma", "0", "--record", "{tmp}/r.html"],
+        ["evaluate", "--decider", "exact", "--operator-model", "random", "--gamma", "inf"],
+    ],
+)
+def test_gamma_and_mistake_prob_out_of_range_are_refused_by_argparse(capsys, tmp_path, argv):
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    flag = "--gamma" if "--gamma" in argv else "--mistake-prob"
+    fix = "(0, 1]" if flag == "--gamma" else "[0, 1]"
+    assert_one_line(*refused(capsys, *argv), f"hrc-drake {argv[0]}: error: argument {flag}", fix)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        (["--still-time", "3"], ["--still-time", "without --still"]),
+        (["--still", "{tmp}/s.png", "--still-time", "nan"], ["--still-time nan"]),
+        (["--port", "7005"], ["--port 7005", "--live or --record"]),
+        (["--scenario-text", "{motion: {hold_time: 1, hold_time: 5}}"], ["duplicate key"]),
+        (
+            ["--assembly", FOUR_SLOT, "--scenario", "row4-forces-4"],
+            ["--assembly", "row4-forces-4", "'flange'"],
+        ),
+        (["--assembly", "/dev/null"], ["/dev/null", "character device"]),
+        (["--assembly", "{tmp}"], ["is a folder"]),
+    ],
+)
+def test_simulate_refuses_what_it_accepted_silently(capsys, tmp_path, argv, words):
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    assert_one_line(*refused(capsys, "simulate", *argv, "--lean"), *words)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_duplicate_keys_in_a_scenario_file_are_refused(capsys, tmp_path):
+    scenario = tmp_path / "twice.yaml"
+    scenario.write_text("motion:\n  hold_time: 1\nmotion:\n  hold_time: 5\n")
+    code, out, err = refused(capsys, "simulate", "--scenario", scenario)
+    assert_one_line(code, out, err, str(scenario), "line 3", "duplicate key 'motion'")
+
+
+def test_the_scenario_and_assembly_may_name_the_same_spec():
+    from hrc_drake.cell.command import check_assembly_matches
+
+    check_assembly_matches(argparse.Namespace(assembly=Path(FLANGE), scenario="row4-forces-4"))
+
+
+@pytest.mark.parametrize(
+    ("content", "words"),
+    [
+        (None, ["/dev/null", "is a character device, not a regular file"]),
+        ("", ["the file is empty"]),
+        ("- a list\n", ["not a YAML mapping"]),
+        (b"\xff\xfe\x00binary", ["not a text file"]),
+        ("name: x\nname: y\n", ["duplicate key 'name'"]),
+    ],
+)
+def test_assembly_files_say_what_they_are(capsys, tmp_path, content, words):
+    path = Path("/dev/null")
+    if content is not None:
+        path = tmp_path / "spec.yaml"
+        if isinstance(content, bytes):
+            path.write_bytes(content)
+        else:
+            path.write_text(content)
+    assert_one_line(*refused(capsys, "states", "--assembly", path), "assembly spec", *words)
+
+
+def test_evaluate_refuses_more_runs_than_the_maximum_before_any_work(capsys, monkeypatch):
+    def no_work(*args):
+        raise AssertionError("the cost table was asked for")
+
+    monkeypatch.setattr(evaluate_command, "_cost_table", no_work)
+    argv = ["evaluate", "--decider", "exact", "--operator-model", "random", "--runs", "10000000"]
+    code, out, err = refused(capsys, *argv)
+    assert_one_line(code, out, err, "--runs 10000000", "at most 1,000,000", "of memory")
+
+
+def test_evaluate_says_how_long_a_long_evaluation_takes(capsys):
+    evaluate_command._check_task_runs(100_000, 1)
+    err = capsys.readouterr().err
+    assert err.startswith("evaluate: 100000 runs, about ") and "of memory" in err
+    evaluate_command._check_task_runs(evaluate_command.DEFAULT_RUNS, 1)
+    assert capsys.readouterr().err == ""  # a short one starts at once
+
+
+@pytest.mark.parametrize(
+    ("argv", "name"),
+    [
+        (["solve", "--out", "{out}"], "notes.md"),
+        (["train", "--out", "{out}"], "notes.md"),
+        (["costs", "--out", "{out}"], "notes.md"),
+        (["plot", "graph", "--out", "{out}"], "picture.png"),
+        (["simulate", "--record", "{out}", "--lean"], "page.html"),
+        (["simulate", "--still", "{out}", "--lean"], "picture.png"),
+        (
+            ["evaluate", "--decider", "exact", "--operator-model", "follows", "--plot", "{out}"],
+            "picture.png",
+        ),
+    ],
+)
+def test_an_existing_file_of_another_kind_is_kept_without_force(capsys, tmp_path, argv, name):
+    out = tmp_path / name
+    out.write_text("my notes\n")
+    argv = [a.format(out=out) for a in argv]
+    code, stdout, err = refused(capsys, *argv)
+    assert_one_line(code, stdout, err, f"{out}: exists and is not a", "--force")
+    assert out.read_text() == "my notes\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [name]
+
+
+def test_force_replaces_a_file_of_another_kind(capsys, tmp_path):
+    out = tmp_path / "notes.md"
+    out.write_text("my notes\n")
+    code, _, err = refused(capsys, "solve", "--out", out, "--force")
+    assert code == 0, err
+    assert is_policy_file(out)
+
+
+def test_a_policy_file_is_replaced_without_force(capsys, tmp_path, flange_space):
+    out = tmp_path / "policy.json"
+    save_policy(exact_policy(flange_space), out)
+    before = json.loads(out.read_text())
+    code, _, err = refused(capsys, "solve", "--out", out, "--gamma", "0.5")
+    assert code == 0, err
+    after = json.loads(out.read_text())
+    assert after["format"] == before["format"] and after != before
+    assert load_policy(out, flange_space).method == "exact"
+
+
+def test_a_corrupted_policy_file_is_still_a_policy_file(tmp_path, flange_space):
+    out = tmp_path / "policy.json"
+    save_policy(exact_policy(flange_space), out)
+    out.write_text(out.read_text().replace('"exact"', '"edited"'))  # checksum now wrong
+    assert check_output_path(out, "--out", kind=POLICY_FILE) == out
+
+
+def test_policy_hints_never_advise_overwriting_a_file_that_is_not_a_policy(capsys, tmp_path):
+    readme = tmp_path / "README.md"
+    readme.write_text("# notes\n")
+    code, out, err = refused(capsys, "policy", "--policy", readme)
+    assert_one_line(code, out, err, f"policy file {readme}")
+    assert f"--out {readme}" not in err
+    assert f"--out {tmp_path / 'policy.json'}" in err
+    (tmp_path / "policy.json").write_text("other notes\n")  # taken: the hint moves on
+    code, out, err = refused(capsys, "policy", "--policy", readme)
+    assert f"--out {tmp_path / 'policy-2.json'}" in err
+    assert fresh_name(readme) == tmp_path / "README-2.md"
+
+
+def test_a_negative_seed_is_refused_by_argparse(capsys):
+    argv = ["evaluate", "--decider", "exact", "--operator-model", "follows", "--seed", "-1"]
+    assert_one_line(*refused(capsys, *argv), "argument --seed", ">= 0")
