@@ -142,12 +142,14 @@ def test_an_empty_gripper_where_it_should_hold_a_part_stops_the_task():
         loop.station.part_body(part),
         RigidTransform([0.65, -0.42, 0.006]),
     )
-    assert loop.advance_to(8.0) == Mode.FAILED
+    assert loop.advance_to(8.0) == Mode.HANDOVER
     status = loop.status
     # The fingers close on nothing: the Supervisor looks for the part where the configuration
-    # sensor reads it, finds it out of the arm's reach, and hands the task over.
+    # sensor reads it, finds it out of the arm's reach, and hands the task over (the operator
+    # then does it by hand: tests/test_faults.py).
     assert any(f"{part} is not in the gripper" in e for e in status.events)
-    assert f"cannot pick {part} from where it lies" in status.error
-    assert "out of reach" in status.error
+    assert f"cannot pick {part} from where it lies" in status.handover
+    assert "out of reach" in status.handover
+    assert status.prompt.kind == "handover" and status.prompt.part == part
     assert [d.cause for d in status.detections] == ["grip"]
     assert status.history == ()

@@ -388,8 +388,11 @@ class InstantCell:
     def check(self, operator, model_name):
         pass
 
-    def play(self, prepared, space, decider, operator):
+    def play(self, prepared, setup, decider, run):
         return RunResult(True, self.seconds, 3, 0, 0, (0.0,) * 3, (True,) * 3)
+
+    def replay(self, setup, run):
+        return None
 
     def describe(self, space):
         return {"scenario": f"instant {space.spec.name}"}

@@ -144,6 +144,7 @@ class CellOptions:
         delay = {"distribution": it.delay.distribution, "median": it.delay.median}
         delay["sigma"] = it.delay.sigma
         params = {k: _param(v) for k, v in setup.params.items()}
+        costs = {"costs": self.costs} if self.costs else {}  # left out: the cell's, cached
         operator = {
             # Scripted deviations or a stochastic operator of the base would clash with the
             # model (and are not what the evaluation played).
@@ -160,7 +161,7 @@ class CellOptions:
             {
                 "interaction": {"mode": it.mode, "interface": it.interface, "delay": delay},
                 "operator": operator,
-                "decider": {"name": setup.decider, "seed": setup.seed, "costs": self.costs},
+                "decider": {"name": setup.decider, "seed": setup.seed, **costs},
             },
         )
         return yaml.safe_dump(data, default_flow_style=True, width=10**6, sort_keys=False).strip()

@@ -54,7 +54,9 @@ class Injection:
     task_start: float | None = None  # when the task's CHOOSE prompt appeared
     injected_at: float | None = None
     since: float | None = None  # grip-lost: the carry began; stuck open: the fingers stalled
-    ended_at: float | None = None  # grip-lost: the fingers opened again (the fault is over)
+    # grip-lost: the fingers opened again (the fault is over); no-seat with debris: the
+    # operator cleared the pocket.
+    ended_at: float | None = None
     shifted: bool = False  # no-seat: the station has moved the part in the fingers
     target: tuple[float, ...] = ()  # no-path: where the box stands (its centre, world)
 
@@ -180,7 +182,12 @@ class FaultInjector(LeafSystem):
         output.SetFromVector(_carriage_state(OBSTACLE_PARK, boxes, context.get_time()))
 
     def _calc_debris(self, context, output) -> None:
-        debris = ((i, np.inf) for f, i in self._active(context, FaultKind.NO_SEAT) if f.obstacle)
+        # The debris stays until the operator clears it (a task handed over: `clear_debris`).
+        debris = (
+            (i, np.inf if i.ended_at is None else i.ended_at - i.injected_at)
+            for f, i in self._active(context, FaultKind.NO_SEAT)
+            if f.obstacle and i.injected_at is not None
+        )
         output.SetFromVector(_carriage_state(DEBRIS_PARK, debris, context.get_time()))
 
     # --- what happened -------------------------------------------------------------------
@@ -271,6 +278,21 @@ class FaultInjector(LeafSystem):
             and injection.injected_at is not None
             and not injection.shifted
         ]
+
+    def clear_debris(self, context) -> bool:
+        """The operator takes the debris of the no-seat faults out of its pocket now (their
+        carriage parks): in `context` (this system's). Whether there was any."""
+        injections, now, cleared = list(self._injections(context)), context.get_time(), False
+        for k, (fault, injection) in enumerate(zip(self._faults, injections, strict=True)):
+            if (
+                fault.fault_kind == FaultKind.NO_SEAT
+                and fault.obstacle
+                and injection.injected_at is not None
+                and injection.ended_at is None
+            ):
+                injections[k], cleared = replace(injection, ended_at=now), True
+        context.get_mutable_abstract_state(self._state).set_value(tuple(injections))
+        return cleared
 
     def mark_shifted(self, context, index: int) -> None:
         """Record in `context` (this system's) that the part of fault `index` was moved."""

@@ -83,7 +83,7 @@ from hrc_drake.hri.messages import Prompt
 from hrc_drake.hri.scenario import CameraSettings, Scenario
 from hrc_drake.motion.poses import IN_TRAY, CellFrames, layout_poses, part_pose
 from hrc_drake.motion.scene import read_cell_frames
-from hrc_drake.obstacle_models import DEBRIS, OBSTACLE
+from hrc_drake.obstacle_models import DEBRIS, DEBRIS_PARK, OBSTACLE
 from hrc_drake.robot_models import GRIPPER, UR3, UR3_JOINTS
 from hrc_drake.tasks.decide import Operator
 from hrc_drake.tasks.graph import generate_states
@@ -172,11 +172,15 @@ class CellStation:
     def _place_by_hand(self, context: Context, plant_context) -> None:
         """Put the parts of the tasks the operator did by hand where the task puts them, at
         rest (a placement: its seat, on the plate or where the host part measured under it
-        sits; an undo: its tray home), and tell the operator, whose bolt then takes."""
+        sits; an undo: its tray home), and tell the operator, whose bolt then takes. The
+        operator also puts back in their tray homes the other loose parts (neither seated nor
+        held nor home: what a falling part knocked out of the tray), so that the robot finds
+        them where it picks them."""
         operator_context = (
             self.operator.GetMyMutableContextFromRoot(context) if self.operator else None
         )
         for task, part, state in self._hand_placements(context):
+            self._clear_debris(context, plant_context)
             config = self.configuration(context)
             part = part or self._part_for(config, task, state)
             if part:
@@ -184,7 +188,27 @@ class CellStation:
                 X = self.frames.homes[part] if task == UNDO else self._seat_by_hand(config, task)
                 self.plant.SetFreeBodyPose(plant_context, body, X)
                 self.plant.SetFreeBodySpatialVelocity(plant_context, body, SpatialVelocity.Zero())
+            for other, placement in config.placements:
+                if other != part and placement.status in (
+                    PartStatus.TRANSIT,
+                    PartStatus.MISPLACED,
+                ):
+                    body = self.part_body(other)
+                    self.plant.SetFreeBodyPose(plant_context, body, self.frames.homes[other])
+                    self.plant.SetFreeBodySpatialVelocity(
+                        plant_context, body, SpatialVelocity.Zero()
+                    )
             self.operator.placed(operator_context, part)
+
+    def _clear_debris(self, context: Context, plant_context) -> None:
+        """The operator, doing a task by hand, takes any debris out of the pocket first (its
+        carriage parks at once, out of the part's way)."""
+        if self.injector is None or DEBRIS not in self.instances:
+            return
+        if self.injector.clear_debris(self.injector.GetMyMutableContextFromRoot(context)):
+            model = self.instances[DEBRIS]
+            self.plant.SetPositions(plant_context, model, list(DEBRIS_PARK))
+            self.plant.SetVelocities(plant_context, model, [0.0] * len(DEBRIS_PARK))
 
     def _part_for(self, config: CellConfiguration, task: str, state: tuple[str, ...]) -> str:
         """The part the operator takes for `task` when the robot chose none: for an undo the
