@@ -122,7 +122,11 @@ def one_run(job: tuple[str, str, int, str, bool]) -> dict:
         "violations": safety.violations if safety is not None else 0,
         "imposed": safety.imposed if safety is not None else 0,
         "sim_time": result.sim_time,
-        "out_of_reach": out_of_reach(result.error),
+        # A task handed over no longer ends the run: its reason is the step's.
+        "out_of_reach": out_of_reach(
+            result.error or next((t.handed_over for t in result.tasks if t.handed_over), None)
+        ),
+        "handovers": result.handovers,
     }
 
 
@@ -226,12 +230,13 @@ def report(runs: list[dict], args, wall: float) -> str:
         "of the faults injected, those the controller found from its measurements (in the "
         "struck task, from the injection on); *out of reach*: of those, the runs whose part "
         "came to rest where the robot has no grasp of it (the planner's verdict on the pose "
-        "the sensor reads: tilted past the 0.2 rad a grasp from above allows, or lying where "
-        "the fingers going down would touch the tray or plate), which the cell hands over; "
+        "the sensor reads: tilted past the 0.5 rad a grasp tilted with the part allows, or "
+        "lying where the fingers going down would touch the tray or plate), which the cell "
+        "hands over (the operator does the task and the assembly goes on); "
         "*recovered*: of the others, the "
         "ones after which the cell went on by itself and finished the assembly; *lost*: "
-        "simulated seconds from the injection to the recovery, or to the end of a run handed "
-        "over (which ends when the task stops).",
+        "simulated seconds from the injection to the recovery (the operator's done, for a "
+        "task handed over), or to the end of a run that stopped.",
         "",
         "| cell | kind | the cell should | runs | injected | detected | out of reach | "
         "recovered | lost, mean [s] | lost, max [s] | collisions | separation violations | "

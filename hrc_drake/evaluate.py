@@ -7,10 +7,12 @@ drawn for the interface; the task takes its time from the cost table (the operat
 by the model's ``bolt_scale(step)``, for `slow`), plus what the interaction adds — the delay when
 the robot waited, the re-target or swap of a wrong bet, the wait above the seat when a right bet
 arrived before the indication. The run ends in a terminal state, or after `MAX_TASKS` tasks (not
-completed). Run i is seeded from (seed, i) (the operator, and the delays in their own stream) and
-the decider is reset before it, so runs are independent: serial and ``--workers K`` give the same
-report. With `Setup.keep_model` the decider keeps its operator model across the runs (one
-operator, many assemblies): runs then follow each other in one process.
+completed but `capped`: an operator who keeps undoing can outlast any cap; at cell level the cap is
+the scenario's `run.max_steps`, and a capped run with no collision is no failure). Run i is seeded
+from (seed, i) (the operator, and the delays in their own stream) and the decider is reset before
+it, so runs are independent: serial and ``--workers K`` give the same report. With
+`Setup.keep_model` the decider keeps its operator model across the runs (one operator, many
+assemblies): runs then follow each other in one process.
 
 Times are simulated seconds, so the report does not depend on the machine; wall-clock figures
 are under ``wall_*`` keys. Robot idle time at a task boundary: while the operator bolts, the cell
@@ -99,6 +101,11 @@ class RunResult:
     """Cell only: the states the run went through (their names)."""
     violations: int = 0
     """Cell only: separation violations (ISO/TS 15066 S_p; 0 without the operator's body)."""
+    handovers: int = 0
+    """Cell only: tasks the robot handed over and the operator did by hand."""
+    capped: bool = False
+    """Ended by the run's own task cap (not terminal, no failure: an operator who keeps undoing
+    can outlast any cap)."""
 
 
 def run_seed(seed: int, run: int) -> int:
@@ -142,13 +149,13 @@ class _Tally:
     delay: float = 0.0
     wait: float = 0.0
 
-    def result(self, done: bool, tasks: int, ready: list[bool]) -> RunResult:
+    def result(self, done: bool, tasks: int, ready: list[bool], capped=False) -> RunResult:
         # Idle at a boundary: none when the task was planned ahead, else the planning time.
         idle = tuple(0.0 if r else PLANNING_SECONDS for r in ready)
         return RunResult(
             bool(done), self.seconds, tasks, self.undos, self.deviations, idle, tuple(ready),
             commits=self.commits, retargets=self.retargets, swaps=self.swaps,
-            indication_delay=self.delay, indication_wait=self.wait,
+            indication_delay=self.delay, indication_wait=self.wait, capped=capped,
         )  # fmt: skip
 
 
@@ -199,7 +206,8 @@ def simulate_run(
         tally.undos += performed == UNDO
         decider.observe(state, proposal, performed)
         index = feasible[performed]
-    return tally.result(space.kind[index] == StateKind.TERMINAL, max_tasks, ready)
+    done = space.kind[index] == StateKind.TERMINAL
+    return tally.result(done, max_tasks, ready, capped=not done)
 
 
 def _interaction(tally: _Tally, timeline, state, committed, performed, delays) -> None:
@@ -516,6 +524,8 @@ def summarise(
         "runs": len(results),
         "completed": len(done),
         "completion_rate": len(done) / len(results) if results else None,
+        # Not terminal, ended by the run's own task cap with that reason (not a failure).
+        "capped": sum(r.capped for r in results),
         "mean_time": fig(times.mean() if len(done) else None),
         "p95_time": fig(np.percentile(times, 95) if len(done) else None),
         "worst_time": fig(times.max() if len(done) else None),
@@ -541,13 +551,16 @@ def summarise(
         "times": [round(r.seconds, 3) for r in done],
     }
     if setup.cell is not None:
-        errors = sorted({r.error for r in results if r.error and not r.completed})
+        errors = sorted({r.error for r in results if r.error and not (r.completed or r.capped)})
         wall_idle = [x for r in results for x in r.wall_idle]
         report.update(
             {
                 # How long the arm stood still for an indication the cell does not measure.
                 "mean_indication_wait": None,
                 "collisions": int(sum(r.collisions for r in results)),
+                # Tasks the robot could not do and the operator did by hand (the runs went on).
+                "handovers": int(sum(r.handovers for r in results)),
+                "runs_with_handovers": int(sum(r.handovers > 0 for r in results)),
                 "wall_mean_idle": round(float(np.mean(wall_idle)), 4) if wall_idle else 0.0,
                 **setup.cell.describe(setup.space),
                 "errors": errors[:5],
@@ -578,7 +591,7 @@ def failures(setup: Setup, results: list[RunResult], runs: list[int]) -> list[di
     and parameters, the stop reason, the states it went through and the command."""
     out = []
     for run, r in zip(runs, results, strict=True):
-        if r.completed and not r.collisions and not r.violations:
+        if (r.completed or r.capped) and not r.collisions and not r.violations:
             continue
         out.append(
             {

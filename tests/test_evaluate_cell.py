@@ -70,6 +70,7 @@ def test_cell_runs_play_the_task_level_runs_and_are_independent(played):
     assert _keys(report, *DECISIONS) == _keys(expected, *DECISIONS)
     assert report["level"] == "cell" and report["collisions"] == 0 and report["errors"] == []
     assert report["failures"] == [] and report["interrupted"] is False  # every run passed
+    assert report["handovers"] == 0 and report["runs_with_handovers"] == 0  # no task handed over
     assert _keys(report, *INTERACTION) == _keys(expected, *INTERACTION)
     assert report["interaction"] == WAIT and report["commit_rate"] == 0.0
     # The simulated operator waited the delays the task level drew for the same runs.

@@ -166,6 +166,10 @@ def test_a_part_resting_tilted_within_half_a_radian_is_picked_again():
     assert found.cause == "grip" and found.step == 3 and found.recovery == "regrasp"
     assert not any(t.handed_over for t in status.history)
     assert not loop.watch.contacts.collisions
+    report = loop.result().to_json()
+    assert report["terminal"] and report["handovers"] == 0
+    (fault,) = report["faults"]
+    assert fault["recovered"] is True and fault["recovery"] == "regrasp"
 
 
 def test_a_part_let_go_off_its_seat_is_picked_again_and_replaced():
@@ -241,13 +245,15 @@ def test_an_obstacle_set_down_while_the_robot_moves_stops_it_on_its_path():
 
 
 def test_an_obstacle_that_stays_hands_the_task_over():
-    # The operator, who set the box down, puts F1 in its seat under it by hand; the box keeps
-    # clear of the other tasks' paths.
+    # The operator, who set the box down, puts F1 in its seat under it by hand, and S23 too
+    # while the box still stands in the robot's way (its paths go by it).
     text = "{run: {path_timeout: 4}, faults: [{kind: no-path, task: 1, duration: 60}]}"
     result = _result(text)
     assert result.done and result.states == ROW1_STATES, result.error
+    handed = [t.handed_over for t in result.tasks if t.handed_over]
+    assert handed and all("blocked the path for 4 s" in reason for reason in handed)
     assert "blocked the path for 4 s" in result.tasks[0].handed_over
-    assert result.to_json()["handovers"] == 1
+    assert result.to_json()["handovers"] == len(handed)
     (record,) = result.faults
     assert record.detected_at is not None and not record.recovered
     assert record.recovery == "operator"
@@ -345,3 +351,77 @@ def test_a_run_ended_by_a_fault_writes_its_json_and_recording(tmp_path):
     assert fault["recovered"] is False and fault["recovery"] == "operator"
     assert fault["detected_at"] >= fault["injected_at"] - 0.05
     assert record.stat().st_size > 100_000
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("{run: {indication_give_up: 0}}", r"run\.indication_give_up: give finite seconds > 0"),
+        ("{run: {indication_give_up: .inf}}", r"run\.indication_give_up: .*finite"),
+        ("{run: {handover_time: -1}}", r"run\.handover_time: give finite seconds >= 0"),
+        ("{run: {handover_time: .nan}}", r"run\.handover_time: .*finite"),
+    ],
+)
+def test_the_give_up_and_hand_over_times_are_checked(text, message):
+    from hrc_drake.hri.scenario import ScenarioError
+
+    with pytest.raises(ScenarioError, match=message) as err:
+        load_cell_scenario("row1-optimal", [LEAN, text])
+    assert "\n" not in str(err.value)
+
+
+def test_an_operator_who_never_answers_is_given_up_on_with_the_json_written(tmp_path):
+    # The answer to task 2 would come 200 s late: asked again every 10 s, the robot gives up
+    # 30 s after the question (run.indication_give_up), and the run ends with the reason.
+    import subprocess
+    import sys
+
+    text = (
+        "{run: {indication_give_up: 30}, faults: [{kind: operator-silent, task: 2, duration: 200}]}"
+    )
+    record = tmp_path / "silent.html"
+    cmd = [sys.executable, "-m", "hrc_drake.cli", "simulate", "--lean", "--json"]
+    done = subprocess.run(
+        [*cmd, "--scenario-text", text, "--record", str(record)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 1, done.stderr
+    report = json.loads(done.stdout)
+    assert report["terminal"] is False and report["interrupted"] is False
+    assert "step 2: no indication from the operator in 30 s of simulated time" in report["error"]
+    assert "asked 3 times; run.indication_give_up" in report["error"]
+    assert [s["step"] for s in report["steps"]] == [1]
+    (fault,) = report["faults"]
+    assert fault["detected_at"] - fault["injected_at"] == pytest.approx(10.0, abs=0.05)
+    assert not fault["recovered"]
+    assert done.stderr.strip().splitlines()[-1].startswith("hrc-drake simulate: error: step 2")
+    assert record.stat().st_size > 100_000
+
+
+def test_simulate_json_says_the_operator_recovered_a_part_the_robot_could_not_pick():
+    # The done-when check of the handover: the square flange, lost in its carry, falls against
+    # the tray where no finger can go down beside it; the operator seats it (and puts back the
+    # oval flange it knocked out of its tray home), and the run ends terminal.
+    import subprocess
+    import sys
+
+    text = "{faults: [{kind: grip-lost, task: 2}]}"
+    cmd = [sys.executable, "-m", "hrc_drake.cli", "simulate", "--scenario", "row1-optimal"]
+    done = subprocess.run(
+        [*cmd, "--lean", "--json", "--scenario-text", text],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    assert report["terminal"] is True and report["error"] is None
+    assert report["handovers"] == 1
+    assert [s["handed_over"] for s in report["steps"]] == [False, True, False]
+    assert "cannot pick square_flange from where it lies" in report["steps"][1]["handover_reason"]
+    (fault,) = report["faults"]
+    assert fault["kind"] == "grip-lost" and fault["task"] == 2
+    assert fault["recovered"] is False and fault["recovery"] == "operator"
+    assert report["collisions"] == 0

@@ -35,7 +35,7 @@ def _force_to_hold(part: str) -> float:
 
 
 @pytest.mark.slow
-def test_a_grip_too_weak_for_the_part_lets_it_slip_and_the_cell_stops():
+def test_a_grip_too_weak_for_the_part_lets_it_slip_and_the_task_is_handed_over():
     needed = _force_to_hold("square_flange")
     default = Scenario().station.rg2.grip_force
     # The RG2's weakest grip is below what the square flange needs; the default is well above.
@@ -45,12 +45,14 @@ def test_a_grip_too_weak_for_the_part_lets_it_slip_and_the_cell_stops():
         [LEAN, SQUARE_FIRST, f"{{station: {{rg2: {{grip_force: {RG2_MIN_FORCE}}}}}}}"],
     )
     result = run_scenario(weak)
-    assert not result.done and result.tasks == []
-    # The Supervisor saw the fingers close past the part's width (no grip) and stopped.
-    assert "square_flange is 90.0 mm wide" in result.error
-    assert "no grip detected" in result.error and "does not hold the part" in result.error
-    assert any("stopped" in event for event in result.events)
-    assert "S23" not in result.final_tokens
+    # The Supervisor saw the fingers close past the part's width (no grip), picked it again
+    # from where it fell (run.recover_tries, 2), saw it slip each time, and handed the task
+    # over: the operator seats the square by hand, and the light oval flanges hold.
+    assert any("square_flange is not in the gripper" in event for event in result.events)
+    first = result.tasks[0]
+    assert first.observed == "S23"
+    assert "square_flange slipped out of the gripper 3 times" in first.handed_over
+    assert result.done and not any(t.handed_over for t in result.tasks[1:])
     assert result.collisions == []
 
 

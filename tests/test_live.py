@@ -269,3 +269,38 @@ def test_a_live_prompt_nobody_answers_ends_the_run_after_the_give_up(tmp_path, c
     assert (tmp_path / "live.html").stat().st_size > 100_000
     err = capsys.readouterr().err
     assert "still no answer (asked again, 2 times)" in err
+
+
+@pytest.mark.slow
+def test_a_live_run_goes_on_once_the_person_says_they_did_the_task_handed_over(monkeypatch):
+    """The grip is lost in the first carry and the robot may not pick the part again
+    (`run.recover_tries: 0`): it hands F1 over, the panel shows "I did F1", and once the person
+    clicks it the run goes on to a terminal state, the step counted as handed over."""
+    from hrc_drake.cell.run import run_scenario
+    from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+
+    text = "{run: {recover_tries: 0}, faults: [{kind: grip-lost, task: 1}]}"
+    row = load_cell_scenario("row1-optimal", [LEAN, text])
+    shown, later = [], []
+
+    def click(prompt):
+        shown.append(prompt)
+        name = next(iter(prompt.buttons))  # the proposal, or "I did F1"
+        later.append((prompt.sim_time + 1.0, _press, prompt.meshcat, name))
+
+    def poll(operator, prompt):
+        for item in list(later):
+            due, press, meshcat, name = item
+            if operator.clock() >= due:
+                later.remove(item)
+                press(meshcat, name)
+        return poll_now(operator, prompt)
+
+    poll_now = LiveOperator.poll
+    monkeypatch.setattr(LiveOperator, "poll", poll)
+    result = run_scenario(row, live=True, on_prompt=click)
+    assert result.done and result.error is None, result.error
+    assert [bool(t.handed_over) for t in result.tasks] == [True, False, False]
+    assert "slipped out of the gripper 1 time;" in result.tasks[0].handed_over
+    handover = next(p for p in shown if list(p.buttons) == ["I did F1"])
+    assert handover.step == 1 and result.to_json()["handovers"] == 1

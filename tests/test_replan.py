@@ -150,7 +150,7 @@ def test_the_worker_plans_a_measured_request_as_the_planner_does(planner, on_the
         frozenset(),
         "F1",
         instance=PART,
-        source_pose=on_the_table @ RigidTransform(RotationMatrix.MakeXRotation(0.5)),
+        source_pose=on_the_table @ RigidTransform(RotationMatrix.MakeXRotation(0.7)),
     )
     service.request(request)
     service.request(tilted)
@@ -162,7 +162,7 @@ def test_the_worker_plans_a_measured_request_as_the_planner_does(planner, on_the
     assert plan_to_data(result) == plan_to_data(mine)  # the same plan, to the bit
     failure = service.wait(tilted, timeout=120.0)
     assert isinstance(failure, PlanFailure) and failure.kind == "UnreachableError"
-    assert "tilted 0.50 rad" in failure.reason
+    assert "tilted 0.70 rad" in failure.reason
     # A pose measured 20 µm off is the same request, cached; one 1 mm off is not.
     for dx, cached in ((2e-5, True), (1e-3, False)):
         moved = RigidTransform(

@@ -352,4 +352,6 @@ def play_cell_run(scenario, space: StateSpace, decider, operator):
         indication_delay=float(getattr(operator, "total_delay", lambda: 0.0)()),
         states=tuple(result.names),
         violations=0 if result.safety is None else int(result.safety.violations),
+        handovers=result.handovers,
+        capped=result.capped,
     )

@@ -85,6 +85,8 @@ class RunResult:
     """Seconds the robot waited where it planned to, for the operator (predictive)."""
     replans: int = 0
     """Times the robot re-timed its plan because the body departed from its forecast."""
+    capped: bool = False
+    """The run ended by its own task cap (`run.max_steps`), its reason in `error`."""
 
     @property
     def idle(self) -> tuple[float, ...]:
@@ -127,6 +129,7 @@ class RunResult:
             "mean_idle": round(float(np.mean(self.idle)), 4) if self.tasks else 0.0,
             "wall_mean_idle": round(float(np.mean(self.wall_idle)), 4) if self.tasks else 0.0,
             "error": self.error,
+            "capped": self.capped,
             "interrupted": self.interrupted,
             "sim_time": round(self.sim_time, 3),
             "wall_time": round(self.wall_time, 3),
@@ -572,6 +575,7 @@ def _result(loop: ClosedLoop, wall: float, path, interrupted: bool) -> RunResult
         separation=setup.scenario.safety.separation,
         waited=status.waited,
         replans=status.replans,
+        capped=status.capped,
         faults=tuple(
             fault_records(
                 setup.scenario.faults, loop.cell.injected(root), status.detections, root.get_time()

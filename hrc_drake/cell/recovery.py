@@ -68,9 +68,10 @@ class FaultRecovery:
         if slipped and s.recoveries < self._limits.recover_tries:
             return self._lose_part(s, context, now, "grip", "regrasp")
         if slipped:  # it keeps slipping: the part is out of the gripper, the operator seats it
+            times = s.recoveries + 1
             raise SupervisorError(
                 f"step {s.step}: {plan.instance} slipped out of the gripper "
-                f"{s.recoveries + 1} times; the task is handed over",
+                f"{times} time{'s' if times > 1 else ''}; the task is handed over",
                 cause=cause,
                 hand_over=True,
             )
@@ -84,7 +85,7 @@ class FaultRecovery:
         """The task's part is out of the gripper where it should not be (slipped during the
         carry, or let go out of its seat): hold the arm where it is measured (a part wedged
         against it must not be pushed into), open the fingers a little (to let go of anything
-        caught between them), withdraw any prompt (nobody should reach
+        caught between them), withdraw a `BOLT` prompt (nobody should reach
         in to bolt now), and let the part come to rest before it is picked again from where it
         lies."""
         part = s.pending[2]
@@ -102,7 +103,11 @@ class FaultRecovery:
             recovering=recovery,
             recoveries=s.recoveries + 1,
             grip_lost_at=None,
-            prompt=replace(s.prompt, kind=PromptKind.NONE),
+            # A question still open (anticipating, the indication not in yet) stays up: withdrawn,
+            # it could never be answered and the robot would wait for it forever.
+            prompt=s.prompt
+            if s.prompt.kind == PromptKind.CHOOSE
+            else replace(s.prompt, kind=PromptKind.NONE),
             detections=(*s.detections, Detection(cause, s.step, now)),
             events=(*s.events, event),
         )
@@ -197,18 +202,19 @@ class FaultRecovery:
         asked: SupervisorError, the run stops (a question nobody answers, or whose answer was
         lost, never leaves a run looping)."""
         give_up = self._limits.indication_give_up
+        what = "confirmation" if s.prompt.kind == PromptKind.HANDOVER else "indication"
         if now - s.prompted_at >= give_up:
-            what = "confirmation" if s.prompt.kind == PromptKind.HANDOVER else "indication"
+            asked = s.prompt.asked + 1
             raise SupervisorError(
                 f"step {s.step}: no {what} from the operator in {give_up:g} s of simulated "
-                f"time (asked {s.prompt.asked + 1} times; run.indication_give_up): the run "
-                "stops",
+                f"time (asked {asked} time{'s' if asked > 1 else ''}; run.indication_give_up): "
+                "the run stops",
                 cause="silence",
             )
         timeout = self._limits.indication_timeout
         if now - s.asked_at < timeout:
             return s
-        event = f"{now:.2f}: no indication for step {s.step} in {timeout:g} s: asks again"
+        event = f"{now:.2f}: no {what} for step {s.step} in {timeout:g} s: asks again"
         found = Detection("silence", s.step, now)
         detections = s.detections if s.open_detection("silence") else (*s.detections, found)
         prompt = replace(s.prompt, asked=s.prompt.asked + 1)

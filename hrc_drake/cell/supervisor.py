@@ -57,6 +57,7 @@ from hrc_drake.cell.recovery import FaultRecovery
 from hrc_drake.cell.slot_monitor import CellConfiguration, PartStatus
 from hrc_drake.cell.supervisor_state import (
     N_JOINTS,
+    TASK_CAP,
     Detection,
     Mode,
     SupervisorError,
@@ -216,7 +217,9 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
         (a part in it stays held)."""
         q = self._arm_port.Eval(context)[:N_JOINTS]
         opening = s.command(now)[2]
-        if not s.open_detection():
+        if err.cause == TASK_CAP:
+            s = replace(s, capped=True)
+        elif not s.open_detection():
             s = replace(s, detections=(*s.detections, Detection(err.cause, s.step, now)))
         s = self._resolve(s, None, now, "operator")
         return replace(
@@ -312,7 +315,10 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
         if space.kind[index] == StateKind.TERMINAL:
             return replace(s, mode=Mode.DONE, events=(*s.events, f"{now:.2f}: done"))
         if s.step >= self._limits.max_steps:
-            raise SupervisorError(f"no terminal state after {s.step} tasks")
+            raise SupervisorError(
+                f"no terminal state after {s.step} tasks (the run's cap, run.max_steps)",
+                cause=TASK_CAP,
+            )
         if s.step == 0:
             self._plan_ahead(s.state, config.layout())
         proposal = self._policy.next_task(s.state)

@@ -153,6 +153,7 @@ class SupervisorStatus:
     checked_at: float = float("-inf")  # when the tracked body was last held against it
     replans: int = 0  # re-timed because the body departed from the forecast
     waited: float = 0.0  # s spent in planned waits
+    capped: bool = False  # ended by its own task cap (`run.max_steps`), not by a failure
     held_since: tuple[float, float] | None = None  # (plan time, since when) of the wait now
     forecast_view: tuple[tuple[float, float, float], ...] = ()  # forecast hand, for drawing
 
@@ -225,6 +226,11 @@ def obstacle_moved(planned: tuple[float, ...] | None, seen: tuple[float, ...]) -
     if not planned or not seen:
         return bool(planned) != bool(seen)
     return float(np.linalg.norm(np.subtract(planned[:3], seen[:3]))) > OBSTACLE_MOVED
+
+
+TASK_CAP = "task-cap"
+"""The cause of a run ended by its task cap (`run.max_steps`): an operator who keeps undoing can
+outlast any cap; the run ends with that reason, and it is no fault detection."""
 
 
 class SupervisorError(RuntimeError):
