@@ -78,3 +78,22 @@ def test_the_cell_holds_up_against_every_operator_population(model, capsys):
     assert report["completed"] + report["capped"] == 2
     assert report["collisions"] == 0
     assert report["failures"] == []
+
+
+def test_a_slow_operator_bolts_longer_along_the_run_and_the_robot_holds_on():
+    """The `slow` population in the cell: its bolting time grows by `growth` each step, and the
+    robot holds each part until the operator says it is bolted."""
+
+    def held(model: str) -> list[float]:
+        text = f"{{operator: {{model: {model}, seed: 0, params: {{growth: 2.0}}}}}}"
+        if model == "follows":
+            text = "{operator: {model: follows, seed: 0}}"
+        result = run_scenario(load_cell_scenario("row1-optimal", [LEAN, text]))
+        assert result.done and result.collisions == []
+        return [t.end_time - t.held_at for t in result.tasks]
+
+    slow, follows = held("slow"), held("follows")
+    hold = load_cell_scenario("row1-optimal", LEAN).motion.hold_time
+    # Step k bolts (1 + 2 (k - 1)) holds: 0, 2 and 4 holds longer than the follower's.
+    for step, (s, f) in enumerate(zip(slow, follows, strict=True)):
+        assert s - f == pytest.approx(2.0 * step * hold, abs=0.1)

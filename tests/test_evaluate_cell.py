@@ -135,13 +135,10 @@ def test_decider_policy_proposes_predicts_and_learns(flange_space, toy_costs):
         policy.matches(two.spec)
 
 
-def test_cell_options_are_refused_without_cell_and_slow_in_the_cell(capsys):
+def test_cell_options_are_refused_without_cell(capsys):
     args = ["evaluate", "--decider", "exact", "--operator-model", "follows", "--lean"]
     assert main(args) == 2
     assert "add --cell" in capsys.readouterr().err
-    args = ["evaluate", "--decider", "exact", "--operator-model", "slow", "--cell", "--runs", "1"]
-    assert main(args) == 2
-    assert "drop --cell" in capsys.readouterr().err
     args = ["evaluate", "--decider", "exact", "--operator-model", "follows", "--ray", "bad"]
     assert main(args) == 2
     assert "HOST:PORT" in capsys.readouterr().err

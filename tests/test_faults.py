@@ -144,6 +144,19 @@ def test_a_part_that_fell_out_of_reach_is_handed_over_and_the_assembly_goes_on()
     assert not result.collisions
 
 
+def test_a_part_on_a_host_handed_over_is_seated_on_the_host_where_it_sits():
+    # The oval flange of task 3 (F03, on the square flange) lands upside down: the operator
+    # puts it in its row of the square, as the square measurably sits.
+    text = "{interaction: {mode: wait}, faults: [{kind: grip-lost, task: 3, after: 0.95}]}"
+    loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, text]))
+    result = loop.run()
+    assert result.done and result.states == ROW1_STATES, result.error
+    assert [bool(t.handed_over) for t in result.tasks] == [False, False, True]
+    assert result.tasks[2].observed == "F03" and not result.collisions
+    bolted = {w.part: w.seat for w in loop.station.wanted_welds(loop.root_context)}
+    assert bolted[result.tasks[2].part].startswith("square_flange/")
+
+
 def test_a_part_resting_tilted_within_half_a_radian_is_picked_again():
     # Lost later in the carry of task 3, the flange comes to rest about 0.37 rad tilted (past
     # the 0.2 rad a grasp from above allowed): the gripper tilts with it, picks it and places

@@ -29,6 +29,7 @@ methods and never imports this module; this module imports it (one way).
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 import shlex
 from dataclasses import dataclass
@@ -307,15 +308,19 @@ def task_level_run(scenario, space: StateSpace, costs) -> RunResult:
 
 
 def check_cell_operator(operator, model_name: str) -> None:
-    """UsageError for an operator model the cell cannot play: one whose bolting time changes
-    (`slow`), since the cell's plans hold every part for the scenario's `motion.hold_time`."""
+    """UsageError for an operator model the cell cannot play: one whose bolting scale
+    (`bolt_scale(step)`, which the simulated operator's bolting time is multiplied by: `slow`
+    tires along the run) is not a positive finite factor."""
     scale = getattr(operator, "bolt_scale", None)
-    if scale is not None and any(scale(step) != 1.0 for step in (1, 2, 5)):
-        raise UsageError(
-            f"operator model {model_name!r} changes the bolting time along the run; the cell "
-            "holds each part for the scenario's motion.hold_time, so evaluate it at task level "
-            "(drop --cell)"
-        )
+    if scale is None:
+        return
+    for step in (1, 2, 5, 30):
+        factor = float(scale(step))
+        if not (math.isfinite(factor) and factor > 0.0):
+            raise UsageError(
+                f"operator model {model_name!r}: bolt_scale({step}) is {factor}; the cell "
+                "multiplies the operator's bolting time by it, so it must be a positive number"
+            )
 
 
 def play_cell_run(scenario, space: StateSpace, decider, operator):

@@ -149,7 +149,7 @@ class SimulatedOperator(LeafSystem):
                     kind=ActivityKind.BOLT,
                     part=prompt.part,
                     start=max(now, free),
-                    duration=self._bolt_time,
+                    duration=self._bolting(prompt.step),
                     step=prompt.step,
                 )
             elif activity.kind == ActivityKind.BOLT and now >= activity.start + activity.duration:
@@ -181,7 +181,7 @@ class SimulatedOperator(LeafSystem):
         else:
             step, due = context.get_abstract_state(self._by_hand).get_value()
             if step != prompt.step:
-                due = now + self._handover_time + self._bolt_time
+                due = now + self._handover_time + self._bolting(prompt.step)
                 state.get_mutable_abstract_state(self._by_hand).set_value((prompt.step, due))
                 activity = replace(
                     activity,
@@ -199,6 +199,13 @@ class SimulatedOperator(LeafSystem):
         state.get_mutable_abstract_state(self._placements).set_value((*placements, placement))
         indication = Indication(prompt.step, prompt.proposal, True, now, done=True)
         return indication, replace(activity, kind=ActivityKind.REST)
+
+    def _bolting(self, step: int) -> float:
+        """Seconds the operator bolts at decision `step`: `bolt_time`, scaled by the operator
+        model's `bolt_scale(step)` when it has one (the `slow` population tires along the run;
+        the robot holds the part until the operator says it is bolted)."""
+        scale = getattr(self._operator, "bolt_scale", None)
+        return self._bolt_time * (1.0 if scale is None else float(scale(step)))
 
     def placements(self, context) -> tuple[tuple[str, str, tuple[str, ...]], ...]:
         """Sim only: the tasks done by hand whose part the station has still to put in place,

@@ -220,7 +220,14 @@ class PlanFailure:
         return self.request.task
 
     def __str__(self) -> str:
-        return f"no plan for {self.task} from {sorted(self.request.configuration)}: {self.reason}"
+        request = self.request
+        if request.held and request.task == UNDO:
+            # A swap's return: the part in the gripper goes back to its tray, not an undo of
+            # the last task (which, from an empty base, there is none).
+            what = f"putting {request.instance} back in its tray"
+        else:
+            what = request.task
+        return f"no plan for {what} from {sorted(request.configuration)}: {self.reason}"
 
 
 class PlanServiceError(RuntimeError):
