@@ -119,8 +119,20 @@ class Page:
             time.sleep(0.25)
         raise AssertionError(f"the panel shows {self.panel()}, not {first!r} first")
 
-    def buttons_out_of_view(self) -> list[str]:
-        """Labels of our buttons not wholly within the 1280×800 view."""
+    def buttons_out_of_view(self, tries: int = 3) -> list[str]:
+        """Labels of our buttons not wholly within the 1280×800 view, once the panel has
+        settled: a question left unanswered for `run.indication_timeout` is sent to the browser
+        afresh (its buttons deleted and added again), and while the panel lays them out again a
+        button may stand outside for a moment (seen once under a loaded machine)."""
+        outside = self._out_of_view()
+        for _ in range(tries - 1):
+            if not outside:
+                break
+            time.sleep(0.5)
+            outside = self._out_of_view()
+        return outside
+
+    def _out_of_view(self) -> list[str]:
         outside = []
         rows = self.page.locator(BUTTONS)
         for i in range(rows.count()):
@@ -332,3 +344,38 @@ def test_a_shared_desk_recording_shows_the_bins_and_the_robots_forecast(chromium
     assert page.shown(["forecast", "0"])["x"] != early["x"]
     assert not at(data["sim_time"] - 0.05, ["forecast", "0"])
     assert page.errors == [], page.errors
+
+
+def test_a_person_does_a_task_the_robot_hands_over(chromium, tmp_path):
+    """Row 1 by hand with a part lost on its first carry that the robot may not pick again
+    (`run.recover_tries: 0`): the panel shows one button, "I did F1"; the person clicks it (as
+    if they had put the flange in place themselves) and the run goes on to its terminal state,
+    the step counted as handed over."""
+    text = "{run: {recover_tries: 0}, faults: [{kind: grip-lost, task: 1}]}"
+    port = free_port()
+    args = ["--live", "--lean", "--scenario", "row1-optimal", "--port", str(port)]
+    run = SimulateProcess(*args, "--scenario-text", text, "--json")
+    try:
+        url = run.wait_for_line(r"live: open (http://\S+) in a web browser", STEP_TIMEOUT)[1]
+        page = Page(chromium)
+        page.page.goto(url)
+        page.page.get_by_text("Open Controls", exact=True).click()
+        run.wait_for_line(r"^step 1: the robot proposes F1\b", STEP_TIMEOUT)
+        page.click(page.wait_for_panel(first=f"F1 - robot proposal{ON_ITS_WAY}")[0])
+        labels = page.wait_for_panel(first="I did F1", timeout=STEP_TIMEOUT)
+        assert labels == ["I did F1"] and page.buttons_out_of_view() == []
+        page.screenshot(tmp_path, "live_handover.png")
+        page.click("I did F1")
+        for step, proposal in ((2, "S23"), (3, "F03")):
+            run.wait_for_line(f"^step {step}: the robot proposes {proposal}\\b", STEP_TIMEOUT)
+            page.click(page.wait_for_panel(first=f"{proposal} - robot proposal{ON_ITS_WAY}")[0])
+        code, out, err = run.finish(STEP_TIMEOUT)
+    finally:
+        run.kill()
+    assert code == 0, err[-5:]
+    assert page.errors == [], page.errors
+    data = json.loads(out)
+    assert data["terminal"] and data["error"] is None
+    assert data["names"] == ["1", "2", "7", "10"]
+    assert data["handovers"] == 1
+    assert [bool(s["handed_over"]) for s in data["steps"]] == [True, False, False]
