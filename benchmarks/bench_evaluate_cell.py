@@ -5,8 +5,9 @@ closed-loop simulations of the cell (`--cell`, full settings: 5 s bolting holds,
 body and speed-and-separation monitoring on) and at task level with the cell's cost table. The
 report compares the paper's Q-learning agent with ours in the cell, and how well the cost table
 predicts the cell's times. Populations whose runs are all alike (`follows`, `habitual`) get two
-runs, the random ones more. `slow` is task level only (the cell's holds are fixed) and
-`random` is left out (its runs average 15 tasks, minutes of simulation each).
+runs, the random ones more. `slow` and `random` are left out here (`random`'s runs average 15
+tasks, minutes of simulation each); `bench_population_sweep.py` runs every population in the
+cell, lean.
 
 Each pair is played in one interaction mode (``--interaction``, default `anticipate`: the decider
 bets at each boundary, in the cell as at task level, and the simulated operator indicates after

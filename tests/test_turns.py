@@ -76,3 +76,25 @@ def test_a_part_put_back_is_left_from_above_it(planner, f1, flange_space):
     assert back.segment(Stage.RELEASE).end <= above < back.duration
     assert _speed(back, above) < 1e-6
     assert back.gripper_opening(above) > back.grip_width  # let go
+
+
+def test_a_turn_before_the_grasp_keeps_the_fingers_open_until_clear_of_the_part(
+    planner, flange_space
+):
+    """Turned to another part on the way down to the square flange (the fingers open around
+    it), the plan from there keeps the square's opening until the arm is clear of the cell and
+    only then closes to the oval flange's: closing at once closed the fingers on the square
+    (`stochastic-long` stopped there, the arm pushed)."""
+    square = planner.plan_task(flange_space.configuration(0), "S23")
+    tau = square.segment(Stage.GRASP).start - 0.05  # going down, the fingers by the square
+    q = square.trajectory.value(tau).ravel()
+    wide = square.gripper_opening(tau)
+    turned = planner.plan_task(flange_space.configuration(0), "F1", q_start=q, start_opening=wide)
+    oval = turned.gripper_opening(turned.segment(Stage.GRASP).start)
+    assert wide > oval + 0.03
+    clear = next(m for m in turned.motions if m.name == "up, clear of the cell")
+    for t in np.linspace(0.0, clear.start + clear.duration, 8):
+        assert turned.gripper_opening(t) == pytest.approx(wide)
+    # Narrowed on the way to the pre-grasp, before going down to the oval flange.
+    down = next(m for m in turned.motions if m.name == "down to grasp")
+    assert turned.gripper_opening(down.start) == pytest.approx(oval)
