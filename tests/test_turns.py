@@ -98,3 +98,15 @@ def test_a_turn_before_the_grasp_keeps_the_fingers_open_until_clear_of_the_part(
     # Narrowed on the way to the pre-grasp, before going down to the oval flange.
     down = next(m for m in turned.motions if m.name == "down to grasp")
     assert turned.gripper_opening(down.start) == pytest.approx(oval)
+
+
+def test_a_swap_turned_just_past_the_lifts_end_is_planned_back_to_the_tray(planner, f1):
+    """Turned just past the lift's end, the way back to the tray starts almost at the pre-place
+    above it: a move of 0.011 rad, on which KTO ran out of iterations (where the arm stopped in
+    run 11 of exact vs habitual in the population sweep); it is the straight line."""
+    stopped = np.array([-1.125532, -1.272209, 1.284885, -1.585087, -1.567562, 2.012624])
+    assert 0.0 < np.abs(stopped - f1.trajectory.value(lift_end(f1)).ravel()).max() < 0.05
+    back = planner.plan_task(frozenset(), UNDO, instance=f1.instance, q_start=stopped, held=True)
+    assert back.task == UNDO and back.carrying(0.0) == f1.instance
+    assert back.trajectory.value(0.0).ravel() == pytest.approx(stopped, abs=1e-4)
+    assert back.trajectory.value(back.duration).ravel() == pytest.approx(planner.q_home, abs=1e-6)

@@ -22,6 +22,9 @@ from hrc_drake.motion.ik import solve_ik
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.scene import PlanningScene
 
+# rad in every joint: a free move this short is the straight line in joint space (`free_path`).
+SHORT_MOVE = 0.05
+
 
 class PlanningError(RuntimeError):
     """A path between two reachable postures could not be found or retimed."""
@@ -75,9 +78,20 @@ def free_path(
     Solved with SNOPT first without collision constraints; when that path comes closer than the
     clearance plus margin (checked at `check_samples` points), solved again from it with
     minimum-distance constraints (bound: clearance + margin) at `collision_samples` points.
+    A move of less than `SHORT_MOVE` in every joint is the straight line in joint space, when
+    that keeps the clearance: KTO's path-length cost has no gradient at zero length, and SNOPT
+    ran out of iterations on a 0.011 rad move (a swap turned just past the lift's end, whose
+    way back starts almost at the pre-place above the tray). Where KTO fails without collision
+    constraints, the straight line is taken too if it keeps the clearance.
     """
     n = len(q_start)
     order = 4
+    base_duration = float(np.max(np.abs(q_end - q_start) / limits.velocity)) * 2.0 + 0.5
+    line = _joint_line(q_start, q_end, base_duration, order, options.kto_control_points)
+    if float(np.max(np.abs(q_end - q_start))) < SHORT_MOVE:
+        worst, _ = path_clearance(scene, line, options.check_samples)
+        if worst >= options.clearance:
+            return line, False
     trajopt = KinematicTrajectoryOptimization(n, options.kto_control_points, spline_order=order)
     prog = trajopt.get_mutable_prog()
     trajopt.AddDurationCost(1.0)
@@ -91,7 +105,6 @@ def free_path(
     zero = np.zeros(n)
     trajopt.AddPathVelocityConstraint(zero, zero, 0.0)
     trajopt.AddPathVelocityConstraint(zero, zero, 1.0)
-    base_duration = float(np.max(np.abs(q_end - q_start) / limits.velocity)) * 2.0 + 0.5
     solver = SnoptSolver()
     # KTO is nonconvex (duration × velocity and acceleration bounds); when SNOPT stalls from one
     # guess, a slower or faster one usually converges.
@@ -103,15 +116,14 @@ def free_path(
             0.0,
             base_duration * scale,
         )
-        control = [
-            (q_start + (q_end - q_start) * a).reshape(n, 1)
-            for a in np.linspace(0.0, 1.0, options.kto_control_points)
-        ]
-        trajopt.SetInitialGuess(BsplineTrajectory(basis, control))
+        trajopt.SetInitialGuess(BsplineTrajectory(basis, line.control_points()))
         result = solver.Solve(prog)
         if result.is_success():
             break
     else:
+        worst, _ = path_clearance(scene, line, options.check_samples)
+        if worst >= options.clearance:
+            return line, False
         raise PlanningError(f"KTO without collisions failed: {result.get_solution_result()}")
     path = trajopt.ReconstructTrajectory(result)
     target = options.clearance + options.clearance_margin
@@ -137,6 +149,17 @@ def free_path(
         f"KTO with collision constraints failed ({result.get_solution_result()}); "
         f"closest pair {pair} at {worst:.4f} m"
     )
+
+
+def _joint_line(
+    q_start: np.ndarray, q_end: np.ndarray, duration: float, order: int, points: int
+) -> BsplineTrajectory:
+    """The straight line from `q_start` to `q_end` in joint space as a B-spline over
+    [0, `duration`] (KTO's initial guess, and the path of a short move)."""
+    basis = BsplineBasis(order, points, KnotVectorType.kClampedUniform, 0.0, duration)
+    n = len(q_start)
+    control = [(q_start + (q_end - q_start) * a).reshape(n, 1) for a in np.linspace(0, 1, points)]
+    return BsplineTrajectory(basis, control)
 
 
 def straight_waypoints(
