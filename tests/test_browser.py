@@ -350,8 +350,11 @@ def test_a_person_does_a_task_the_robot_hands_over(chromium, tmp_path):
     """Row 1 by hand with a part lost on its first carry that the robot may not pick again
     (`run.recover_tries: 0`): the panel shows one button, "I did F1"; the person clicks it (as
     if they had put the flange in place themselves) and the run goes on to its terminal state,
-    the step counted as handed over."""
-    text = "{run: {recover_tries: 0}, faults: [{kind: grip-lost, task: 1}]}"
+    the step counted as handed over. The robot waits for each click (`interaction: wait`), so
+    that the part is lost after the person's answer however slowly the page comes up."""
+    text = (
+        "{interaction: {mode: wait}, run: {recover_tries: 0}, faults: [{kind: grip-lost, task: 1}]}"
+    )
     port = free_port()
     args = ["--live", "--lean", "--scenario", "row1-optimal", "--port", str(port)]
     run = SimulateProcess(*args, "--scenario-text", text, "--json")
@@ -361,14 +364,14 @@ def test_a_person_does_a_task_the_robot_hands_over(chromium, tmp_path):
         page.page.goto(url)
         page.page.get_by_text("Open Controls", exact=True).click()
         run.wait_for_line(r"^step 1: the robot proposes F1\b", STEP_TIMEOUT)
-        page.click(page.wait_for_panel(first=f"F1 - robot proposal{ON_ITS_WAY}")[0])
+        page.click(page.wait_for_panel(first="F1 - robot proposal")[0])
         labels = page.wait_for_panel(first="I did F1", timeout=STEP_TIMEOUT)
         assert labels == ["I did F1"] and page.buttons_out_of_view() == []
         page.screenshot(tmp_path, "live_handover.png")
         page.click("I did F1")
         for step, proposal in ((2, "S23"), (3, "F03")):
             run.wait_for_line(f"^step {step}: the robot proposes {proposal}\\b", STEP_TIMEOUT)
-            page.click(page.wait_for_panel(first=f"{proposal} - robot proposal{ON_ITS_WAY}")[0])
+            page.click(page.wait_for_panel(first=f"{proposal} - robot proposal")[0])
         code, out, err = run.finish(STEP_TIMEOUT)
     finally:
         run.kill()
