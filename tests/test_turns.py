@@ -110,3 +110,22 @@ def test_a_swap_turned_just_past_the_lifts_end_is_planned_back_to_the_tray(plann
     assert back.task == UNDO and back.carrying(0.0) == f1.instance
     assert back.trajectory.value(0.0).ravel() == pytest.approx(stopped, abs=1e-4)
     assert back.trajectory.value(back.duration).ravel() == pytest.approx(planner.q_home, abs=1e-6)
+
+
+def test_a_carry_back_toppra_cannot_time_is_timed_on_a_refit_of_its_path(planner):
+    """Where the arm stopped carrying F01's flange in run 15 of mpc vs change-of-mind (the
+    population sweep), the way back to the tray is a KTO path Toppra fails on at any grid; the
+    cubic through samples of it is timed instead, and the part goes back."""
+    stopped = np.array([-0.953173, -1.391857, 1.393899, -1.573851, -1.567462, 2.184938])
+    back = planner.plan_task(
+        frozenset({"S12"}),
+        UNDO,
+        last_token="S12",
+        layout={"square_flange": "S12"},
+        instance="oval_flange_1",
+        q_start=stopped,
+        held=True,
+    )
+    assert back.carrying(0.0) == "oval_flange_1"
+    assert back.trajectory.value(0.0).ravel() == pytest.approx(stopped, abs=1e-4)
+    assert back.trajectory.value(back.duration).ravel() == pytest.approx(planner.q_home, abs=1e-6)

@@ -294,5 +294,26 @@ def retime(
     slower by `options.limit_fraction`."""
     s_of_t = time_optimal(scene, path, limits, options, min_grid_points=40)
     if s_of_t is None:
+        path, s_of_t = _refit_and_time(scene, path, limits, options)
+    if s_of_t is None:
         raise PlanningError("Toppra found no time parameterisation of the path")
     return Retimed(path, s_of_t, options.limit_fraction)
+
+
+def _refit_and_time(
+    scene: PlanningScene, path: Trajectory, limits: JointLimits, options: MotionOptions
+) -> tuple[Trajectory, Trajectory | None]:
+    """(path, s(t)) for a path Toppra cannot time: now and then it fails on a KTO path at any
+    grid ("failed to find the maximum path acceleration" near a knot; a 0.18 rad carry back to
+    the tray, in the population sweep), and times the cubic spline through samples of the same
+    path, at rest at both ends, which is taken if it keeps the clearance. (path, None) when no
+    refit does."""
+    for count in (8, 12, 16, 24, 40):
+        times = np.linspace(path.start_time(), path.end_time(), count)
+        refit = spline_through([path.value(t).ravel() for t in times])
+        if path_clearance(scene, refit, options.check_samples)[0] < options.clearance:
+            continue
+        s_of_t = time_optimal(scene, refit, limits, options, min_grid_points=40)
+        if s_of_t is not None:
+            return refit, s_of_t
+    return path, None
