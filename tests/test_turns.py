@@ -129,3 +129,31 @@ def test_a_carry_back_toppra_cannot_time_is_timed_on_a_refit_of_its_path(planner
     assert back.carrying(0.0) == "oval_flange_1"
     assert back.trajectory.value(0.0).ravel() == pytest.approx(stopped, abs=1e-4)
     assert back.trajectory.value(back.duration).ravel() == pytest.approx(planner.q_home, abs=1e-6)
+
+
+def test_another_part_indicated_as_the_arm_reaches_the_pre_place_pose_stops_it_there(f1):
+    """An indication of another part (here `undo`) taken an update before the arm reaches the
+    pre-place pose: the arm stops at that pose, where it is at rest, and turns from there. It
+    used to slow down along its path, which took it on down to the seat: too late to turn, the
+    run stopped (random operator, population sweep)."""
+    from dataclasses import replace
+
+    from hrc_drake.cell.run import build_closed_loop
+    from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+    from hrc_drake.cell.supervisor_state import Mode, SupervisorStatus
+
+    supervisor = build_closed_loop(load_cell_scenario("row1-optimal", LEAN)).controller.supervisor
+    above = wait_point(f1)
+    moving = SupervisorStatus(
+        mode=Mode.EXECUTE, plan=f1, tau=above - 0.01, tau_time=10.0, committed="F1"
+    )
+    turning = supervisor._advance(replace(moving, change=UNDO), 1.0, 10.02)
+    assert turning.tau == pytest.approx(above) and turning.speed == 0.0
+    assert turning.plan_time(10.1) == pytest.approx(above)
+    assert turn_at(f1, turning.plan_time(10.02), supervisor._space.spec, UNDO) == Turn.RETURN
+    # Still waiting for the indication: it waits there at speed; with none to wait for and no
+    # turn, it goes on down to the seat.
+    waiting = supervisor._advance(replace(moving, awaiting=True), 1.0, 10.02)
+    assert waiting.tau == pytest.approx(above) and waiting.speed == 1.0
+    placing = supervisor._advance(moving, 1.0, 10.02)
+    assert placing.plan_time(10.02) > above

@@ -50,7 +50,7 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from hrc_drake.cell.anticipation import Anticipation, back_above, wait_point
+from hrc_drake.cell.anticipation import TAU_EPS, Anticipation, back_above, same_part, wait_point
 from hrc_drake.cell.intent import MotionIntent
 from hrc_drake.cell.keep_clear import KeepClear, KeepClearSettings
 from hrc_drake.cell.recovery import FaultRecovery
@@ -285,8 +285,15 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
             return replace(s, speed=limit)
         plan = s.plan
         tau = s.plan_time(now)
-        if s.awaiting and tau >= wait_point(plan):  # no indication yet: wait above the seat
-            return replace(s, tau=wait_point(plan), tau_time=now, speed=limit, rate=0.0)
+        above = wait_point(plan)
+        if tau >= above and s.tau <= above + TAU_EPS:  # reaching the pre-place pose
+            if s.awaiting:  # no indication yet: wait above the seat
+                return replace(s, tau=above, tau_time=now, speed=limit, rate=0.0)
+            if s.change is not None and not same_part(self._space.spec, plan.task, s.change):
+                # Another part indicated as the arm reaches the pre-place pose, where it is at
+                # rest: it stops there to turn. Slowing down along the path took it on down
+                # to the seat, too late to turn (the run stopped; population sweep).
+                return replace(s, tau=above, tau_time=now, speed=0.0, rate=0.0)
         if s.holding_for_bolts(tau):
             return replace(s, tau=plan.t_in_place, tau_time=now, speed=limit, rate=0.0)
         qdot = np.abs(plan.trajectory.EvalDerivative(min(tau, plan.duration), 1)).max()
