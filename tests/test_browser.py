@@ -50,6 +50,10 @@ VIEW = {"width": 1280, "height": 800}
 # Our buttons sit in the panel's top level; Drake's own (save_scene, …) are in folders.
 BUTTONS = ".dg.main > ul > li.cr.function"
 STEP_TIMEOUT = 180.0  # s; a task at the wall clock's pace is ~8 s, planning on a busy CI more
+# A question left unanswered for `run.indication_timeout` (10 s) is sent to the browser afresh,
+# its buttons deleted and added again (tests/test_live.py tests that): a page slowed by a loaded
+# machine must not take that for a button out of view, so these runs ask again only after 60 s.
+SLOW_PAGE = "{run: {indication_timeout: 60.0}}"
 # Drake's MeshcatAnimation records at 64 frames per second (MeshcatVisualizerParams default).
 RECORDING_FRAME = 1.0 / 64
 
@@ -206,7 +210,7 @@ def _drive_live_run(chromium, tmp_path, frames, scenario, clicks, script, screen
     record = tmp_path / "live.html"
     port = free_port()
     args = ["--live", "--lean", "--scenario", scenario, "--port", str(port)]
-    run = SimulateProcess(*args, "--record", str(record), "--json")
+    run = SimulateProcess(*args, "--scenario-text", SLOW_PAGE, "--record", str(record), "--json")
     try:
         url = run.wait_for_line(r"live: open (http://\S+) in a web browser", STEP_TIMEOUT)[1]
         assert url.endswith(f":{port}"), url
@@ -353,7 +357,8 @@ def test_a_person_does_a_task_the_robot_hands_over(chromium, tmp_path):
     the step counted as handed over. The robot waits for each click (`interaction: wait`), so
     that the part is lost after the person's answer however slowly the page comes up."""
     text = (
-        "{interaction: {mode: wait}, run: {recover_tries: 0}, faults: [{kind: grip-lost, task: 1}]}"
+        "{interaction: {mode: wait}, run: {recover_tries: 0, indication_timeout: 60.0}, "
+        "faults: [{kind: grip-lost, task: 1}]}"
     )
     port = free_port()
     args = ["--live", "--lean", "--scenario", "row1-optimal", "--port", str(port)]
