@@ -40,6 +40,9 @@ CHROMIUM = Path(os.environ.get("HRC_DRAKE_CHROMIUM", "/usr/bin/chromium"))
 CHROMIUM_ARGS = [
     "--no-sandbox",
     "--disable-gpu",
+    # Shared memory in a file under /tmp, not /dev/shm (a container's /dev/shm may be 64 MB,
+    # too little for two WebGL pages at once).
+    "--disable-dev-shm-usage",
     "--disable-quic",
     "--no-first-run",
     "--disable-background-networking",
@@ -89,15 +92,62 @@ def flange_frames():
 
 
 class Page:
-    """A 1280×800 page that keeps its console errors, page errors and requests."""
+    """A 1280×800 page that keeps its console errors, page errors, requests and what happened
+    to it (`events`: a crash, a navigation, its websocket opened or closed), for a failure's
+    message."""
 
     def __init__(self, browser):
-        self.page = browser.new_page(viewport=VIEW)
+        self.browser = browser
         self.errors: list[str] = []
         self.requests: list[str] = []
-        self.page.on("console", lambda m: self.errors.append(m.text) if m.type == "error" else None)
-        self.page.on("pageerror", lambda e: self.errors.append(f"page error: {e}"))
-        self.page.on("request", lambda r: self.requests.append(r.url))
+        self.events: list[str] = []
+        self.crashed = False
+        self.reopened = 0
+        self.url = ""
+        self.page = self._new_page()
+
+    def _new_page(self):
+        page = self.browser.new_page(viewport=VIEW)
+        page.on("console", lambda m: self.errors.append(m.text) if m.type == "error" else None)
+        page.on("pageerror", lambda e: self.errors.append(f"page error: {e}"))
+        page.on("request", lambda r: self.requests.append(r.url))
+        page.on("crash", lambda _: self._crash())
+        page.on(
+            "framenavigated",
+            lambda f: self._event(f"navigated to {f.url}") if f == page.main_frame else None,
+        )
+        page.on("websocket", self._watch_socket)
+        return page
+
+    def _event(self, what: str) -> None:
+        self.events.append(f"{time.monotonic():.1f} {what}")
+
+    def _crash(self) -> None:
+        self.crashed = True
+        self._event("crashed")
+
+    def _watch_socket(self, socket) -> None:
+        self._event("websocket opened")
+        socket.on("close", lambda _: self._event("websocket closed"))
+
+    def open_live(self, url: str) -> None:
+        """Open a live run's page and its controls ("Open Controls"), as a person does."""
+        self.url = url
+        self.page.goto(url)
+        self.page.get_by_text("Open Controls", exact=True).click()
+
+    def _reopen_after_crash(self) -> None:
+        """A renderer that crashed (seen once on a loaded CI machine: the page went blank) is
+        what a person meets as a dead tab: they open the page again, and Drake's Meshcat sends
+        a new connection the scene and every button still registered. Done once at most: a
+        page that keeps crashing fails the test."""
+        if self.reopened:
+            raise AssertionError(f"the page crashed again after it was reopened: {self.events}")
+        self.reopened += 1
+        self.crashed = False
+        self.page = self._new_page()
+        self.open_live(self.url)
+        self._event("reopened")
 
     def screenshot(self, tmp_path: Path, name: str) -> Path:
         """Save a screenshot in tmp_path (and in $HRC_DRAKE_SCREENSHOTS, if set)."""
@@ -112,16 +162,29 @@ class Page:
         return self.page.locator(f"{BUTTONS} .property-name").all_inner_texts()
 
     def wait_for_panel(self, first: str, timeout: float = 30.0) -> list[str]:
-        """The panel's labels once `first` heads it and they no longer change."""
+        """The panel's labels once `first` heads it and they no longer change (a page that
+        crashed meanwhile is opened again, `_reopen_after_crash`)."""
+        from playwright.sync_api import Error as PlaywrightError
+
         deadline = time.monotonic() + timeout
         previous = None
         while time.monotonic() < deadline:
-            labels = self.panel()
+            if self.crashed:
+                self._reopen_after_crash()
+            try:
+                labels = self.panel()
+            except PlaywrightError:
+                if not self.crashed:
+                    raise
+                continue
             if labels and labels[0] == first and labels == previous:
                 return labels
             previous = labels
             time.sleep(0.25)
-        raise AssertionError(f"the panel shows {self.panel()}, not {first!r} first")
+        raise AssertionError(
+            f"the panel shows {self.panel()}, not {first!r} first (now {time.monotonic():.1f}; "
+            f"page events: {self.events}; console errors: {self.errors})"
+        )
 
     def buttons_out_of_view(self, tries: int = 3) -> list[str]:
         """Labels of our buttons not wholly within the 1280×800 view, once the panel has
@@ -215,8 +278,7 @@ def _drive_live_run(chromium, tmp_path, frames, scenario, clicks, script, screen
         url = run.wait_for_line(r"live: open (http://\S+) in a web browser", STEP_TIMEOUT)[1]
         assert url.endswith(f":{port}"), url
         page = Page(chromium)
-        page.page.goto(url)
-        page.page.get_by_text("Open Controls", exact=True).click()
+        page.open_live(url)
         for decision in decisions:
             state, proposal = decision.state, decision.proposed
             run.wait_for_line(
@@ -225,7 +287,13 @@ def _drive_live_run(chromium, tmp_path, frames, scenario, clicks, script, screen
             # The robot starts on its proposal (a placement) while the buttons are up, and
             # the proposal's button says so.
             first = f"{proposal} - robot proposal" + ("" if proposal == UNDO else ON_ITS_WAY)
-            labels = page.wait_for_panel(first=first)
+            try:
+                labels = page.wait_for_panel(first=first)
+            except AssertionError as err:
+                tail = "\n".join(run.stderr_lines[-15:])
+                ended = run.proc.poll()
+                state = "still runs" if ended is None else f"ended with exit status {ended}"
+                raise AssertionError(f"{err}; the run {state}; its stderr ends:\n{tail}") from err
             _check_panel(space, state, proposal, labels)
             assert page.buttons_out_of_view() == [], f"step {decision.step}: {labels}"
             mark = ["operator_choices", "undo" if proposal == UNDO else "proposal", "ghost"]
@@ -366,8 +434,7 @@ def test_a_person_does_a_task_the_robot_hands_over(chromium, tmp_path):
     try:
         url = run.wait_for_line(r"live: open (http://\S+) in a web browser", STEP_TIMEOUT)[1]
         page = Page(chromium)
-        page.page.goto(url)
-        page.page.get_by_text("Open Controls", exact=True).click()
+        page.open_live(url)
         run.wait_for_line(r"^step 1: the robot proposes F1\b", STEP_TIMEOUT)
         page.click(page.wait_for_panel(first="F1 - robot proposal")[0])
         labels = page.wait_for_panel(first="I did F1", timeout=STEP_TIMEOUT)

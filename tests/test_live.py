@@ -103,6 +103,7 @@ def test_an_undo_proposal_shows_its_own_marker_and_the_buttons_go_after_the_clic
     assert meshcat.GetButtonNames() == [] and visible("/operator_choices/undo") is False
     assert meshcat.HasPath("/operator_choices/step_2")
     assert "undo: take F2 off" in said[0] and '"Open Controls", top right' in said[0]
+    assert said[-1] == "step 2: you chose undo: take F2 off (the robot's proposal)"
 
 
 @pytest.mark.slow

@@ -334,6 +334,12 @@ class LiveOperator:
             self.meshcat.SetProperty(mark, "visible", False, self.clock())
         self._draw_choice(prompt.step, prompt.state, prompt.proposal, chosen, self.clock())
         self.answers.append((prompt.step, prompt.proposal, chosen))
+        # The terminal confirms the click (a person sees it taken; a log shows which).
+        agreed = "the robot's proposal" if chosen == prompt.proposal else "instead of the proposal"
+        self.say(
+            f"step {prompt.step}: you chose {describe_task(self.space, chosen, prompt.state)} "
+            f"({agreed})"
+        )
 
     def prompt_text(
         self, step: int, state: tuple[str, ...], proposal: str, buttons: dict[str, str]
