@@ -161,9 +161,12 @@ class Page:
         """The labels of our buttons in the control panel, top to bottom."""
         return self.page.locator(f"{BUTTONS} .property-name").all_inner_texts()
 
-    def wait_for_panel(self, first: str, timeout: float = 30.0) -> list[str]:
+    def wait_for_panel(self, first: str, timeout: float = STEP_TIMEOUT) -> list[str]:
         """The panel's labels once `first` heads it and they no longer change (a page that
-        crashed meanwhile is opened again, `_reopen_after_crash`)."""
+        crashed meanwhile is opened again, `_reopen_after_crash`). The wait is long: Drake's
+        Meshcat queues every message for a slow page (it drops none), so on a loaded machine
+        a page that draws slower than the run sends may show the buttons well after the run
+        has put them up (the panel stayed empty 30 s after the terminal's line once in CI)."""
         from playwright.sync_api import Error as PlaywrightError
 
         deadline = time.monotonic() + timeout
