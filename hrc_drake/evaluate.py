@@ -31,7 +31,7 @@ waits; the simulated operator indicates after the interface's delay (`DelayedInd
 from the same seeded stream as the task level's, so a run's delays are the same at both levels. This
 module does not know the cell: `Setup.cell` is an object that plays cell runs (`CellRuns`;
 `hrc_drake.cell.evaluate.CellOptions`), so the dependency goes one way, from the cell to here. The
-command line is `hrc_drake.evaluate_command`.
+command line is `hrc_drake.cli.evaluate`.
 
 Runs spread over local processes (``workers``) or, with ``ray``, over a Ray cluster (the optional
 extra ``hrc_drake[ray]``): each worker builds its own decider (and, at cell level, its own

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from hrc_drake import evaluate_command
+from hrc_drake.cli import evaluate as evaluate_command
 from hrc_drake.cli import main
 from hrc_drake.hri.scenario import ScenarioError, load_scenario
 from hrc_drake.paths import check_output_path, fresh_name
@@ -140,7 +140,7 @@ def test_duplicate_keys_in_a_scenario_file_are_refused(capsys, tmp_path):
 
 
 def test_the_scenario_and_assembly_may_name_the_same_spec():
-    from hrc_drake.cell.command import check_assembly_matches
+    from hrc_drake.cli.simulate import check_assembly_matches
 
     check_assembly_matches(argparse.Namespace(assembly=Path(FLANGE), scenario="row4-forces-4"))
 

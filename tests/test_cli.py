@@ -9,8 +9,8 @@ import types
 
 import pytest
 
-from hrc_drake import cli
 from hrc_drake.cli import main
+from hrc_drake.cli import tasks as task_commands
 from hrc_drake.paths import UsageError, check_output_path
 from hrc_drake.tasks.decide import StepLimitError, run_decisions
 from hrc_drake.tasks.policy import save_policy
@@ -261,7 +261,7 @@ def test_table2_script_past_the_end_and_shorter_rows(capsys, monkeypatch):
         )
 
     rows = [row(1, {5: "F3"}, ["1", "2", "7", "10"]), row(2, {}, ["1", "2", "1", "2", "7", "10"])]
-    monkeypatch.setattr(cli, "table2_scenarios", lambda: rows)
+    monkeypatch.setattr(task_commands, "table2_scenarios", lambda: rows)
     code, out, _ = run(capsys, "table2", "--json")
     first, second = json.loads(out)
     assert code == 0

@@ -297,13 +297,13 @@ def test_default_cost_table_is_read_from_the_cache(tmp_path, flange_space, plann
 
 
 def test_cli_costs_solve_and_train(tmp_path, monkeypatch, capsys, flange_space, table):
-    import hrc_drake.cell.costs as cell_costs
+    import hrc_drake.cli.costs as costs_command
     from hrc_drake.cli import main
     from hrc_drake.tasks.policy import load_policy
 
     # The planning itself is tested above; here the command around it, with the hand table.
-    monkeypatch.setattr(cell_costs, "timing_planner", lambda space: None)
-    monkeypatch.setattr(cell_costs, "compute_cost_table", lambda space, planner, progress: table)
+    monkeypatch.setattr(costs_command, "timing_planner", lambda space: None)
+    monkeypatch.setattr(costs_command, "compute_cost_table", lambda space, planner, progress: table)
     out = tmp_path / "costs.json"
     assert main(["costs", "--out", str(out), "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
@@ -331,12 +331,12 @@ def test_cli_costs_solve_and_train(tmp_path, monkeypatch, capsys, flange_space, 
 
 
 def test_cli_costs_prints_the_bets(tmp_path, monkeypatch, capsys, toy_costs):
-    import hrc_drake.cell.costs as cell_costs
+    import hrc_drake.cli.costs as costs_command
     from hrc_drake.cli import main
 
-    monkeypatch.setattr(cell_costs, "timing_planner", lambda space: None)
+    monkeypatch.setattr(costs_command, "timing_planner", lambda space: None)
     monkeypatch.setattr(
-        cell_costs, "compute_cost_table", lambda space, planner, progress: toy_costs
+        costs_command, "compute_cost_table", lambda space, planner, progress: toy_costs
     )
     out = tmp_path / "costs.json"
     assert main(["costs", "--out", str(out), "--interface", "touch", "--json"]) == 0

@@ -173,8 +173,8 @@ def test_a_failing_cell_run_is_listed_and_replays_alone(tmp_path, toy_costs, cap
 
     from simulate_process import hrc_drake_command
 
+    from hrc_drake.cli.evaluate import print_report
     from hrc_drake.evaluate import run_seed
-    from hrc_drake.evaluate_command import print_report
     from hrc_drake.tasks.costs import save_cost_table
 
     costs = tmp_path / "toy-costs.json"

@@ -413,7 +413,7 @@ def test_bad_interaction_inputs_are_one_line_errors(tmp_path, cost_file, capsys,
         capsys, ["costs", "--out", str(tmp_path / "c.json"), "--interface", "voice"], "voice"
     )
     # simulate: refused before anything is built or simulated.
-    import hrc_drake.cell.command as command
+    import hrc_drake.cli.simulate as command
 
     def no_run(*args, **kwargs):
         raise AssertionError("the run started")
@@ -533,7 +533,7 @@ def test_simulate_learns_and_saves_the_operator_profile(tmp_path, capsys, space)
 def test_a_cell_evaluation_takes_the_scenarios_interaction_under_the_flags():
     from argparse import Namespace
 
-    from hrc_drake.evaluate_command import cell_interaction
+    from hrc_drake.cli.evaluate import cell_interaction
 
     scenario = load_scenario(
         scenario_text="{interaction: {mode: wait, interface: touch, delay: {median: 1.0}}}"

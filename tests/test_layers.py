@@ -21,7 +21,7 @@ DRAKE_FREE = [
     "hrc_drake.hri.messages",
     "hrc_drake.motion.options",
     "hrc_drake.evaluate",
-    "hrc_drake.evaluate_command",
+    "hrc_drake.cli.evaluate",
     "hrc_drake.gym",
     "hrc_drake.cli",
 ]

@@ -18,9 +18,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from hrc_drake import cli
 from hrc_drake.atomic import atomic_write_text
-from hrc_drake.cli import main
+from hrc_drake.cli import build_parser, main
+from hrc_drake.cli import tasks as task_commands
 from hrc_drake.evaluate import RunResult, Setup, evaluate, summarise
 from hrc_drake.hri.scenario import ScenarioError, load_scenario
 from hrc_drake.paths import UsageError, check_output_path
@@ -95,7 +95,7 @@ def test_an_output_path_where_no_file_can_be_made_fails_before_any_work(
     traceback. A probe file is now made and removed instead."""
     if not Path(folder).is_dir():
         pytest.skip(f"{folder} is not mounted here")
-    monkeypatch.setattr(cli, "exact_policy", _no_work)
+    monkeypatch.setattr(task_commands, "exact_policy", _no_work)
     code, out, err = run(capsys, "solve", "--out", f"{folder}/policy.json")
     one_line_error(code, err, "solve", f"--out {folder}/policy.json")
     assert "no file can be created" in err or "not writable" in err
@@ -120,7 +120,8 @@ def test_a_scenario_value_of_the_wrong_type_is_one_line_before_any_work(
     capsys, monkeypatch, tmp_path, text, key, expected
 ):
     """Before: Drake's converter raised a ValueError that ended in a 40-line traceback."""
-    from hrc_drake.cell import command, costs
+    from hrc_drake.cell import costs
+    from hrc_drake.cli import simulate as command
 
     monkeypatch.setattr(command, "run_scenario", _no_work)
     monkeypatch.setattr(costs, "default_cost_table", _no_work)
@@ -248,10 +249,10 @@ def test_table2_script_na_note_is_a_whole_sentence(capsys, tmp_path, flange_spac
 
 def test_simulate_with_an_operator_script_describes_that_operator():
     """Before: the header showed row1's description, "nothing: the operator follows the robot"."""
-    from hrc_drake.cell.command import _scenario
+    from hrc_drake.cli.scenario_args import scenario_from_args
 
-    args = cli.build_parser().parse_args(["simulate", "--operator", "1:F3,2:S12"])
-    description = _scenario(args).description
+    args = build_parser().parse_args(["simulate", "--operator", "1:F3,2:S12"])
+    description = scenario_from_args(args).description
     assert "F3 at step 1, S12 at step 2 instead of the robot's proposal" in description
     assert "nothing" not in description
 
@@ -261,7 +262,7 @@ def test_simulate_with_an_operator_script_describes_that_operator():
 
 def test_a_yaml_syntax_error_names_the_file_line_and_column(capsys, monkeypatch, tmp_path):
     """Before: PyYAML's four lines about `<unicode string>`."""
-    from hrc_drake.cell import command
+    from hrc_drake.cli import simulate as command
 
     monkeypatch.setattr(command, "run_scenario", _no_work)
     spec = tmp_path / "bad.yaml"
@@ -304,7 +305,7 @@ def test_the_first_evaluation_of_a_spec_shows_progress_while_it_plans_the_cost_t
 
 def test_still_time_is_checked_before_the_run(capsys, monkeypatch, tmp_path):
     """Before: a --still-time past the end was refused only after the whole run."""
-    from hrc_drake.cell import command
+    from hrc_drake.cli import simulate as command
 
     monkeypatch.setattr(command, "run_scenario", _no_work)
     still = ["simulate", "--lean", "--still", tmp_path / "still.png", "--still-time"]
@@ -328,8 +329,8 @@ def test_too_many_cell_runs_are_refused_with_an_estimate_before_any_work(capsys,
 
 
 def test_cell_runs_start_with_an_estimate(capsys, monkeypatch, toy_costs):
-    from hrc_drake import evaluate_command
     from hrc_drake.cell import costs
+    from hrc_drake.cli import evaluate as evaluate_command
 
     monkeypatch.setattr(costs, "default_cost_table", lambda space, progress=None: toy_costs)
     monkeypatch.setattr(evaluate_command, "evaluate", _no_work)
@@ -343,7 +344,7 @@ def test_cell_runs_start_with_an_estimate(capsys, monkeypatch, toy_costs):
 
 
 def test_workers_are_capped_at_the_cpus_with_a_note(capsys, tmp_path, toy_costs):
-    from hrc_drake.evaluate_command import usable_cpus
+    from hrc_drake.cli.evaluate import usable_cpus
 
     save_cost_table(toy_costs, tmp_path / "costs.json")
     code, out, err = run(
@@ -445,12 +446,12 @@ def test_the_evaluation_modules_depend_one_way():
     cell_level = _imports(REPO / "hrc_drake" / "cell" / "evaluate.py")
     assert not [m for m in task_level if m.startswith("hrc_drake.cell")], task_level
     assert "hrc_drake.evaluate" in cell_level
-    assert "hrc_drake.evaluate_command" not in cell_level
+    assert "hrc_drake.cli.evaluate" not in cell_level
 
 
 def test_the_evaluate_command_line_imports_no_drake():
     code = (
-        "import sys, hrc_drake.cli, hrc_drake.evaluate_command\n"
+        "import sys, hrc_drake.cli, hrc_drake.cli.evaluate\n"
         "hrc_drake.cli.build_parser()\n"
         "print(any(m.startswith('pydrake') for m in sys.modules))\n"
     )

@@ -25,13 +25,9 @@ from hrc_drake.cell.interface import (
     end_station_session,
     make_cell_station_interface,
 )
-from hrc_drake.cell.scenario import (
-    LEAN,
-    load_cell_scenario,
-    scenario_from_args,
-    scenario_options,
-)
+from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 from hrc_drake.cell.scenario_identity import ScenarioIdentity, mismatch, spec_digest
+from hrc_drake.cli.scenario_args import scenario_from_args, scenario_options
 from hrc_drake.hri.scenario import Scenario
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -91,7 +87,7 @@ def test_a_mismatch_names_what_differs_from_each_side():
 
 def test_the_spec_digest_ignores_comments_only(tmp_path):
     """A comment does not change the spec's digest; a value does."""
-    flange = Path(cli.__file__).parents[1] / "models" / "assemblies" / "flange.yaml"
+    flange = Path(cli.__file__).parents[2] / "models" / "assemblies" / "flange.yaml"
     text = flange.read_text()
     commented = tmp_path / "flange.yaml"
     commented.write_text("# a copy\n" + text)

@@ -12,7 +12,7 @@ seat's pre-place posture to the indicated one's, a swap as the part put back (th
 backwards, the gripper opened, up again) and a free path from its pre-grasp to the indicated
 task's. `cell_hash(planner)` names the cell a table was planned in, and
 `default_cost_table(space)` computes the table once per (spec, cell) and caches it under the
-user's cache folder. `hrc-drake costs --out FILE` is `costs_command`.
+user's cache folder. `hrc-drake costs --out FILE` is `hrc_drake.cli.costs`.
 """
 
 from __future__ import annotations
@@ -22,7 +22,6 @@ import hashlib
 import json
 import os
 import sys
-import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
@@ -33,23 +32,20 @@ from hrc_drake.motion.planner import check_reach, resolve_task
 from hrc_drake.motion.scene import Layout
 from hrc_drake.motion.trajectory import free_path, retime
 from hrc_drake.resources import models_dir
+from hrc_drake.tasks.bets import Bet, bet_kind
 from hrc_drake.tasks.costs import (
-    COST_TABLE_FILE,
     BetKey,
     CostTable,
     CostTableError,
     Edge,
     EdgeCost,
     bet_pairs,
-    cost_summary,
     load_cost_table,
     operator_seconds,
     save_cost_table,
     task_edges,
 )
 from hrc_drake.tasks.graph import StateSpace
-from hrc_drake.tasks.interaction import Bet, bet_kind
-from hrc_drake.tasks.mdp import MdpConfig
 from hrc_drake.tasks.tokens import UNDO
 
 # The robot's model files: what the arm and gripper are (the cell's plate, tray and parts are
@@ -262,99 +258,11 @@ def default_cost_table(
     return table
 
 
-def costs_command(args) -> int:
-    """`hrc-drake costs --out FILE [--json]`: plan every edge, save the table, rank sequences.
-    A layout the UR3 cannot reach, or an edge that cannot be planned, is a one-line UsageError."""
-    from hrc_drake.cell_models import CellModelError
-    from hrc_drake.evaluate_command import interaction_from_flags
-    from hrc_drake.paths import UsageError, check_output_path
-    from hrc_drake.progress import ProgressLine
-    from hrc_drake.tasks.graph import generate_states
-    from hrc_drake.tasks.interaction import bet_summary
-    from hrc_drake.tasks.spec import load_spec
-
-    check_output_path(args.out, "--out", kind=COST_TABLE_FILE, force=getattr(args, "force", False))
-    interaction = interaction_from_flags(args)
-    space = generate_states(load_spec(args.assembly))
-    start = time.perf_counter()
-    try:
-        planner = timing_planner(space)
-        with ProgressLine("planning task edges and bets", "plan") as bar:
-            table = compute_cost_table(space, planner, progress=bar.update)
-    except (CellModelError, CostPlanningError) as err:
-        raise UsageError(str(err)) from None
-    wall = time.perf_counter() - start
-    save_cost_table(table, args.out)
-    config = MdpConfig(
-        gamma=1.0 if args.gamma is None else args.gamma, mistake_prob=args.mistake_prob
-    )
-    summary = {
-        "out": str(args.out),
-        **cost_summary(space, table, config),
-        "interaction": bet_summary(space, table, interaction),
-        "wall_time": round(wall, 2),
-    }
-    if args.json:
-        json.dump(summary, sys.stdout, indent=1)
-        sys.stdout.write("\n")
-        return 0
-    bets = len(table.bets or {})
-    print(
-        f"{summary['edges']} task edges and {bets} bets of {space.spec.name!r} planned in "
-        f"{wall:.1f} s (cell {table.cell_hash}) -> {args.out}"
-    )
-    _print_summary(summary)
-    return 0
-
-
-def _print_summary(summary: dict) -> None:
-    """The sequences ranked, the two policies' choices and the bets, as text."""
-    print(
-        "shortest sequences, fastest first (as proposed; expected with the operator's "
-        f"{summary['mistake_prob']:.0%} mistakes):"
-    )
-    for r in summary["shortest_sequences"]:
-        parts = " + ".join(f"{t:.2f}" for t in r["task_seconds"])
-        print(
-            f"  {r['states']:<12} {' '.join(r['tasks']):<14} {r['seconds']:7.2f} s  "
-            f"({parts})  expected {r['expected_seconds']:.3f} s"
-        )
-    for key, label in (("time_aware_choice", "time-aware"), ("unit_cost_choice", "unit-cost")):
-        c = summary[key]
-        print(
-            f"{label} choice: {c['states']} ({' '.join(c['tasks'])}), {c['seconds']:.2f} s, "
-            f"expected {c['expected_seconds']:.3f} s"
-        )
-    _print_bets(summary["interaction"])
-
-
-def _print_bets(interaction: dict) -> None:
-    """The bets of `bet_summary`: planned at most, and added on average with the delay."""
-    delay = interaction["delay"]
-    print(
-        f"interaction {interaction['mode']} over the {interaction['interface']} (delay "
-        f"{delay['distribution']}, median {delay['median']} s, mean {delay['mean']} s): waiting "
-        f"for the indication costs {interaction['wait_seconds']:.2f} s per boundary"
-    )
-    if interaction["bets"] is None:
-        print("  no re-target or swap times in this table")
-        return
-    print("  bets (robot starts on the first, the operator indicates the second): planned at "
-          "most, added on average with this delay")  # fmt: skip
-    for b in interaction["bets"]:
-        state = " ".join(b["state"]) or "(empty base)"
-        print(
-            f"  {state:<12} {b['committed']:>4} -> {b['indicated']:<5} {b['kind']:<8} "
-            f"{b['planned']:5.2f} s  {b['expected']:5.2f} s"
-        )
-
-
 __all__ = [
     "CostPlanningError",
     "cache_dir",
     "cell_hash",
     "compute_cost_table",
-    "costs_command",
     "default_cost_table",
     "timing_options",
     "timing_planner",

@@ -13,10 +13,7 @@ refuse, on both sides, a pair that differs (`ScenarioMismatch`).
 from __future__ import annotations
 
 import ipaddress
-import json
 import re
-import shlex
-import sys
 
 from pydrake.lcm import DrakeLcm
 from pydrake.systems.framework import Diagram
@@ -24,7 +21,6 @@ from pydrake.systems.framework import Diagram
 from hrc_drake.cell.interface import (
     DEFAULT_LCM_URL,
     LockstepTimeouts,
-    ScenarioMismatch,
     StationLinkError,
     end_station_session,
     exchange_period,
@@ -38,9 +34,6 @@ from hrc_drake.cell.scenario import (
     cell_design,
     load_cell_scenario,
     motion_options,
-    scenario_argv,
-    scenario_from_args,
-    scenario_options,
 )
 from hrc_drake.cell.scenario_identity import ScenarioIdentity
 from hrc_drake.cell.station import CellStation, make_cell_station
@@ -166,60 +159,10 @@ def run_over_lcm(
     return loop.run(progress=progress)
 
 
-EXIT_MISMATCH = 2
-"""The exit status of either side of a refused station-controller pair: as for an option
-refused (the two command lines must be made to agree), not 1, a link that failed."""
-
-
-def controller_hint(args, url: str) -> str:
-    """The command that runs the controller against a station started with `args` on `url`,
-    to paste as it is into a POSIX shell or zsh (the URL's `?` quoted)."""
-    argv = ["hrc-drake", "simulate", *scenario_argv(args), "--station-lcm", url]
-    return shlex.join(argv)
-
-
-def station_command(args) -> int:
-    """`hrc-drake station`: serve the scenario's simulated station over LCM until a controller
-    (`hrc-drake simulate --station-lcm URL`) has run against it. Exit status 0; 1 if no
-    controller came, it stopped answering or the station failed; `EXIT_MISMATCH` (2) if the
-    controller runs another scenario."""
-    url = check_lcm_url(args.lcm or DEFAULT_LCM_URL, "--lcm")
-    if not args.timeout > 0:
-        raise UsageError(f"--timeout {args.timeout}: give a number of seconds > 0")
-    scenario = scenario_from_args(args)
-    identity = ScenarioIdentity.of(scenario, scenario_options(args))
-    timeouts = LockstepTimeouts(start=args.timeout, step=args.timeout)
-    print(
-        f"station {scenario.name}: serving on {url}; start the controller with: "
-        f"{controller_hint(args, url)}",
-        file=sys.stderr,
-        flush=True,
-    )
-    try:
-        report = serve_scenario(scenario, url, timeouts, identity)
-    except ScenarioMismatch as err:
-        print(f"hrc-drake station: error: {err}", file=sys.stderr)
-        return EXIT_MISMATCH
-    except StationLinkError as err:
-        print(f"hrc-drake station: error: {err}", file=sys.stderr)
-        return 1
-    if args.json:
-        print(json.dumps({"scenario": scenario.name, "lcm": url, **report}))
-    else:
-        print(
-            f"station {scenario.name}: served {report['exchanges']} exchanges, "
-            f"{report['sim_time']:.2f} s simulated"
-        )
-    return 0
-
-
 __all__ = [
-    "EXIT_MISMATCH",
     "RemoteCell",
     "check_lcm_url",
-    "controller_hint",
     "run_over_lcm",
     "serve_scenario",
-    "station_command",
     "station_of",
 ]

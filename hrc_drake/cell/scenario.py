@@ -23,7 +23,6 @@ from hrc_drake.hri.scenario import (
     check_scenario,
     load_scenario,
     scenario_file,
-    with_operator_script,
 )
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.tasks.spec import AssemblySpec
@@ -105,82 +104,3 @@ def motion_options(scenario: Scenario) -> MotionOptions:
 def cell_design(scenario: Scenario, spec: AssemblySpec) -> CellDesign:
     """The cell for `spec`: the scenario's `cell` layout, else the spec's `cell:` section."""
     return CellDesign.of(spec, scenario.cell)
-
-
-# --- the scenario of a command line (`hrc-drake simulate` and `hrc-drake station`) ----------
-def scenario_from_args(args) -> Scenario:
-    """The scenario of `simulate`'s or `station`'s options: `--scenario` (default
-    `DEFAULT_SCENARIO`, or with `--assembly` an operator who follows the robot), `--lean`,
-    `--scenario-text`, `--assembly`, `--operator`, `--policy`, and what `simulate` alone has
-    (`--interaction`, `--interface`, `--separation`)."""
-    overrides = [t for t in (LEAN if args.lean else None, args.scenario_text) if t]
-    name = args.scenario
-    if name is None and args.assembly is None:
-        name = DEFAULT_SCENARIO
-    scenario = load_cell_scenario(name, overrides)
-    if args.assembly is not None:
-        # A missing file is refused by `load_spec`, before anything is built.
-        scenario = dataclasses.replace(scenario, assembly=str(args.assembly))
-        if args.scenario is None:
-            scenario.name = Path(args.assembly).stem
-            scenario.description = f"assembly {args.assembly}, operator follows the robot"
-    if args.operator is not None:
-        scenario = with_operator_script(scenario, args.operator)
-        # The file's description told of its own operator; say what will run instead.
-        steps = ", ".join(f"{d.task} at step {d.step}" for d in scenario.operator.deviations)
-        scenario.description = (
-            f"the operator performs {steps} instead of the robot's proposal, and otherwise "
-            "follows the robot (--operator)"
-        )
-    if args.policy is not None:
-        scenario = dataclasses.replace(scenario, policy=str(args.policy))
-    return _with_interaction(args, scenario)
-
-
-def _with_interaction(args, scenario: Scenario) -> Scenario:
-    """`--interaction` and `--interface` set the scenario's interaction (a delay the scenario
-    gives stays; left out, the interface's): in anticipate mode the robot starts on its
-    commitment and turns if the indication names another task; in wait mode it waits for it."""
-    # Imported here: the command's flag checks live with the CLI, which imports this module.
-    from hrc_drake.evaluate_command import interaction_from_flags, separation_from_flags
-
-    interaction_from_flags(args)  # a bad mode or interface: one line, before anything is built
-    separation = separation_from_flags(args)
-    if separation is not None:
-        safety = dataclasses.replace(scenario.safety, separation=separation)
-        scenario = dataclasses.replace(scenario, safety=safety)
-    mode, interface = getattr(args, "interaction", None), getattr(args, "interface", None)
-    if mode is None and interface is None:
-        return scenario
-    it = scenario.interaction
-    changed = dataclasses.replace(it, mode=mode or it.mode, interface=interface or it.interface)
-    return dataclasses.replace(scenario, interaction=changed)
-
-
-def scenario_options(args) -> list[str]:
-    """The options of `args` that change what the station simulates, as arguments to give
-    again (`--scenario` apart): `--assembly`, `--lean`, `--scenario-text`, `--operator`,
-    `--interface`. Shown in a refused station-controller pair and in the station's hint."""
-    options = []
-    if args.assembly is not None:
-        options += ["--assembly", str(args.assembly)]
-    if args.lean:
-        options.append("--lean")
-    if args.scenario_text:
-        options += ["--scenario-text", args.scenario_text]
-    if args.operator is not None:
-        options += ["--operator", args.operator]
-    interface = getattr(args, "interface", None)
-    if interface is not None:
-        options += ["--interface", interface]
-    return options
-
-
-def scenario_argv(args) -> list[str]:
-    """`--scenario NAME` (unless the scenario is the assembly's own, `--assembly` without
-    `--scenario`) and `scenario_options(args)`: what starts the other side of a station link
-    with the same scenario."""
-    name = args.scenario
-    if name is None and args.assembly is None:
-        name = DEFAULT_SCENARIO
-    return [*(["--scenario", name] if name is not None else []), *scenario_options(args)]

@@ -50,6 +50,7 @@ import numpy as np
 
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.paths import OutputKind, fresh_name
+from hrc_drake.tasks.bets import Bet, bet_kind
 from hrc_drake.tasks.datafile import (
     check_made_for,
     first_infeasible,
@@ -233,8 +234,6 @@ def table_from_seconds(
 
 def uniform_bets(space: StateSpace, retarget: float, swap: float) -> dict[BetKey, float]:
     """Every bet of `space` at one re-target and one swap figure (hand-made tables)."""
-    from hrc_drake.tasks.interaction import Bet, bet_kind
-
     return {
         (s, c, t): retarget if bet_kind(space, c, t) == Bet.RETARGET else swap
         for s, c, t in bet_pairs(space)

@@ -39,11 +39,11 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
-from enum import StrEnum
 from statistics import NormalDist
 
 import numpy as np
 
+from hrc_drake.tasks.bets import Bet, bet_kind
 from hrc_drake.tasks.costs import CostTable, CostTableError
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.tokens import UNDO
@@ -170,24 +170,6 @@ def make_interaction(
         )
     delay = DEFAULT_DELAYS[interface] if delay is None else delay.check()
     return Interaction(mode, interface, delay)
-
-
-class Bet(StrEnum):
-    """How the committed task relates to the indicated one."""
-
-    RIGHT = "right"
-    RETARGET = "retarget"
-    SWAP = "swap"
-
-
-def bet_kind(space: StateSpace, committed: str, indicated: str) -> Bet:
-    """Right, re-target (the same part to another seat) or swap (another part, or undo)."""
-    if indicated == committed:
-        return Bet.RIGHT
-    if indicated == UNDO or committed == UNDO:
-        return Bet.SWAP
-    same = space.spec.placement(committed).part == space.spec.placement(indicated).part
-    return Bet.RETARGET if same else Bet.SWAP
 
 
 def extra_seconds(kind: Bet, delay, carry_start: float, carry_end: float, planned: float):

@@ -10,7 +10,7 @@ import sys
 import threading
 
 from hrc_drake.cell.run import run_scenario, scenario_policy
-from hrc_drake.cell.scenario import scenario_from_args, scenario_options
+from hrc_drake.cli.scenario_args import scenario_from_args, scenario_options
 from hrc_drake.hri.faults import FaultError, check_faults
 from hrc_drake.hri.operator import ScriptedOperator
 from hrc_drake.hri.scenario import Scenario
@@ -23,7 +23,6 @@ from hrc_drake.tasks.tokens import UNDO
 
 EXIT_INTERRUPTED = 130  # the shell's status for a command ended by SIGINT (128 + 2)
 DEFAULT_STILL_TIME = 10.0  # s, simulated: `--still` without `--still-time`
-_scenario = scenario_from_args  # the name tests and older scripts import
 
 
 def _known_decisions(scenario: Scenario, space, policy, live: bool):
