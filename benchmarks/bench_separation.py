@@ -33,7 +33,7 @@ from pydrake.systems.framework import DiagramBuilder
 
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.intent import MotionIntent
-from hrc_drake.cell.operator_body import BodySpheres
+from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.run import run_scenario
 from hrc_drake.cell.scenario import LEAN, cell_design, load_cell_scenario, motion_options
 from hrc_drake.cell.separation import ControllerSeparationMonitor, assess

@@ -121,8 +121,8 @@ def robot_late(scenario, result) -> float:
     """Seconds per held task the robot put the part in place after the operator's hands were
     free of the fetch (0 where it was there first): how much of the assembly the robot's own
     motion, and what slows it, decides."""
+    from hrc_drake.cell.ports import OperatorActivity
     from hrc_drake.cell.scenario import cell_design
-    from hrc_drake.cell.sim_operator import OperatorActivity
     from hrc_drake.cell.station import body_script_of
     from hrc_drake.motion.scene import load_cell_frames
     from hrc_drake.tasks.spec import load_spec

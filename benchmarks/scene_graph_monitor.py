@@ -40,7 +40,8 @@ from pydrake.geometry import Role
 from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from hrc_drake.cell.operator_body import CHAIN_GAP, BodySpheres
+from hrc_drake.cell.person import CHAIN_GAP
+from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.separation import SafetyLog, SeparationReading, allowed_scale
 from hrc_drake.cell.supervisor import Mode, SupervisorStatus
 from hrc_drake.hri.scenario import SafetyConfig

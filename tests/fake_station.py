@@ -20,8 +20,8 @@ from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.systems.framework import BasicVector, Diagram, DiagramBuilder, LeafSystem
 
 from hrc_drake.cell.interface import CellStationServer, LockstepTimeouts
-from hrc_drake.cell.operator_body import BodySpheres
-from hrc_drake.cell.slot_monitor import (
+from hrc_drake.cell.ports import (
+    BodySpheres,
     CellConfiguration,
     PartPlacement,
     PartStatus,

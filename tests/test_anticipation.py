@@ -6,9 +6,9 @@ import dataclasses
 import numpy as np
 import pytest
 
+from hrc_drake.cell.ports import PartStatus
 from hrc_drake.cell.run import build_closed_loop
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
-from hrc_drake.cell.slot_monitor import PartStatus
 from hrc_drake.cell.supervisor import Mode
 from hrc_drake.robot_models import UR3
 

@@ -13,13 +13,9 @@ from pydrake.multibody.parsing import PackageMap
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.solvers import Solve
 
-from hrc_drake.cell import (
-    PartStatus,
-    make_cell_station,
-    simulate_station,
-    station_scenario,
-)
+from hrc_drake.cell import make_cell_station, simulate_station, station_scenario
 from hrc_drake.cell.controller import COMMANDED, MEASURED
+from hrc_drake.cell.ports import PartStatus
 from hrc_drake.cell.scenario import load_cell_scenario, plant_config, scene_graph_config
 from hrc_drake.cell.sim_operator import bolt_weld
 from hrc_drake.cell.welds import Weld

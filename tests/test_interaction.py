@@ -486,8 +486,8 @@ def test_the_simulated_operator_indicates_after_the_delay():
     from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import ConstantValueSource
 
+    from hrc_drake.cell.ports import CellConfiguration
     from hrc_drake.cell.sim_operator import SimulatedOperator
-    from hrc_drake.cell.slot_monitor import CellConfiguration
     from hrc_drake.hri.messages import Prompt, PromptKind
 
     def indication_after(operator, seconds: float):

@@ -6,7 +6,9 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.analysis import Simulator
 
 from hrc_drake.cell.intent import MotionIntent
-from hrc_drake.cell.operator_body import CHAIN_GAP, BodySpheres, ReachInto, body_pose
+from hrc_drake.cell.operator_body import ReachInto
+from hrc_drake.cell.person import CHAIN_GAP, body_pose
+from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.run import run_scenario, shared_planner
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario, motion_options
 from hrc_drake.cell.separation import (

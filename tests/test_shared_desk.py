@@ -171,9 +171,10 @@ def test_separation_flag_is_checked_before_any_work():
 def test_a_body_the_forecast_cannot_explain_replaces_every_forecast_timeline_while_it_stays():
     """Each timeline of a joined forecast (whole body first, then arms) is replaced by the
     observed body's same spheres until the stay ends, and left as forecast after it."""
-    from hrc_drake.cell.desk import Anchor, OperatorForecast
+    from hrc_drake.cell.forecast import Anchor, OperatorForecast
     from hrc_drake.cell.keep_clear import _staying
-    from hrc_drake.cell.operator_body import BodySpheres, body_pose
+    from hrc_drake.cell.person import body_pose
+    from hrc_drake.cell.ports import BodySpheres
 
     person = Person()
     forecast = OperatorForecast(person, DESK, delay=1.0, sigma=0.3)
@@ -197,7 +198,7 @@ def test_a_forecast_without_timing_spread_is_the_one_timeline_of_the_model():
     """`safety.forecast_spread` 0 keeps only the modelled timeline (the bound of a perfect
     forecast); 1 keeps the whole spread, before the indication (delay quantiles), after it and
     once seen."""
-    from hrc_drake.cell.desk import Anchor, OperatorForecast
+    from hrc_drake.cell.forecast import Anchor, OperatorForecast
 
     person = Person()
     full = OperatorForecast(person, DESK, delay=2.0, sigma=0.4)
@@ -215,7 +216,8 @@ def test_a_forecast_without_timing_spread_is_the_one_timeline_of_the_model():
     joined = full.occupancy(anchor, 0.0, 2.0, full.offsets(True))
     assert one.centres.shape[1] < joined.centres.shape[1]
     # The fitted forecast keeps its spread.
-    from hrc_drake.cell.operator_body import BodySpheres, body_pose
+    from hrc_drake.cell.person import body_pose
+    from hrc_drake.cell.ports import BodySpheres
 
     centres, radii, groups = body_pose(
         np.asarray(person.stance), np.asarray(person.rest_hand)
@@ -234,7 +236,8 @@ def _desk_run(separation: str, **person):
     one the scenario describes (and the controller forecasts)."""
     from dataclasses import replace
 
-    from hrc_drake.cell.desk import DeskScript, desk_of
+    from hrc_drake.cell.desk import DeskScript
+    from hrc_drake.cell.person import desk_of
     from hrc_drake.cell.run import run_scenario
     from hrc_drake.cell.scenario import LEAN, cell_design, load_cell_scenario
     from hrc_drake.motion.scene import load_cell_frames

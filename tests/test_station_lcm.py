@@ -36,17 +36,17 @@ from hrc_drake.cell.interface import (
     make_cell_station_interface,
 )
 from hrc_drake.cell.loop import ClosedLoop
-from hrc_drake.cell.operator_body import BodySpheres
-from hrc_drake.cell.remote import RemoteCell, run_over_lcm, station_of
-from hrc_drake.cell.run import build_closed_loop, controller_of, run_scenario
-from hrc_drake.cell.scenario import LEAN, load_cell_scenario
-from hrc_drake.cell.slot_monitor import (
+from hrc_drake.cell.ports import (
+    BodySpheres,
     CellConfiguration,
     PartPlacement,
     PartStatus,
     placement_transform,
     pose_tuple,
 )
+from hrc_drake.cell.remote import RemoteCell, run_over_lcm, station_of
+from hrc_drake.cell.run import build_closed_loop, controller_of, run_scenario
+from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
 from hrc_drake.hri.scenario import Scenario, ScenarioError
 

@@ -27,7 +27,7 @@ from __future__ import annotations
 import enum
 from dataclasses import replace
 
-from hrc_drake.cell.slot_monitor import CellConfiguration
+from hrc_drake.cell.ports import CellConfiguration
 from hrc_drake.cell.supervisor_state import Mode, SupervisorError, SupervisorStatus
 from hrc_drake.motion.plan import HOME_LEG, LIFT, Plan, Stage
 from hrc_drake.motion.service import PlanRequest

@@ -18,10 +18,11 @@ import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import Demultiplexer
 
-from hrc_drake.cell.desk import OperatorForecast, desk_of
+from hrc_drake.cell.forecast import OperatorForecast
 from hrc_drake.cell.intent import MotionIntent
 from hrc_drake.cell.keep_clear import KeepClearSettings
-from hrc_drake.cell.operator_body import BodySpheres
+from hrc_drake.cell.person import desk_of
+from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.separation import (
     ControllerSeparationMonitor,
     RobotEnvelope,

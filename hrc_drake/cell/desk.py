@@ -1,16 +1,12 @@
-"""The shared desk in the cell: the operator's bins, the body script of an operator who uses them,
-and the controller's forecast of that body (`hrc_drake.hri.activity` is the model of both).
+"""The shared desk in the simulated station: the operator's bins drawn on the table, and the body
+script of an operator who uses them (`hrc_drake.hri.activity` is the model; the controller's
+forecast of the same body is `hrc_drake.cell.forecast`).
 
-The station moves the simulated operator's body by `DeskScript` with this person's parameters;
-the controller forecasts it by `OperatorForecast` with the population's, from what it knows: the
-task indicated (or the one it predicts, with the interface's median delay) and what the body
-tracker reports. The forecast is the body as spheres sampled in time (`motion.clearance.
-Occupancy`), the form the separation monitor measures.
+The station moves the simulated operator's body by `DeskScript` with this person's parameters
+(the controller forecasts it with the population's).
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass, replace
 
 import numpy as np
 from pydrake.geometry import (
@@ -23,40 +19,17 @@ from pydrake.geometry import (
 )
 from pydrake.math import RigidTransform
 
-from hrc_drake.cell.operator_body import body_pose
-from hrc_drake.cell.sim_operator import ActivityKind, OperatorActivity
+from hrc_drake.cell.ports import ActivityKind, OperatorActivity
 from hrc_drake.hri.activity import (
     Desk,
-    DeskBin,
     HandTimeline,
     Person,
-    Stay,
     bolting_hand,
-    desk_stays,
     indication_timeline,
-    stays_timeline,
 )
 from hrc_drake.layout import CellLayout
-from hrc_drake.motion.clearance import Occupancy
-from hrc_drake.motion.poses import CellFrames
 
 BIN_COLOUR = {"bolts": Rgba(0.55, 0.55, 0.60, 1.0), "nuts": Rgba(0.75, 0.62, 0.25, 1.0)}
-HOSTED_ABOVE = 0.02  # m: a seat on a host part stands about this far above the base's
-
-
-def desk_of(frames: CellFrames, layout: CellLayout) -> Desk:
-    """The desk of a cell: the layout's bins, and where each placement token's seat is."""
-    spec = frames.spec
-    seats, parts = {}, {}
-    for token, mount, slots in spec.placements():
-        centre = np.mean([frames.seats[k].translation() for k in slots], axis=0)
-        if spec.placement(token).host is not None:
-            centre = centre + np.array([0.0, 0.0, HOSTED_ABOVE])
-        seats[token] = tuple(float(x) for x in centre)
-        parts[token] = mount.part
-    bins = tuple(DeskBin(b.name, b.holds, b.grab_point()) for b in layout.bins)
-    bolts = {p.symbol: p.bolt_count for p in spec.parts}
-    return Desk(bins, seats, parts, bolts)
 
 
 def add_bins(scene_graph, layout: CellLayout) -> None:
@@ -120,147 +93,7 @@ class DeskScript:
         return timeline.at(now)
 
 
-def body_samples(person: Person, timeline: HandTimeline, times: np.ndarray) -> Occupancy:
-    """The body as spheres at `times` with the hand on `timeline` (velocities by differences,
-    as a tracker reports them)."""
-    stance = np.asarray(person.stance, dtype=float)
-    centres, radii = [], None
-    for t in times:
-        c, radii, _ = body_pose(stance, timeline.at(t), person.left_handed).spheres()
-        centres.append(c)
-    centres = np.array(centres)
-    velocities = np.zeros_like(centres)
-    if len(times) > 1:
-        velocities = np.gradient(centres, times, axis=0)
-    return Occupancy(np.asarray(times, dtype=float), centres, np.asarray(radii), velocities)
-
-
-# The hand, forearm and upper arm: the first three groups of `BodyPose.spheres`.
-ARM_SPHERES = body_pose(np.zeros(2), np.array([0.5, 0.0, 0.1])).spheres()[2][2][1]
-
-
-@dataclass(frozen=True)
-class Anchor:
-    """What a forecast starts from: the task the operator indicates (or is predicted to), when,
-    and how far the person's timeline runs behind the model's (`lag` [s]); once the tracker
-    saw the hand at a stay of the activity, `done` stays are behind it and it goes on from
-    `start` (the hand seen) at `at`."""
-
-    task: str
-    at: float
-    lag: float = 0.0
-    done: int = 0
-    start: tuple[float, float, float] | None = None
-
-
-class OperatorForecast:
-    """The controller's forecast of the operator's body (see the module docstring).
-
-    `person`: the parameters assumed of the operator; `delay`, `sigma`: the interface's median
-    delay from a prompt to the indication [s] and the standard deviation of its log; `spread`:
-    the fraction of the timing spread below kept (`safety.forecast_spread`; 0: one timeline,
-    the model's own).
-
-    A forecast is the union of the body on a few timelines — swept volumes in time windows:
-    before the indication, one per quantile of the delay (`QUANTILES`), each also `JITTER` late;
-    after it, the person from `EARLY` ahead of the model to `LATE` behind it (a slower hand, a
-    longer lag). The arm is timed to keep clear of them all.
-    """
-
-    SAMPLE = 0.1  # s between forecast samples
-    SEARCH = 5.0  # s either side of now searched to re-anchor on the observed hand
-    QUANTILES = (-1.28, -0.52, 0.0, 0.52, 1.28)  # standard normal: 10, 30, 50, 70, 90 %
-    JITTER = 0.4  # s
-    EARLY, LATE = 0.1, 0.3  # s ahead of and behind the model after the indication
-    SEEN_LATE = 0.3  # s behind the model once the tracker saw where the activity is
-
-    def __init__(
-        self, person: Person, desk: Desk, delay: float, sigma: float = 0.0, spread: float = 1.0
-    ):
-        self.person, self.desk, self.delay, self.sigma = person, desk, delay, sigma
-        self.spread = spread
-
-    def offsets(self, indicated: bool | str) -> tuple[float, ...]:
-        """The time offsets of the timelines a forecast joins (see the class docstring):
-        before the indication (False), after it (True), or once seen at a stay ("seen"); the
-        same offsets once each (with `spread` 0, only 0)."""
-        k = self.spread
-        if indicated == "seen":
-            offsets = np.linspace(0.0, k * self.SEEN_LATE, 3)
-        elif indicated:
-            offsets = np.linspace(-k * self.EARLY, k * self.LATE, 6)
-        else:
-            quantiles = [self.delay * (np.exp(k * self.sigma * z) - 1.0) for z in self.QUANTILES]
-            offsets = [q + d for q in quantiles for d in (0.0, k * self.JITTER)]
-        return tuple(dict.fromkeys(float(d) for d in offsets))
-
-    def fitted(self, body) -> OperatorForecast:
-        """This forecast for the person a tracked `body` (BodySpheres) at rest shows: the hand
-        they work with (the side of the arm's shoulder) and where it rests."""
-        if len(body.groups) < 4:
-            return self
-        shoulder = body.centres[body.groups[2][0]]
-        torso = body.centres[body.groups[3][0]]
-        left = bool(shoulder[1] < torso[1])
-        rest = tuple(float(x) for x in body.centres[body.groups[0][0]])
-        person = replace(self.person, left_handed=left, rest_hand=rest)
-        return OperatorForecast(person, self.desk, self.delay, self.sigma, self.spread)
-
-    def stays(self, task: str) -> tuple[Stay, ...]:
-        """The stays of the activity the forecast expects after the indication of `task`."""
-        return desk_stays(self.person, self.desk, task)
-
-    def timeline(self, anchor: Anchor, shift: float = 0.0) -> HandTimeline:
-        """The hand's forecast moves for `anchor`, `shift` seconds later."""
-        stays = self.stays(anchor.task)[anchor.done :]
-        return stays_timeline(self.person, stays, anchor.at + anchor.lag + shift, anchor.start)
-
-    def occupancy(
-        self, anchor: Anchor, start: float, end: float, offsets: tuple[float, ...] = (0.0,)
-    ) -> Occupancy:
-        """The forecast body over [start, end]: the union of the bodies on the timelines of
-        `anchor` moved by each of `offsets` [s]."""
-        times = np.arange(start, end + self.SAMPLE / 2, self.SAMPLE)
-        bodies = [
-            body_samples(self.person, self.timeline(anchor, d), times)
-            for d in dict.fromkeys(offsets)
-        ]
-        # Past the first timeline, the arm only: torso and head barely move between them.
-        arm = ARM_SPHERES
-        bodies[1:] = [
-            Occupancy(b.times, b.centres[:, :arm], b.radii[:arm], b.velocities[:, :arm])
-            for b in bodies[1:]
-        ]
-        return Occupancy(
-            times,
-            np.concatenate([b.centres for b in bodies], axis=1),
-            np.concatenate([b.radii for b in bodies]),
-            np.concatenate([b.velocities for b in bodies], axis=1),
-        )
-
-    def departure(
-        self, anchor: Anchor, hand: np.ndarray, now: float, offsets: tuple[float, ...] = (0.0,)
-    ) -> float:
-        """How far the observed `hand` is from the nearest forecast one at `now` [m] (of the
-        timelines of `anchor` moved by each of `offsets`)."""
-        return min(float(np.linalg.norm(self.timeline(anchor, d).at(now) - hand)) for d in offsets)
-
-    def reanchored(self, anchor: Anchor, hand: np.ndarray, now: float) -> tuple[Anchor, float]:
-        """(the anchor whose timeline best explains the observed `hand` at `now`, moved in time
-        within ±SEARCH, and the distance left)."""
-        timeline = self.timeline(anchor)
-        offsets = np.arange(-self.SEARCH, self.SEARCH + 1e-9, 0.05)
-        gaps = np.array([np.linalg.norm(timeline.at(now + d) - hand) for d in offsets])
-        # Of equally good explanations (the hand at rest fits many), the least shift.
-        best = int(np.argmin(gaps + 0.01 * np.abs(offsets)))
-        return replace(anchor, lag=anchor.lag - float(offsets[best])), float(gaps[best])
-
-
 __all__ = [
-    "Anchor",
     "DeskScript",
-    "OperatorForecast",
     "add_bins",
-    "body_samples",
-    "desk_of",
 ]

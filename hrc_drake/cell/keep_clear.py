@@ -35,8 +35,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 from pydrake.common.value import AbstractValue
 
-from hrc_drake.cell.desk import ARM_SPHERES, Anchor, OperatorForecast
-from hrc_drake.cell.operator_body import BodySpheres
+from hrc_drake.cell.forecast import Anchor, OperatorForecast
+from hrc_drake.cell.person import ARM_SPHERES
+from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.supervisor_state import Mode, SupervisorStatus
 from hrc_drake.motion.clearance import Occupancy, ScaleFn, time_around
 from hrc_drake.tasks.tokens import UNDO

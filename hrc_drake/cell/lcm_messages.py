@@ -32,8 +32,7 @@ import numpy as np
 from drake import lcmt_panda_command, lcmt_panda_status
 
 from hrc_drake.cell.contacts import Owner
-from hrc_drake.cell.operator_body import BodySpheres
-from hrc_drake.cell.slot_monitor import CellConfiguration, PartPlacement, PartStatus
+from hrc_drake.cell.ports import BodySpheres, CellConfiguration, PartPlacement, PartStatus
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
 from hrc_drake.robot_models import UR3_JOINTS
 

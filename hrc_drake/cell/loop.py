@@ -35,8 +35,8 @@ from hrc_drake.cell.contacts import Owner, geometry_owners, owner_pairs
 from hrc_drake.cell.controller import Controller, connect_controller
 from hrc_drake.cell.fault_report import fault_records
 from hrc_drake.cell.keep_clear import VIEW_TIMES
+from hrc_drake.cell.ports import CellConfiguration
 from hrc_drake.cell.separation import SafetyLog
-from hrc_drake.cell.slot_monitor import CellConfiguration
 from hrc_drake.cell.station import CellStation
 from hrc_drake.cell.supervisor import Mode, SupervisorStatus, TaskRecord
 from hrc_drake.cell.view import frame_cell

@@ -17,7 +17,6 @@ than the arm is long.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -35,46 +34,27 @@ from pydrake.geometry import (
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.framework import LeafSystem
 
-from hrc_drake.cell.sim_operator import ActivityKind, OperatorActivity
-from hrc_drake.hri.activity import SHOULDER, bolting_hand, min_jerk
+from hrc_drake.cell.person import (
+    ARM_RADII,
+    FOREARM,
+    HAND_RADIUS,
+    HEAD_RADIUS,
+    TORSO_LENGTH,
+    TORSO_RADIUS,
+    UPPER_ARM,
+    BodyPose,
+    body_pose,
+)
+from hrc_drake.cell.ports import ActivityKind, BodySpheres, OperatorActivity
+from hrc_drake.hri.activity import bolting_hand, min_jerk
 from hrc_drake.hri.scenario import BodyConfig
 
-UPPER_ARM, FOREARM = 0.30, 0.32  # shoulder-elbow, elbow-hand centre [m] (adult, ~50th pct)
-ARM_RADII = (0.045, 0.04)
-HAND_RADIUS = 0.05
-TORSO_RADIUS, TORSO_LENGTH = 0.15, 0.45
-HEAD_RADIUS = 0.10
-TORSO_CENTRE = np.array([0.0, 0.0, 0.25])
-HEAD_CENTRE = np.array([0.0, 0.0, 0.75])
-CHAIN_GAP = 1 - np.sqrt(3) / 2  # of a chain sphere's radius (see `_chain`)
 SKIN = Rgba(0.93, 0.75, 0.62, 1.0)
 SHIRT = Rgba(0.25, 0.40, 0.65, 1.0)
 
 # (simulated time, the simulated operator's activity, position of the part it works on or None)
 #   -> the hand centre in world [m]
 BodyScript = Callable[[float, OperatorActivity, np.ndarray | None], np.ndarray]
-
-
-@dataclass(frozen=True)
-class BodySpheres:
-    """The body as world-frame spheres: centres (n×3) [m], radii (n) [m], velocities (n×3)
-    [m/s]; `groups` are the index ranges [start, end) of the body's parts (hand, forearm, upper
-    arm, torso, head), each part within the sphere `bound(group)`."""
-
-    centres: np.ndarray
-    radii: np.ndarray
-    velocities: np.ndarray
-    groups: tuple[tuple[int, int], ...] = ()
-
-    def bound(self, group: int) -> tuple[np.ndarray, float]:
-        """(centre, radius) of a sphere that holds every sphere of `group`."""
-        start, end = self.groups[group]
-        a, b = self.centres[start], self.centres[end - 1]
-        centre = (a + b) / 2
-        return centre, float(np.linalg.norm(b - a) / 2 + self.radii[start:end].max())
-
-    def __deepcopy__(self, memo) -> BodySpheres:
-        return self  # immutable once made (Drake copies abstract values often)
 
 
 class BoltingScript:
@@ -124,101 +104,10 @@ class ReachInto:
         return self.rest + out * (self.target - self.rest)
 
 
-def elbow(shoulder: np.ndarray, hand: np.ndarray, left: bool = False) -> np.ndarray:
-    """The elbow of a two-link arm from `shoulder` to `hand` (elbow down and outward)."""
-    d_vec = hand - shoulder
-    d = float(np.clip(np.linalg.norm(d_vec), 1e-6, UPPER_ARM + FOREARM - 1e-6))
-    u = d_vec / max(np.linalg.norm(d_vec), 1e-9)
-    a = (UPPER_ARM**2 - FOREARM**2 + d**2) / (2 * d)
-    h = np.sqrt(max(UPPER_ARM**2 - a**2, 0.0))
-    pole = np.array([0.0, -0.4 if left else 0.4, -1.0])
-    w = pole - pole.dot(u) * u
-    w /= max(np.linalg.norm(w), 1e-9)
-    return shoulder + a * u + h * w
-
-
 def _along(a: np.ndarray, b: np.ndarray) -> RigidTransform:
     """A pose at the middle of a→b whose z axis points along it (Drake's capsule axis)."""
     z = b - a
     return RigidTransform(RotationMatrix.MakeFromOneVector(z / np.linalg.norm(z), 2), (a + b) / 2)
-
-
-def _chain_steps(radius: float, length: float) -> np.ndarray:
-    """Where the spheres of a capsule of nominal `length` sit along it (0 to 1), spaced ≤ the
-    radius (a fixed count per capsule): their union misses the capsule's surface by at most
-    (1 − √3/2) × radius between two spheres (`CHAIN_GAP`), which the monitor subtracts."""
-    return np.linspace(0.0, 1.0, int(np.ceil(1.1 * length / radius)) + 1)[:, None]
-
-
-# The body's parts as sphere chains: (steps along the part, radius); computed once.
-_FOREARM_STEPS = _chain_steps(ARM_RADII[1], FOREARM)
-_UPPER_ARM_STEPS = _chain_steps(ARM_RADII[0], UPPER_ARM)
-_TORSO_STEPS = _chain_steps(TORSO_RADIUS, TORSO_LENGTH)
-_COUNTS = (1, len(_FOREARM_STEPS), len(_UPPER_ARM_STEPS), len(_TORSO_STEPS), 1)
-_RADII = np.concatenate(
-    [
-        np.full(n, r)
-        for n, r in zip(
-            _COUNTS, (HAND_RADIUS, *ARM_RADII[::-1], TORSO_RADIUS, HEAD_RADIUS), strict=True
-        )
-    ]
-)
-_ENDS = np.cumsum(_COUNTS)
-_GROUPS = tuple((int(e - n), int(e)) for e, n in zip(_ENDS, _COUNTS, strict=True))
-_HALF_TORSO = np.array([0.0, 0.0, TORSO_LENGTH / 2])
-
-
-@dataclass(frozen=True)
-class BodyPose:
-    """Key points of the body in world [m]."""
-
-    def __deepcopy__(self, memo) -> BodyPose:
-        return self  # immutable once made
-
-    shoulder: np.ndarray
-    elbow: np.ndarray
-    hand: np.ndarray
-    torso: np.ndarray
-    head: np.ndarray
-
-    def spheres(self) -> tuple[np.ndarray, np.ndarray, tuple[tuple[int, int], ...]]:
-        """(centres n×3, radii n, index ranges of the parts) of the body as spheres: the hand,
-        the forearm, the upper arm, the torso, the head."""
-        bottom = self.torso - _HALF_TORSO
-        centres = np.vstack(
-            [
-                self.hand,
-                self.elbow + _FOREARM_STEPS * (self.hand - self.elbow),
-                self.shoulder + _UPPER_ARM_STEPS * (self.elbow - self.shoulder),
-                bottom + _TORSO_STEPS * (2 * _HALF_TORSO),
-                self.head,
-            ]
-        )
-        return centres, _RADII, _GROUPS
-
-
-def body_pose(stance: np.ndarray, hand: np.ndarray, left: bool = False) -> BodyPose:
-    """The body standing at `stance` (x, y) with the hand centre at `hand` (of the left arm
-    with `left`); the torso leans toward the hand when the arm is too short."""
-    base = np.array([stance[0], stance[1], 0.0])
-    shoulder = base + SHOULDER * [1.0, -1.0 if left else 1.0, 1.0]
-    reach = np.linalg.norm(hand - shoulder)
-    limit = 0.97 * (UPPER_ARM + FOREARM)
-    lean = np.zeros(3)
-    if reach > limit:
-        # Lean horizontally toward the hand until the arm reaches it.
-        d = hand - shoulder
-        horizontal = float(np.hypot(d[0], d[1]))
-        needed = np.sqrt(max(limit**2 - min(d[2] ** 2, limit**2), 0.0))
-        lean[:2] = d[:2] / max(horizontal, 1e-9) * max(horizontal - needed, 0.0)
-    shoulder = shoulder + lean
-    return BodyPose(
-        shoulder=shoulder,
-        elbow=elbow(shoulder, hand, left),
-        hand=hand,
-        torso=base + TORSO_CENTRE + lean,
-        head=base + HEAD_CENTRE + lean,
-    )
 
 
 _EMPTY = BodySpheres(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from hrc_drake.cell.anticipation import Turn, turn_at
-from hrc_drake.cell.slot_monitor import CellConfiguration, PartStatus
+from hrc_drake.cell.ports import CellConfiguration, PartStatus
 from hrc_drake.cell.supervisor_state import (
     GRIP_SETTLE,
     N_JOINTS,

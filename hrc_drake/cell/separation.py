@@ -58,7 +58,8 @@ from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 
 from hrc_drake.cell.intent import MotionIntent
-from hrc_drake.cell.operator_body import CHAIN_GAP, BodySpheres
+from hrc_drake.cell.person import CHAIN_GAP
+from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell_models import CellDesign, add_cell_models
 from hrc_drake.hri.scenario import SafetyConfig
 from hrc_drake.motion.scene import TCP

@@ -24,43 +24,16 @@ station applies: simulator only). The controller sees none of this: only `hri.in
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
-from enum import StrEnum
+from dataclasses import replace
 
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
-from hrc_drake.cell.slot_monitor import CellConfiguration, PartStatus
+from hrc_drake.cell.ports import ActivityKind, CellConfiguration, OperatorActivity, PartStatus
 from hrc_drake.cell.welds import Weld
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
 from hrc_drake.tasks.decide import Operator
 from hrc_drake.tasks.tokens import UNDO
-
-
-class ActivityKind(StrEnum):
-    """What the simulated operator is doing."""
-
-    REST = "rest"
-    BOLT = "bolt"
-
-
-@dataclass(frozen=True)
-class OperatorActivity:
-    """The simulated operator's activity: `kind` on `part` from `start` for `duration` seconds
-    (decision `step`); `answered_step`, `answered_at` and `answered_task` say when the operator
-    last indicated a task, and which (body motions key on it)."""
-
-    kind: ActivityKind = ActivityKind.REST
-    part: str = ""
-    start: float = 0.0
-    duration: float = 0.0
-    step: int = 0
-    answered_step: int = 0
-    answered_at: float = float("-inf")
-    answered_task: str = ""
-
-    def __deepcopy__(self, memo) -> OperatorActivity:
-        return self  # immutable
 
 
 def bolt_weld(configuration: CellConfiguration, part: str) -> Weld | None:

@@ -12,122 +12,30 @@ fell on the table, lies askew on the plate or rests in the gripper is found wher
 
 from __future__ import annotations
 
-import enum
 import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from pydrake.common.eigen_geometry import Quaternion
 from pydrake.common.value import AbstractValue
 from pydrake.geometry import GeometryId, QueryObject, SceneGraph
-from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.math import RigidTransform
 from pydrake.multibody.plant import ContactResults, MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex
 from pydrake.systems.framework import LeafSystem
 
 from hrc_drake.cell.contacts import contact_pairs, geometry_owners
+from hrc_drake.cell.ports import (
+    CellConfiguration,
+    PartPlacement,
+    PartStatus,
+    placement_transform,
+    pose_tuple,
+)
 from hrc_drake.cell_models import BOSS, PLATE, POCKET_CLEARANCE, POCKET_DEPTH
 from hrc_drake.motion.poses import CellFrames, seat_pose
 from hrc_drake.obstacle_models import OBSTACLE, OBSTACLE_SEEN_ABOVE, OBSTACLE_SIZE
 from hrc_drake.robot_models import GRIPPER
 from hrc_drake.tasks.spec import SpecError
-
-
-class PartStatus(enum.Enum):
-    """Where a part is, as the SlotMonitor sees it."""
-
-    SEATED = "seated"  # in a seat of the plate or of a host part
-    HELD = "held"  # in the gripper, in no seat
-    MISPLACED = "misplaced"  # on the plate or a host part, in no seat
-    TRAY = "tray"  # at rest at a tray home frame
-    TRANSIT = "transit"  # anywhere else (moving, or lying elsewhere)
-
-
-@dataclass(frozen=True)
-class PartPlacement:
-    """One part's placement. `slots` are the base slots under it (empty unless seated).
-
-    `pose` is the part body's measured world pose `(x, y, z, qw, qx, qy, qz)` (m, then the unit
-    quaternion), filled by the SlotMonitor for every part in every status; empty for a
-    placement built without one. It is read to the last bit, so it jitters between steps while
-    the status and token stand still: to tell whether the cell changed, compare
-    `CellConfiguration.tokens()` or the statuses, not whole configurations. Use
-    `placement_transform` for it as a RigidTransform.
-    """
-
-    status: PartStatus
-    seats: tuple[str, ...] = ()  # seat frames it sits in, e.g. ("slot_1", "slot_2") or ("row_2",)
-    slots: tuple[int, ...] = ()
-    host: str | None = None  # model instance of the host part, for a part on another part
-    token: str | None = None  # task token, e.g. "F3", "S12", "F01"; None unless seated in place
-    pose: tuple[float, ...] = ()  # world pose: x, y, z [m], qw, qx, qy, qz; () if not measured
-
-
-def pose_tuple(X: RigidTransform) -> tuple[float, ...]:
-    """`X` as `PartPlacement.pose`: (x, y, z, qw, qx, qy, qz), the translation and
-    `RotationMatrix.ToQuaternion()`."""
-    q = X.rotation().ToQuaternion()
-    x, y, z = (float(v) for v in X.translation())
-    return (x, y, z, float(q.w()), float(q.x()), float(q.y()), float(q.z()))
-
-
-def placement_transform(placement: PartPlacement) -> RigidTransform:
-    """The world pose of a placement as a RigidTransform; ValueError if it has none (or not a
-    7-float pose with a non-zero finite quaternion)."""
-    pose = placement.pose
-    if not pose:
-        raise ValueError(
-            f"a {placement.status.value} placement without a pose: only the SlotMonitor's "
-            "placements (or a configuration message with has_pose) carry one"
-        )
-    if len(pose) != 7:
-        raise ValueError(
-            f"a placement pose of {len(pose)} values; it must be 7: x, y, z, qw, qx, qy, qz"
-        )
-    q = np.asarray(pose[3:], dtype=float)
-    norm = float(np.linalg.norm(q))
-    if not (math.isfinite(norm) and norm > 0.0) or not np.all(np.isfinite(pose[:3])):
-        raise ValueError(f"a placement pose {pose} that is not finite, or has a zero quaternion")
-    # Quaternion() refuses what is not unit length to within its tolerance: a pose read from
-    # elsewhere (a camera) may be off by more than that.
-    return RigidTransform(RotationMatrix(Quaternion(q / norm)), np.asarray(pose[:3], dtype=float))
-
-
-@dataclass(frozen=True)
-class CellConfiguration:
-    """The placement of every part, sorted by model instance name. Two readings are equal only
-    if every pose is, to the bit: to see whether the cell changed, compare `tokens()` (or the
-    statuses)."""
-
-    placements: tuple[tuple[str, PartPlacement], ...] = ()
-    # The world pose (x, y, z, qw, qx, qy, qz) of a temporary obstacle seen in the work
-    # (`hrc_drake.obstacle_models`), or () when there is none.
-    obstacle: tuple[float, ...] = ()
-
-    def __deepcopy__(self, memo) -> CellConfiguration:
-        # Immutable: Drake's copies of this abstract value can share it.
-        return self
-
-    def placement(self, instance: str) -> PartPlacement:
-        """The placement of the part `instance`; KeyError naming the known parts if unknown."""
-        for name, placement in self.placements:
-            if name == instance:
-                return placement
-        known = ", ".join(name for name, _ in self.placements)
-        raise KeyError(f"no part {instance!r} in the cell configuration (parts: {known})")
-
-    def status(self, instance: str) -> PartStatus:
-        """The status of the part `instance`."""
-        return self.placement(instance).status
-
-    def tokens(self) -> frozenset[str]:
-        """The task-layer configuration: the tokens of the seated parts, e.g. {"F3","S12","F01"}."""
-        return frozenset(p.token for _, p in self.placements if p.token is not None)
-
-    def layout(self) -> dict[str, str]:
-        """Which part instance sits at each token: instance -> token, seated parts only."""
-        return {name: p.token for name, p in self.placements if p.token is not None}
-
 
 # A seated part is in its pocket: its boss(es) can stand off the seat by the pocket's clearance
 # along each side (cell_models: POCKET_CLEARANCE), no more; the little above that allows for the

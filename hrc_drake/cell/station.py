@@ -58,7 +58,7 @@ from pydrake.systems.sensors import CameraConfig, RgbdSensor
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.arm_servo import GravityCompensation, servo_actuators
 from hrc_drake.cell.contacts import geometry_owners, owner_pairs
-from hrc_drake.cell.desk import DeskScript, add_bins, desk_of
+from hrc_drake.cell.desk import DeskScript, add_bins
 from hrc_drake.cell.faults import FaultInjector, SilentOperator
 from hrc_drake.cell.gripper import add_gripper_ports
 from hrc_drake.cell.obstacle import (
@@ -67,15 +67,12 @@ from hrc_drake.cell.obstacle import (
     mount_obstacle,
     mounted_obstacles,
 )
-from hrc_drake.cell.operator_body import BodyScript, BodySpheres, OperatorBody
+from hrc_drake.cell.operator_body import BodyScript, OperatorBody
+from hrc_drake.cell.person import desk_of
+from hrc_drake.cell.ports import BodySpheres, CellConfiguration, PartStatus, placement_transform
 from hrc_drake.cell.scenario import cell_design, plant_config, scene_graph_config
 from hrc_drake.cell.sim_operator import SimulatedOperator
-from hrc_drake.cell.slot_monitor import (
-    CellConfiguration,
-    PartStatus,
-    SlotMonitor,
-    placement_transform,
-)
+from hrc_drake.cell.slot_monitor import SlotMonitor
 from hrc_drake.cell.welds import Bolts, Weld
 from hrc_drake.cell_models import CellDesign, add_cell_models
 from hrc_drake.hri.faults import check_faults

@@ -53,8 +53,8 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 from hrc_drake.cell.anticipation import TAU_EPS, Anticipation, back_above, same_part, wait_point
 from hrc_drake.cell.intent import MotionIntent
 from hrc_drake.cell.keep_clear import KeepClear, KeepClearSettings
+from hrc_drake.cell.ports import CellConfiguration, PartStatus
 from hrc_drake.cell.recovery import FaultRecovery
-from hrc_drake.cell.slot_monitor import CellConfiguration, PartStatus
 from hrc_drake.cell.supervisor_state import (
     N_JOINTS,
     TASK_CAP,

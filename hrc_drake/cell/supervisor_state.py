@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hrc_drake.cell.desk import Anchor
+from hrc_drake.cell.forecast import Anchor
 from hrc_drake.hri.messages import Prompt
 from hrc_drake.motion.clearance import Hold
 from hrc_drake.motion.plan import Plan
