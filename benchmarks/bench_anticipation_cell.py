@@ -11,9 +11,10 @@ m/s, the operator's body and the separation monitor on.
 Per run: the assembly's simulated seconds in each mode, the indication delay `wait` spends (per
 step, from the prompt to the indication, summed), and the share of it anticipation saves:
 (T_wait - T_anticipate) / delay. Also re-targets, swaps, collisions and separation violations.
-Beside each cell time, the task level's on the same run (`hrc_drake.cell.evaluate.task_level_run`:
-the cell's cost table, planned by the motion layer and cached, the same operator and the same
-delay draws) and the ratio of the two: how far the task level mirrors the cell.
+Beside each cell time, the task level's on the same run
+(`hrc_drake.cell.run.evaluate.task_level_run`: the cell's cost table, planned by the motion layer
+and cached, the same operator and the same delay draws) and the ratio of the two: how far the task
+level mirrors the cell.
 
 Usage: ``python benchmarks/bench_anticipation_cell.py [--workers 2] [--lean]`` (with ``--lean``
 the report is printed, not written).
@@ -70,7 +71,7 @@ def run_scenario_of(job: tuple[str, str, str, bool]):
 
 def one_run(job: tuple[str, str, str, bool]) -> dict:
     """One run of a cell in a mode over an interface: its figures."""
-    from hrc_drake.cell.run import scenario_policy
+    from hrc_drake.cell.run.run import scenario_policy
     from hrc_drake.tasks.decide import run_decisions
     from hrc_drake.tasks.graph import generate_states
     from hrc_drake.tasks.spec import load_spec
@@ -110,8 +111,8 @@ def one_run(job: tuple[str, str, str, bool]) -> dict:
 def add_task_level(runs: list[dict], jobs: list) -> None:
     """Each run's task-level seconds (`task`), from its cell's cost table (computed once and
     cached by `default_cost_table`, here in this process)."""
-    from hrc_drake.cell.costs import default_cost_table
-    from hrc_drake.cell.evaluate import task_level_run
+    from hrc_drake.cell.run.costs import default_cost_table
+    from hrc_drake.cell.run.evaluate import task_level_run
     from hrc_drake.tasks.graph import generate_states
     from hrc_drake.tasks.spec import load_spec
 

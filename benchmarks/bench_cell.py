@@ -24,7 +24,7 @@ from pydrake.geometry import Meshcat
 from pydrake.math import RigidTransform
 
 from hrc_drake.atomic import atomic_write_text
-from hrc_drake.cell import make_cell_station, simulate_station, station_scenario
+from hrc_drake.cell.station import make_cell_station, simulate_station, station_scenario
 from hrc_drake.hri.scenario import Scenario
 
 REPORT = Path(__file__).resolve().parent / "reports" / "cell.md"

@@ -49,9 +49,9 @@ from timing import best_cpu_rtf
 
 import hrc_drake.cell_models as cell_models
 from hrc_drake.atomic import atomic_write_text
-from hrc_drake.cell import make_cell_station, station_scenario
-from hrc_drake.cell.run import shared_planner
+from hrc_drake.cell.run.run import shared_planner
 from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
+from hrc_drake.cell.station import make_cell_station, station_scenario
 from hrc_drake.hri.scenario import Scenario
 from hrc_drake.motion.plan import Stage
 from hrc_drake.motion.poses import default_layout
@@ -365,9 +365,9 @@ def rim_pinch(modulus: float) -> list[dict]:
     """The 4-slot closed loop, its square flange (task 2) slid `PINCH_OFFSETS` in the fingers,
     at hydroelastic `modulus`: per offset, whether the run completed, its collisions, the
     largest contact force on a finger, and how it ended."""
-    from hrc_drake.cell.contacts import geometry_owners
-    from hrc_drake.cell.run import build_closed_loop
-    from hrc_drake.cell.supervisor import Mode
+    from hrc_drake.cell.controller.supervisor import Mode
+    from hrc_drake.cell.run.run import build_closed_loop
+    from hrc_drake.cell.station.contacts import geometry_owners
 
     runs = []
     for offset in PINCH_OFFSETS:

@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hrc_drake.cell import supervisor as supervisor_module
-from hrc_drake.cell.run import run_scenario
+from hrc_drake.cell.controller import supervisor as supervisor_module
+from hrc_drake.cell.run.run import run_scenario
 from hrc_drake.cell.scenario import LEAN, cell_design, load_cell_scenario, motion_options
 from hrc_drake.motion.planner import MotionPlanner
 from hrc_drake.motion.service import WorkerPlanService
@@ -100,7 +100,7 @@ def main() -> None:
 
 
 def _run_with(scenario, worker: WorkerPlanService):
-    from hrc_drake.cell import run as run_module
+    from hrc_drake.cell.run import run as run_module
 
     original = run_module.shared_plan_service
     run_module.shared_plan_service = lambda options, design: worker

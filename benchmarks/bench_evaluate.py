@@ -1,7 +1,7 @@
 """Monte Carlo evaluation of the deciders on operator populations -> benchmarks/reports/evaluate.md.
 
 Side by side in one run, on the flange case with the cell's cost table (computed once and
-cached, `hrc_drake.cell.costs.default_cost_table`):
+cached, `hrc_drake.cell.run.costs.default_cost_table`):
 
 1. every (decider, operator model) pair: completion, mean / p95 / worst simulated seconds;
 2. mpc against exact on the habitual and mistake-prone populations, mpc when its operator model
@@ -250,7 +250,7 @@ def main() -> int:
         "--section", type=int, choices=(1, 2, 3, 4), help="run and print this section only"
     )
     args = parser.parse_args()
-    from hrc_drake.cell.costs import default_cost_table
+    from hrc_drake.cell.run.costs import default_cost_table
 
     space = generate_states(load_spec(models_dir() / "assemblies" / "flange.yaml"))
     costs = default_cost_table(space)

@@ -31,8 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from hrc_drake.atomic import atomic_write_text
-from hrc_drake.cell.costs import default_cost_table
-from hrc_drake.cell.evaluate import CellOptions
+from hrc_drake.cell.run.costs import default_cost_table
+from hrc_drake.cell.run.evaluate import CellOptions
 from hrc_drake.evaluate import Setup, evaluate
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.interaction import ANTICIPATE, MODES, WAIT, make_interaction

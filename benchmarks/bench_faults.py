@@ -89,7 +89,7 @@ def _texts(cell: str, lean: bool) -> list[str]:
 
 def run_tasks(cell: str, lean: bool) -> int:
     """How many tasks the cell's run has (its operator follows the robot)."""
-    from hrc_drake.cell.run import scenario_policy
+    from hrc_drake.cell.run.run import scenario_policy
     from hrc_drake.cell.scenario import load_cell_scenario
     from hrc_drake.hri.operator import ScriptedOperator
     from hrc_drake.tasks.decide import run_decisions

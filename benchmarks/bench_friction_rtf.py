@@ -55,9 +55,9 @@ def _worker(tree: str, scenario: str, texts: list[str], repeats: int) -> dict:
     sys.path.insert(0, tree)
     from pydrake.systems.analysis import Simulator
 
-    from hrc_drake.cell.run import build_closed_loop, run_scenario
+    from hrc_drake.cell.run.run import build_closed_loop, run_scenario
     from hrc_drake.cell.scenario import load_cell_scenario
-    from hrc_drake.cell.station import make_cell_station
+    from hrc_drake.cell.station.build import make_cell_station
     from hrc_drake.hri.scenario import Scenario
 
     if not hasattr(Scenario(), "interaction"):
@@ -127,10 +127,10 @@ def hold_levers(scenario_name: str, repeats: int) -> dict[str, float]:
 
     from pydrake.systems.analysis import Simulator
 
-    from hrc_drake.cell.run import build_closed_loop
+    from hrc_drake.cell.run.run import build_closed_loop
     from hrc_drake.cell.scenario import LEAN, load_cell_scenario
-    from hrc_drake.cell.station import make_cell_station
-    from hrc_drake.cell.welds import Weld
+    from hrc_drake.cell.station.build import make_cell_station
+    from hrc_drake.cell.station.welds import Weld
 
     scenario = load_cell_scenario(scenario_name, [LEAN, NO_DELAY])
     loop = build_closed_loop(scenario)

@@ -24,9 +24,9 @@ import time
 from pathlib import Path
 
 from hrc_drake.atomic import atomic_write_text
-from hrc_drake.cell import make_cell_station
-from hrc_drake.cell.run import run_scenario
+from hrc_drake.cell.run.run import run_scenario
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario, motion_options
+from hrc_drake.cell.station import make_cell_station
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.hri.scenario import Scenario
 from hrc_drake.motion import MotionPlanner, check_plan

@@ -1,7 +1,7 @@
 """The robot moves on its prediction (task level) -> benchmarks/reports/interaction.md.
 
 On the flange case with the cell's cost table (edges and bets planned by the motion layer, cached:
-`hrc_drake.cell.costs.default_cost_table`), every figure on the same operators and seeds (the
+`hrc_drake.cell.run.costs.default_cost_table`), every figure on the same operators and seeds (the
 seeds of `evaluate`: operator answers and indication delays in their own streams):
 
 1. anticipate against wait, per interface, an operator who follows (deciders `exact` and
@@ -285,7 +285,7 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--section", type=int, choices=(1, 2), help="this section only")
     args = parser.parse_args()
-    from hrc_drake.cell.costs import default_cost_table
+    from hrc_drake.cell.run.costs import default_cost_table
 
     space = generate_states(load_spec(models_dir() / "assemblies" / "flange.yaml"))
     start = time.perf_counter()

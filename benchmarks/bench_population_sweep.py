@@ -23,8 +23,8 @@ import time
 from pathlib import Path
 
 from hrc_drake.atomic import atomic_write_text
-from hrc_drake.cell.costs import default_cost_table
-from hrc_drake.cell.evaluate import CellOptions
+from hrc_drake.cell.run.costs import default_cost_table
+from hrc_drake.cell.run.evaluate import CellOptions
 from hrc_drake.cell.scenario import LEAN
 from hrc_drake.evaluate import Setup, evaluate
 from hrc_drake.tasks.graph import generate_states

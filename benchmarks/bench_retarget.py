@@ -1,10 +1,10 @@
 """How soon a re-target's plan is ready -> benchmarks/reports/retarget.md.
 
 In `anticipate` mode a robot carrying the part it bet on to the wrong seat turns to the
-indicated one at its plan's next rest point (`hrc_drake.cell.anticipation`): the lift's end, or
-once past it the pre-place pose. The turn's plan carries the part on from there (a held plan).
-At a commitment the Supervisor asks ahead for up to `RETARGETS_AHEAD` of them from the lift's end;
-one indicated after the lift's end is asked at the indication and planned during the carry.
+indicated one at its plan's next rest point (`hrc_drake.cell.controller.anticipation`): the lift's
+end, or once past it the pre-place pose. The turn's plan carries the part on from there (a held
+plan). At a commitment the Supervisor asks ahead for up to `RETARGETS_AHEAD` of them from the lift's
+end; one indicated after the lift's end is asked at the indication and planned during the carry.
 
 For every re-target bet of the flange case and the 4-slot and 5-slot cells (a state, the
 placement committed to, another seat for the same kind of part), this plans the committed
@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from hrc_drake.atomic import atomic_write_text
-from hrc_drake.cell.anticipation import RETARGETS_AHEAD, lift_end, same_part, wait_point
+from hrc_drake.cell.controller.anticipation import RETARGETS_AHEAD, lift_end, same_part, wait_point
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.motion.planner import MotionPlanner
 from hrc_drake.resources import models_dir

@@ -1,5 +1,5 @@
-"""The separation monitor's cost per call: the controller's (`hrc_drake.cell.separation`, its
-own model of the robot, measured inputs only) against the one it replaces
+"""The separation monitor's cost per call: the controller's (`hrc_drake.cell.controller.separation`,
+its own model of the robot, measured inputs only) against the one it replaces
 (`scene_graph_monitor.SeparationMonitor` beside this script, SceneGraph distance queries),
 on the same inputs.
 
@@ -32,12 +32,12 @@ import scene_graph_monitor
 from pydrake.systems.framework import DiagramBuilder
 
 from hrc_drake.atomic import atomic_write_text
-from hrc_drake.cell.intent import MotionIntent
+from hrc_drake.cell.controller.intent import MotionIntent
+from hrc_drake.cell.controller.separation import ControllerSeparationMonitor, assess
 from hrc_drake.cell.ports import BodySpheres
-from hrc_drake.cell.run import run_scenario
+from hrc_drake.cell.run.run import run_scenario
 from hrc_drake.cell.scenario import LEAN, cell_design, load_cell_scenario, motion_options
-from hrc_drake.cell.separation import ControllerSeparationMonitor, assess
-from hrc_drake.cell.station import make_cell_station
+from hrc_drake.cell.station.build import make_cell_station
 from hrc_drake.hri.scenario import table2_scenarios
 from hrc_drake.robot_models import RG2_FINGER_JOINTS, UR3_JOINTS
 from hrc_drake.tasks.spec import load_spec

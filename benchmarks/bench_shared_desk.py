@@ -87,7 +87,7 @@ def scenario_of(job: tuple) -> object:
 
 def one_run(job: tuple) -> dict:
     """One closed-loop run of a job: its figures."""
-    from hrc_drake.cell.run import scenario_policy
+    from hrc_drake.cell.run.run import scenario_policy
     from hrc_drake.tasks.decide import run_decisions
     from hrc_drake.tasks.graph import generate_states
     from hrc_drake.tasks.spec import load_spec
@@ -123,7 +123,7 @@ def robot_late(scenario, result) -> float:
     motion, and what slows it, decides."""
     from hrc_drake.cell.ports import OperatorActivity
     from hrc_drake.cell.scenario import cell_design
-    from hrc_drake.cell.station import body_script_of
+    from hrc_drake.cell.station.build import body_script_of
     from hrc_drake.motion.scene import load_cell_frames
     from hrc_drake.tasks.spec import load_spec
 

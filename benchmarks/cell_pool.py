@@ -14,7 +14,7 @@ def pooled_loop(scenario, key: str):
     """The closed loop of `scenario` in a pool's worker. A pool's worker cannot start a
     planning worker of its own: it plans in-process, one planner per `key` (a cell), its plans
     cached across the worker's runs."""
-    from hrc_drake.cell.run import build_closed_loop, shared_planner
+    from hrc_drake.cell.run.run import build_closed_loop, shared_planner
     from hrc_drake.cell.scenario import cell_design, motion_options
     from hrc_drake.tasks.spec import load_spec
 

@@ -1,6 +1,7 @@
 """The separation monitor the cell had before the controller got its own (the benchmark's
 baseline, `bench_separation.py`): it reads the simulator's scene graph, which a real controller
-does not have. The cell's monitor is `hrc_drake.cell.separation.ControllerSeparationMonitor`.
+does not have. The cell's monitor is
+`hrc_drake.cell.controller.separation.ControllerSeparationMonitor`.
 
 Speed and separation monitoring (ISO/TS 15066 §5.5.4) between the robot and the operator.
 
@@ -27,7 +28,7 @@ the robot moves, violations (steps where the robot moved with separation < S_p),
 and the time spent slowed and stopped.
 
 The reading, the log and `allowed_scale` are those of the controller's monitor
-(`hrc_drake.cell.separation`), which reads only what a real cell measures.
+(`hrc_drake.cell.controller.separation`), which reads only what a real cell measures.
 """
 
 from __future__ import annotations
@@ -40,10 +41,10 @@ from pydrake.geometry import Role
 from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable
 from pydrake.systems.framework import BasicVector, LeafSystem
 
+from hrc_drake.cell.controller.separation import SafetyLog, SeparationReading, allowed_scale
+from hrc_drake.cell.controller.supervisor import Mode, SupervisorStatus
 from hrc_drake.cell.person import CHAIN_GAP
 from hrc_drake.cell.ports import BodySpheres
-from hrc_drake.cell.separation import SafetyLog, SeparationReading, allowed_scale
-from hrc_drake.cell.supervisor import Mode, SupervisorStatus
 from hrc_drake.hri.scenario import SafetyConfig
 from hrc_drake.motion.plan import Stage
 

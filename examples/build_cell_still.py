@@ -14,7 +14,7 @@ from pathlib import Path
 import matplotlib.image
 import numpy as np
 
-from hrc_drake.cell import make_cell_station, simulate_station, station_scenario
+from hrc_drake.cell.station import make_cell_station, simulate_station, station_scenario
 from hrc_drake.hri.scenario import BodyConfig, Scenario
 
 

@@ -9,7 +9,7 @@ the square flange first, on the highest slots it can, and follows the robot othe
 import argparse
 from pathlib import Path
 
-from hrc_drake.cell.run import run_scenario
+from hrc_drake.cell.run.run import run_scenario
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.spec import load_spec

@@ -30,8 +30,8 @@ interaction: its Supervisor asks the decider's bet (`commit`) at each boundary a
 waits; the simulated operator indicates after the interface's delay (`DelayedIndications`), drawn
 from the same seeded stream as the task level's, so a run's delays are the same at both levels. This
 module does not know the cell: `Setup.cell` is an object that plays cell runs (`CellRuns`;
-`hrc_drake.cell.evaluate.CellOptions`), so the dependency goes one way, from the cell to here. The
-command line is `hrc_drake.cli.evaluate`.
+`hrc_drake.cell.run.evaluate.CellOptions`), so the dependency goes one way, from the cell to here.
+The command line is `hrc_drake.cli.evaluate`.
 
 Runs spread over local processes (``workers``) or, with ``ray``, over a Ray cluster (the optional
 extra ``hrc_drake[ray]``): each worker builds its own decider (and, at cell level, its own
@@ -264,7 +264,7 @@ class Setup:
     model: OnlineOperatorModel | None = None
     """An operator profile's model for `mpc` to start from (None: a fresh one)."""
     cell: CellRuns | None = None
-    """None: task level; else runs through the cell (`hrc_drake.cell.evaluate.CellOptions`)."""
+    """None: task level; else runs through the cell (`hrc_drake.cell.run.evaluate.CellOptions`)."""
 
 
 _WORKER: dict[str, Any] = {}

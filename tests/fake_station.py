@@ -19,7 +19,7 @@ from pydrake.lcm import DrakeLcm
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.systems.framework import BasicVector, Diagram, DiagramBuilder, LeafSystem
 
-from hrc_drake.cell.interface import CellStationServer, LockstepTimeouts
+from hrc_drake.cell.link.interface import CellStationServer, LockstepTimeouts
 from hrc_drake.cell.ports import (
     BodySpheres,
     CellConfiguration,

@@ -6,10 +6,10 @@ import dataclasses
 import numpy as np
 import pytest
 
+from hrc_drake.cell.controller.supervisor import Mode
 from hrc_drake.cell.ports import PartStatus
-from hrc_drake.cell.run import build_closed_loop
+from hrc_drake.cell.run.run import build_closed_loop
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
-from hrc_drake.cell.supervisor import Mode
 from hrc_drake.robot_models import UR3
 
 
@@ -125,9 +125,9 @@ def test_task_level_and_cell_timelines_agree_on_a_scripted_run():
     # Row 8 at full holds: the robot bets on F1, the operator indicates F3 (a re-target), then
     # follows. The task level plays the same run from a cost table of the edges and the bet the
     # run took, planned by the motion layer, with the same delay draws.
-    from hrc_drake.cell.costs import bet_seconds, compute_cost_table, timing_planner
-    from hrc_drake.cell.evaluate import task_level_run
-    from hrc_drake.cell.run import run_scenario
+    from hrc_drake.cell.run.costs import bet_seconds, compute_cost_table, timing_planner
+    from hrc_drake.cell.run.evaluate import task_level_run
+    from hrc_drake.cell.run.run import run_scenario
     from hrc_drake.cell.scenario import motion_options
     from hrc_drake.tasks.costs import uniform_bets
     from hrc_drake.tasks.graph import generate_states

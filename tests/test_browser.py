@@ -85,7 +85,7 @@ def chromium():
 @pytest.fixture(scope="module")
 def flange_frames():
     """The flange cell's frames (plate seats, tray homes), from the models without the robot."""
-    from hrc_drake.cell.station import make_cell_station, station_scenario
+    from hrc_drake.cell.station.build import make_cell_station, station_scenario
     from hrc_drake.hri.scenario import Scenario
 
     return make_cell_station(station_scenario(Scenario(), robot=False)).frames

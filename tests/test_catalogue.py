@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from hrc_drake.cell.run import run_scenario
+from hrc_drake.cell.run.run import run_scenario
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 from hrc_drake.cli import main
 from hrc_drake.hri.populations import OPERATOR_MODELS

@@ -13,12 +13,12 @@ from pydrake.multibody.parsing import PackageMap
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.solvers import Solve
 
-from hrc_drake.cell import make_cell_station, simulate_station, station_scenario
-from hrc_drake.cell.controller import COMMANDED, MEASURED
+from hrc_drake.cell.controller.build import COMMANDED, MEASURED
 from hrc_drake.cell.ports import PartStatus
 from hrc_drake.cell.scenario import load_cell_scenario, plant_config, scene_graph_config
-from hrc_drake.cell.sim_operator import bolt_weld
-from hrc_drake.cell.welds import Weld
+from hrc_drake.cell.station import make_cell_station, simulate_station, station_scenario
+from hrc_drake.cell.station.sim_operator import bolt_weld
+from hrc_drake.cell.station.welds import Weld
 from hrc_drake.cell_models import PLATE, CellDesign, CellModelError, add_cell_models
 from hrc_drake.hri.messages import Indication
 from hrc_drake.hri.scenario import Scenario, ScenarioError

@@ -4,7 +4,7 @@ import dataclasses
 
 import pytest
 
-from hrc_drake.cell.run import run_scenario, shared_planner
+from hrc_drake.cell.run.run import run_scenario, shared_planner
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario, motion_options
 from hrc_drake.hri.scenario import table2_scenarios
 from hrc_drake.tasks.decide import run_decisions

@@ -8,11 +8,11 @@ from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 
-from hrc_drake.cell.controller import COMMANDED, MEASURED, connect_controller, make_controller
+from hrc_drake.cell.controller.build import COMMANDED, MEASURED, connect_controller, make_controller
+from hrc_drake.cell.controller.supervisor import Mode
 from hrc_drake.cell.ports import BodySpheres, CellConfiguration, PartPlacement, PartStatus
-from hrc_drake.cell.run import build_closed_loop, shared_planner
+from hrc_drake.cell.run.run import build_closed_loop, shared_planner
 from hrc_drake.cell.scenario import LEAN, cell_design, load_cell_scenario, motion_options
-from hrc_drake.cell.supervisor import Mode
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
 from hrc_drake.motion.service import InlinePlanService, planner_function
 from hrc_drake.tasks.graph import generate_states

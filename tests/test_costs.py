@@ -223,13 +223,13 @@ def test_q_learning_with_time_costs_learns_the_fastest(flange_space, table):
 @pytest.fixture(scope="module")
 def planner(flange_space):
     pytest.importorskip("pydrake")
-    from hrc_drake.cell.costs import timing_planner
+    from hrc_drake.cell.run.costs import timing_planner
 
     return timing_planner(flange_space)
 
 
 def test_planned_edges_add_robot_and_bolting_time(flange_space, planner):
-    from hrc_drake.cell.costs import compute_cost_table
+    from hrc_drake.cell.run.costs import compute_cost_table
 
     edges = [((), "F1"), (("F1",), "undo")]
     calls = []
@@ -254,7 +254,7 @@ def test_planned_bets_and_carry_milestones(flange_space, planner):
     """A placement's carry runs from the lift's end to the pre-place pose; a re-target (the
     flange carried to seat 1, then on to 2 or 3) costs well under a second, a swap (the flange
     put back, then the square or the undo fetched) seconds: lowered, released, up, across."""
-    from hrc_drake.cell.costs import bet_seconds, carry_milestones, compute_cost_table
+    from hrc_drake.cell.run.costs import bet_seconds, carry_milestones, compute_cost_table
     from hrc_drake.motion import Stage
 
     plan = planner.plan_task(frozenset(), "F1")
@@ -273,7 +273,7 @@ def test_planned_bets_and_carry_milestones(flange_space, planner):
 
 
 def test_cell_hash_names_the_options_and_frames(flange_space, planner):
-    from hrc_drake.cell.costs import cell_hash, timing_options, timing_planner
+    from hrc_drake.cell.run.costs import cell_hash, timing_options, timing_planner
     from hrc_drake.motion import MotionOptions, MotionPlanner
 
     assert cell_hash(planner) == cell_hash(timing_planner(flange_space))
@@ -287,7 +287,7 @@ def test_cell_hash_names_the_options_and_frames(flange_space, planner):
 
 
 def test_default_cost_table_is_read_from_the_cache(tmp_path, flange_space, planner, table):
-    from hrc_drake.cell.costs import cell_hash, default_cost_table
+    from hrc_drake.cell.run.costs import cell_hash, default_cost_table
 
     key = cell_hash(planner)
     cached = replace(table, cell_hash=key)

@@ -14,7 +14,7 @@ import sys
 import numpy as np
 import pytest
 
-from hrc_drake.cell.evaluate import CellOptions, DeciderPolicy
+from hrc_drake.cell.run.evaluate import CellOptions, DeciderPolicy
 from hrc_drake.cell.scenario import LEAN
 from hrc_drake.cli import main
 from hrc_drake.evaluate import Setup, _play, _prepare, evaluate, summarise

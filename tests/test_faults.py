@@ -6,9 +6,9 @@ import json
 import numpy as np
 import pytest
 
-from hrc_drake.cell.run import build_closed_loop
+from hrc_drake.cell.controller.supervisor import Mode
+from hrc_drake.cell.run.run import build_closed_loop
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
-from hrc_drake.cell.supervisor import Mode
 from hrc_drake.hri.faults import FaultConfig, FaultError, check_faults
 from hrc_drake.robot_models import UR3, UR3_JOINTS
 

@@ -9,7 +9,7 @@ import pytest
 from pydrake.geometry import SceneGraph
 from pydrake.multibody.plant import MultibodyPlant
 
-from hrc_drake.cell.run import shared_planner
+from hrc_drake.cell.run.run import shared_planner
 from hrc_drake.cell_models import CellDesign, CellModelError, add_cell_models, check_cell_models
 from hrc_drake.cli import main
 from hrc_drake.motion.options import MotionOptions

@@ -3,10 +3,10 @@ grip lets it slip, and the cell detects that from the gripper's own measurements
 
 import pytest
 
-from hrc_drake.cell.gripper import RG2_MIN_FORCE
-from hrc_drake.cell.run import run_scenario
+from hrc_drake.cell.run.run import run_scenario
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
-from hrc_drake.cell.station import make_cell_station
+from hrc_drake.cell.station.build import make_cell_station
+from hrc_drake.cell.station.gripper import RG2_MIN_FORCE
 from hrc_drake.hri.scenario import Scenario
 
 # The operator takes the square flange (the heaviest part) first.

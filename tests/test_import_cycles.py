@@ -71,3 +71,24 @@ def test_no_import_cycle():
     assert cycles == [], "import cycles (the modules that import one another): " + "; ".join(
         ", ".join(cycle) for cycle in cycles
     )
+
+
+def _between(graph: nx.DiGraph, room: str, other: str) -> list[tuple[str, str]]:
+    return sorted(
+        (a, b) for a, b in graph.edges if a.startswith(f"{room}") and b.startswith(f"{other}")
+    )
+
+
+def test_the_controller_and_the_simulated_station_import_nothing_of_each_other():
+    """The port boundary: the controller reads only what the station's ports carry (types in
+    `hrc_drake.cell.ports`, the person model in `hrc_drake.cell.person`), so it runs against a
+    real cell as against the simulator; and the station never asks the controller."""
+    graph = import_graph()
+    controller, station = "hrc_drake.cell.controller", "hrc_drake.cell.station"
+    assert any(n.startswith(f"{controller}.") for n in graph), "no controller room"
+    assert any(n.startswith(f"{station}.") for n in graph), "no station room"
+    assert _between(graph, controller, station) == []
+    assert _between(graph, station, controller) == []
+    # Nor through anything they import: the controller's modules reach no station module.
+    reached = set().union(*(nx.descendants(graph, n) for n in graph if n.startswith(controller)))
+    assert sorted(n for n in reached if n.startswith(station)) == []

@@ -487,7 +487,7 @@ def test_the_simulated_operator_indicates_after_the_delay():
     from pydrake.systems.primitives import ConstantValueSource
 
     from hrc_drake.cell.ports import CellConfiguration
-    from hrc_drake.cell.sim_operator import SimulatedOperator
+    from hrc_drake.cell.station.sim_operator import SimulatedOperator
     from hrc_drake.hri.messages import Prompt, PromptKind
 
     def indication_after(operator, seconds: float):

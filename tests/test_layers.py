@@ -34,6 +34,7 @@ MOTION = [
     "hrc_drake.motion.service",
 ]
 LEARNING = ["hrc_drake.tasks.mdp", "hrc_drake.tasks.learn", "hrc_drake.tasks.deciders"]
+CONTROLLER = ["hrc_drake.cell.controller"]
 
 
 def _loaded_after_import(modules: list[str], watched: list[str]) -> list[str]:
@@ -54,3 +55,16 @@ def test_task_layer_and_tools_import_no_drake():
 
 def test_motion_layer_knows_no_q_learning():
     assert _loaded_after_import(MOTION, [*LEARNING, "pydrake"]) == ["pydrake"]
+
+
+def test_the_controller_loads_nothing_of_the_simulated_station():
+    """Importing the controller room (in a fresh interpreter) loads no module of the station
+    room: the import graph says so of the source (tests/test_import_cycles.py), this of what
+    Python actually loads, package `__init__`s included."""
+    import pkgutil
+
+    import hrc_drake.cell.station as station
+
+    watched = [f"hrc_drake.cell.station.{m.name}" for m in pkgutil.iter_modules(station.__path__)]
+    assert len(watched) > 5
+    assert _loaded_after_import(CONTROLLER, ["hrc_drake.cell.station", *watched]) == []

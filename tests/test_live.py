@@ -112,7 +112,7 @@ def test_a_live_run_follows_the_clicks_to_a_terminal_state(tmp_path, monkeypatch
     buttons came up, while the robot is already on its way with F1 (it re-targets); then the
     robot's proposals at once. The run ends on the minimum-effort column, and the recording
     shows the choices."""
-    from hrc_drake.cell.run import run_scenario
+    from hrc_drake.cell.run.run import run_scenario
     from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 
     row = load_cell_scenario("row4-forces-4", LEAN)
@@ -256,7 +256,7 @@ def test_a_live_prompt_nobody_answers_ends_the_run_after_the_give_up(tmp_path, c
     """Nobody clicks: the robot asks again every `run.indication_timeout` (the terminal says
     so) and after `run.indication_give_up` the run ends, not terminal, with a one-line reason,
     its JSON and its recording written."""
-    from hrc_drake.cell.run import run_scenario
+    from hrc_drake.cell.run.run import run_scenario
     from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 
     text = "{run: {indication_timeout: 1, indication_give_up: 2.5}}"
@@ -277,7 +277,7 @@ def test_a_live_run_goes_on_once_the_person_says_they_did_the_task_handed_over(m
     """The grip is lost in the first carry and the robot may not pick the part again
     (`run.recover_tries: 0`): it hands F1 over, the panel shows "I did F1", and once the person
     clicks it the run goes on to a terminal state, the step counted as handed over."""
-    from hrc_drake.cell.run import run_scenario
+    from hrc_drake.cell.run.run import run_scenario
     from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 
     text = "{run: {recover_tries: 0}, faults: [{kind: grip-lost, task: 1}]}"

@@ -120,7 +120,7 @@ def test_a_scenario_value_of_the_wrong_type_is_one_line_before_any_work(
     capsys, monkeypatch, tmp_path, text, key, expected
 ):
     """Before: Drake's converter raised a ValueError that ended in a 40-line traceback."""
-    from hrc_drake.cell import costs
+    from hrc_drake.cell.run import costs
     from hrc_drake.cli import simulate as command
 
     monkeypatch.setattr(command, "run_scenario", _no_work)
@@ -285,7 +285,7 @@ def test_the_first_evaluation_of_a_spec_shows_progress_while_it_plans_the_cost_t
     capsys, monkeypatch, tmp_path, toy_costs
 ):
     """Before: `default_cost_table` got no progress callback: 10-18 s of silence."""
-    from hrc_drake.cell import costs
+    from hrc_drake.cell.run import costs
 
     def compute(space, planner, progress):
         for i in range(1, len(toy_costs.entries) + 1):
@@ -320,7 +320,7 @@ def test_still_time_is_checked_before_the_run(capsys, monkeypatch, tmp_path):
 
 
 def test_too_many_cell_runs_are_refused_with_an_estimate_before_any_work(capsys, monkeypatch):
-    from hrc_drake.cell import costs
+    from hrc_drake.cell.run import costs
 
     monkeypatch.setattr(costs, "default_cost_table", _no_work)
     argv = ["evaluate", "--decider", "exact", "--operator-model", "follows", "--cell"]
@@ -329,7 +329,7 @@ def test_too_many_cell_runs_are_refused_with_an_estimate_before_any_work(capsys,
 
 
 def test_cell_runs_start_with_an_estimate(capsys, monkeypatch, toy_costs):
-    from hrc_drake.cell import costs
+    from hrc_drake.cell.run import costs
     from hrc_drake.cli import evaluate as evaluate_command
 
     monkeypatch.setattr(costs, "default_cost_table", lambda space, progress=None: toy_costs)
@@ -415,7 +415,7 @@ def test_cell_runs_over_processes_report_every_run(flange_space, toy_costs):
 
 def test_a_cell_report_says_what_ran(flange_space):
     """Before: `"scenario": "row1-optimal"` whatever the spec."""
-    from hrc_drake.cell.evaluate import CellOptions
+    from hrc_drake.cell.run.evaluate import CellOptions
 
     four = generate_states(load_spec(FOUR_SLOT))
     result = RunResult(True, 30.0, 3, 0, 0)
@@ -443,7 +443,7 @@ def _imports(path: Path) -> set[str]:
 
 def test_the_evaluation_modules_depend_one_way():
     task_level = _imports(REPO / "hrc_drake" / "evaluate.py")
-    cell_level = _imports(REPO / "hrc_drake" / "cell" / "evaluate.py")
+    cell_level = _imports(REPO / "hrc_drake" / "cell" / "run" / "evaluate.py")
     assert not [m for m in task_level if m.startswith("hrc_drake.cell")], task_level
     assert "hrc_drake.evaluate" in cell_level
     assert "hrc_drake.cli.evaluate" not in cell_level

@@ -11,7 +11,7 @@ from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
 
 from hrc_drake.cell.scenario import load_cell_scenario
-from hrc_drake.cell.station import make_cell_station
+from hrc_drake.cell.station.build import make_cell_station
 from hrc_drake.resources import package_uri
 from hrc_drake.robot_models import (
     RG2_FINGER_JOINTS,

@@ -5,13 +5,8 @@ import pytest
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.analysis import Simulator
 
-from hrc_drake.cell.intent import MotionIntent
-from hrc_drake.cell.operator_body import ReachInto
-from hrc_drake.cell.person import CHAIN_GAP, body_pose
-from hrc_drake.cell.ports import BodySpheres
-from hrc_drake.cell.run import run_scenario, shared_planner
-from hrc_drake.cell.scenario import LEAN, load_cell_scenario, motion_options
-from hrc_drake.cell.separation import (
+from hrc_drake.cell.controller.intent import MotionIntent
+from hrc_drake.cell.controller.separation import (
     ControllerSeparationMonitor,
     RobotEnvelope,
     SafetyLog,
@@ -21,7 +16,12 @@ from hrc_drake.cell.separation import (
     log_step,
     nearest_points,
 )
-from hrc_drake.cell.station import make_cell_station, station_scenario
+from hrc_drake.cell.person import CHAIN_GAP, body_pose
+from hrc_drake.cell.ports import BodySpheres
+from hrc_drake.cell.run.run import run_scenario, shared_planner
+from hrc_drake.cell.scenario import LEAN, load_cell_scenario, motion_options
+from hrc_drake.cell.station.build import make_cell_station, station_scenario
+from hrc_drake.cell.station.operator_body import ReachInto
 from hrc_drake.hri.scenario import BodyConfig, SafetyConfig, Scenario, ScenarioError
 from hrc_drake.motion.plan import Stage
 from hrc_drake.motion.poses import part_pose
@@ -99,8 +99,8 @@ def test_a_row_with_a_mistake_and_undo_runs_with_the_body_and_no_violation():
     assert off.safety is None and off.to_json()["safety"] is None
 
 
-# The controller's separation monitor (hrc_drake.cell.separation): its own model of the robot,
-# measured inputs only.
+# The controller's separation monitor (hrc_drake.cell.controller.separation): its own model of the
+# robot, measured inputs only.
 
 POSTURES = (
     (0.0, -1.57, 1.2, -1.2, -1.57, 0.0),

@@ -171,8 +171,8 @@ def test_separation_flag_is_checked_before_any_work():
 def test_a_body_the_forecast_cannot_explain_replaces_every_forecast_timeline_while_it_stays():
     """Each timeline of a joined forecast (whole body first, then arms) is replaced by the
     observed body's same spheres until the stay ends, and left as forecast after it."""
-    from hrc_drake.cell.forecast import Anchor, OperatorForecast
-    from hrc_drake.cell.keep_clear import _staying
+    from hrc_drake.cell.controller.forecast import Anchor, OperatorForecast
+    from hrc_drake.cell.controller.keep_clear import _staying
     from hrc_drake.cell.person import body_pose
     from hrc_drake.cell.ports import BodySpheres
 
@@ -198,7 +198,7 @@ def test_a_forecast_without_timing_spread_is_the_one_timeline_of_the_model():
     """`safety.forecast_spread` 0 keeps only the modelled timeline (the bound of a perfect
     forecast); 1 keeps the whole spread, before the indication (delay quantiles), after it and
     once seen."""
-    from hrc_drake.cell.forecast import Anchor, OperatorForecast
+    from hrc_drake.cell.controller.forecast import Anchor, OperatorForecast
 
     person = Person()
     full = OperatorForecast(person, DESK, delay=2.0, sigma=0.4)
@@ -236,10 +236,10 @@ def _desk_run(separation: str, **person):
     one the scenario describes (and the controller forecasts)."""
     from dataclasses import replace
 
-    from hrc_drake.cell.desk import DeskScript
     from hrc_drake.cell.person import desk_of
-    from hrc_drake.cell.run import run_scenario
+    from hrc_drake.cell.run.run import run_scenario
     from hrc_drake.cell.scenario import LEAN, cell_design, load_cell_scenario
+    from hrc_drake.cell.station.desk import DeskScript
     from hrc_drake.motion.scene import load_cell_frames
     from hrc_drake.tasks.spec import load_spec
 
@@ -290,7 +290,7 @@ def test_a_part_put_back_is_timed_around_the_operator_too():
     """A swap: the habitual operator indicates S23 while the robot carries F1, which it puts
     back, retreating while the operator goes for the bolts. The put-back plan holds for no
     bolts, so it is timed to its end (it was timed only to its release: 9 violations)."""
-    from hrc_drake.cell.run import run_scenario
+    from hrc_drake.cell.run.run import run_scenario
     from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 
     text = "{operator: {model: habitual, seed: 3}}"
@@ -304,9 +304,9 @@ def test_the_robot_keeps_clear_of_the_desks_bins_in_every_placement_plan():
     """The bins are drawn, not in the robot's plant: the layout keeps them clear. Every
     placement plan of the flange case keeps the arm, its fingers as commanded and the part it
     carries at least 1 cm from every point of the bins' tops."""
-    from hrc_drake.cell.run import shared_planner
+    from hrc_drake.cell.controller.separation import RobotEnvelope, nearest_points
+    from hrc_drake.cell.run.run import shared_planner
     from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
-    from hrc_drake.cell.separation import RobotEnvelope, nearest_points
     from hrc_drake.tasks.graph import generate_states
     from hrc_drake.tasks.spec import load_spec
     from hrc_drake.tasks.tokens import UNDO

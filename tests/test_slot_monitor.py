@@ -1,5 +1,5 @@
-"""The configuration sensor (hrc_drake.cell.slot_monitor) reads every part's world pose, wherever
-the part lies: in the tray, seated, on the table, askew on the plate. (Seating and its
+"""The configuration sensor (hrc_drake.cell.station.slot_monitor) reads every part's world pose,
+wherever the part lies: in the tray, seated, on the table, askew on the plate. (Seating and its
 tolerances are tested in tests/test_cell.py.)"""
 
 from __future__ import annotations
@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RollPitchYaw
 
-from hrc_drake.cell import make_cell_station, simulate_station
-from hrc_drake.cell.contacts import geometry_owners, owner_pairs
 from hrc_drake.cell.ports import PartPlacement, PartStatus, placement_transform, pose_tuple
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+from hrc_drake.cell.station import make_cell_station, simulate_station
+from hrc_drake.cell.station.contacts import geometry_owners, owner_pairs
 
 SETTLE = 0.5  # s: long enough for a part laid on a surface to come to rest
 PENETRATION = 0.0002  # m: a part laid on a surface touches it

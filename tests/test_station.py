@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform
 
-from hrc_drake.cell.controller import COMMANDED, MEASURED
-from hrc_drake.cell.run import build_closed_loop
+from hrc_drake.cell.controller.build import COMMANDED, MEASURED
+from hrc_drake.cell.controller.supervisor import Mode
+from hrc_drake.cell.run.run import build_closed_loop
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
-from hrc_drake.cell.station import make_cell_station
-from hrc_drake.cell.supervisor import Mode
-from hrc_drake.cell.welds import Weld
+from hrc_drake.cell.station.build import make_cell_station
+from hrc_drake.cell.station.welds import Weld
 from hrc_drake.hri.scenario import table2_scenarios
 from hrc_drake.resources import scenarios_dir
 

@@ -1,6 +1,6 @@
-"""The cell station over LCM (hrc_drake.cell.interface, hrc_drake.cell.lcm_messages): the message
-types, the lockstep against a small fake station (tests/fake_station.py) in one process and in
-two, and the errors when the other side is missing."""
+"""The cell station over LCM (hrc_drake.cell.link.interface, hrc_drake.cell.link.lcm_messages): the
+message types, the lockstep against a small fake station (tests/fake_station.py) in one process and
+in two, and the errors when the other side is missing."""
 
 from __future__ import annotations
 
@@ -23,10 +23,9 @@ from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, EventStatus
 
-from hrc_drake.cell import lcm_messages as lm
-from hrc_drake.cell.contacts import Owner, geometry_owners, owner_pairs
-from hrc_drake.cell.controller import connect_controller
-from hrc_drake.cell.interface import (
+from hrc_drake.cell.controller.build import connect_controller
+from hrc_drake.cell.link import lcm_messages as lm
+from hrc_drake.cell.link.interface import (
     CellStationServer,
     LockstepTimeouts,
     StationLinkError,
@@ -35,7 +34,7 @@ from hrc_drake.cell.interface import (
     exchange_period,
     make_cell_station_interface,
 )
-from hrc_drake.cell.loop import ClosedLoop
+from hrc_drake.cell.link.remote import RemoteCell, run_over_lcm, station_of
 from hrc_drake.cell.ports import (
     BodySpheres,
     CellConfiguration,
@@ -44,9 +43,10 @@ from hrc_drake.cell.ports import (
     placement_transform,
     pose_tuple,
 )
-from hrc_drake.cell.remote import RemoteCell, run_over_lcm, station_of
-from hrc_drake.cell.run import build_closed_loop, controller_of, run_scenario
+from hrc_drake.cell.run.loop import ClosedLoop
+from hrc_drake.cell.run.run import build_closed_loop, controller_of, run_scenario
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+from hrc_drake.cell.station.contacts import Owner, geometry_owners, owner_pairs
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
 from hrc_drake.hri.scenario import Scenario, ScenarioError
 

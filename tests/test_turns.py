@@ -1,10 +1,10 @@
 """Where along a committed plan the robot turns to the task the operator indicates, and how
-(`hrc_drake.cell.anticipation`): on plans of the flange case, no simulation."""
+(`hrc_drake.cell.controller.anticipation`): on plans of the flange case, no simulation."""
 
 import numpy as np
 import pytest
 
-from hrc_drake.cell.anticipation import (
+from hrc_drake.cell.controller.anticipation import (
     Turn,
     back_above,
     lift_end,
@@ -138,9 +138,9 @@ def test_another_part_indicated_as_the_arm_reaches_the_pre_place_pose_stops_it_t
     run stopped (random operator, population sweep)."""
     from dataclasses import replace
 
-    from hrc_drake.cell.run import build_closed_loop
+    from hrc_drake.cell.controller.supervisor_state import Mode, SupervisorStatus
+    from hrc_drake.cell.run.run import build_closed_loop
     from hrc_drake.cell.scenario import LEAN, load_cell_scenario
-    from hrc_drake.cell.supervisor_state import Mode, SupervisorStatus
 
     supervisor = build_closed_loop(load_cell_scenario("row1-optimal", LEAN)).controller.supervisor
     above = wait_point(f1)

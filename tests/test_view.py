@@ -1,5 +1,5 @@
-"""The camera that frames the cell (`hrc_drake.cell.view`): every framed point in Meshcat's field
-of view on a 1280×800 page, as close as that allows. (The browser tests check the view in
+"""The camera that frames the cell (`hrc_drake.cell.run.view`): every framed point in Meshcat's
+field of view on a 1280×800 page, as close as that allows. (The browser tests check the view in
 Chromium, live and in a recording.)"""
 
 from types import SimpleNamespace
@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform
 
-from hrc_drake.cell.view import MARGIN, PAGE_ASPECT, VERTICAL_FOV_DEG, cell_camera, framed_points
+from hrc_drake.cell.run.view import (
+    MARGIN,
+    PAGE_ASPECT,
+    VERTICAL_FOV_DEG,
+    cell_camera,
+    framed_points,
+)
 
 
 def _frames(slots: int, plate_x: float = 0.30, pitch: float = 0.08):

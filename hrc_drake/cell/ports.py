@@ -3,7 +3,7 @@ read: where every part is (`CellConfiguration`, the configuration sensor's readi
 operator's body as a tracker reports it (`BodySpheres`) and the simulated operator's activity
 (`OperatorActivity`, which the station's body and desk scripts key on). They live here, apart
 from the systems that make them, so that the controller needs nothing of the simulated station
-(`hrc_drake.cell.station`) to read them, and the LCM link (`hrc_drake.cell.link`) encodes them
+(`hrc_drake.cell.station.build`) to read them, and the LCM link (`hrc_drake.cell.link`) encodes them
 without either side."""
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """`hrc-drake costs`: plan every edge of an assembly's state space in the cell, save the cost
-table (`hrc_drake.cell.costs`) and rank its sequences."""
+table (`hrc_drake.cell.run.costs`) and rank its sequences."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import json
 import sys
 import time
 
-from hrc_drake.cell.costs import CostPlanningError, compute_cost_table, timing_planner
+from hrc_drake.cell.run.costs import CostPlanningError, compute_cost_table, timing_planner
 from hrc_drake.cell_models import CellModelError
 from hrc_drake.cli.evaluate import interaction_from_flags
 from hrc_drake.paths import UsageError, check_output_path

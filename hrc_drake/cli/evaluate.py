@@ -4,7 +4,7 @@ Every check that can be made before the runs is made first, in this order: the o
 flags, the spec, the operator model, at cell level the scenario (a wrong key or type is one line)
 and the number of runs (with an estimate of the time they take); only then the cost table, which
 the first evaluation of a spec computes (with a progress line) and later ones read from the
-cache, and the runs. This module joins the task level and the cell (`hrc_drake.cell.evaluate`),
+cache, and the runs. This module joins the task level and the cell (`hrc_drake.cell.run.evaluate`),
 which do not import each other the other way.
 """
 
@@ -219,7 +219,7 @@ def _check_task_runs(runs: int, workers: int | None) -> None:
 def _cell_options(args, space: StateSpace, operator):
     """The cell's options, checked now: the scenario loads (a wrong key or type is a one-line
     ScenarioError) and the operator model is one the cell can play."""
-    from hrc_drake.cell.evaluate import DEFAULT_BASE_SCENARIO, CellOptions
+    from hrc_drake.cell.run.evaluate import DEFAULT_BASE_SCENARIO, CellOptions
     from hrc_drake.cell.scenario import LEAN
 
     separation = separation_from_flags(args)
@@ -279,7 +279,7 @@ def _cost_table(args, space: StateSpace) -> CostTable:
     layout) and CostPlanningError are one-line UsageErrors."""
     if args.costs is not None:
         return load_cost_table(args.costs, space)
-    from hrc_drake.cell.costs import CostPlanningError, default_cost_table
+    from hrc_drake.cell.run.costs import CostPlanningError, default_cost_table
     from hrc_drake.cell_models import CellModelError
 
     label = f"cost table of {space.spec.name} (planned once, then cached)"

@@ -9,7 +9,7 @@ import socket
 import sys
 import threading
 
-from hrc_drake.cell.run import run_scenario, scenario_policy
+from hrc_drake.cell.run.run import run_scenario, scenario_policy
 from hrc_drake.cli.scenario_args import scenario_from_args, scenario_options
 from hrc_drake.hri.faults import FaultError, check_faults
 from hrc_drake.hri.operator import ScriptedOperator
@@ -120,8 +120,8 @@ def _run(args, scenario, policy, record, still, live: bool, port):
             "--station-lcm runs only the controller here; --record, --still and --live need "
             "the station in this process: drop them"
         )
-    from hrc_drake.cell.remote import check_lcm_url, run_over_lcm
-    from hrc_drake.cell.scenario_identity import ScenarioIdentity
+    from hrc_drake.cell.link.remote import check_lcm_url, run_over_lcm
+    from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
 
     # What the station must serve: this scenario, shown with the options that made it.
     identity = ScenarioIdentity.of(scenario, scenario_options(args))
@@ -181,7 +181,7 @@ def _policy(scenario: Scenario, space):
     planned with a progress line the first time), else its policy file or the exact policy."""
     if not scenario.decider.name:
         return scenario_policy(scenario, space)
-    from hrc_drake.cell.evaluate import decider_policy
+    from hrc_drake.cell.run.evaluate import decider_policy
     from hrc_drake.progress import ProgressLine
 
     label = f"cost table of {space.spec.name} (planned once, then cached)"

@@ -1,5 +1,5 @@
 """`hrc-drake station`: the simulated station of a scenario, served over LCM to a controller
-started with `hrc-drake simulate --station-lcm URL` (`hrc_drake.cell.remote`)."""
+started with `hrc-drake simulate --station-lcm URL` (`hrc_drake.cell.link.remote`)."""
 
 from __future__ import annotations
 
@@ -7,14 +7,14 @@ import json
 import shlex
 import sys
 
-from hrc_drake.cell.interface import (
+from hrc_drake.cell.link.interface import (
     DEFAULT_LCM_URL,
     LockstepTimeouts,
     ScenarioMismatch,
     StationLinkError,
 )
-from hrc_drake.cell.remote import check_lcm_url, serve_scenario
-from hrc_drake.cell.scenario_identity import ScenarioIdentity
+from hrc_drake.cell.link.remote import check_lcm_url, serve_scenario
+from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
 from hrc_drake.cli.scenario_args import scenario_argv, scenario_from_args, scenario_options
 from hrc_drake.paths import UsageError
 

@@ -2,7 +2,7 @@
 
 A scenario's `faults:` list names, per entry, a kind and the task it strikes (`task: N`, the N-th
 task of the run, from 1) and the kind's parameters, each with a default, so that `{kind: K,
-task: N}` alone is a valid entry. The station injects them (`hrc_drake.cell.faults`); the
+task: N}` alone is a valid entry. The station injects them (`hrc_drake.cell.station.faults`); the
 controller never reads this list: it detects every fault from what it measures (the gripper,
 the configuration sensor, joint tracking, the protective-stop input, the operator's silence) and
 recovers or hands the task over to the operator.

@@ -315,7 +315,8 @@ class SafetyConfig:
         max_wait: the longest a move is held back for the operator [s].
         forecast_spread: how much of its timing spread the forecast keeps (1: all of it; 0: it
             takes the person's modelled timing as exact, the bound that a perfect forecast of a
-            person who behaves as modelled would reach; `hrc_drake.cell.desk.OperatorForecast`).
+            person who behaves as modelled would reach;
+            `hrc_drake.cell.controller.forecast.OperatorForecast`).
     """
 
     enabled: bool = True
@@ -430,9 +431,9 @@ class GripperConfig:
             flange case (the 0.57 kg square flange, 5.6 N) with a margin of 4.8 at rest
             (benchmarks/reports/contact.md: the largest carry acceleration without slip).
         kp, kd: the simulated finger servo's PD gains [N/m, N·s/m]; the servo pushes with at
-            most the commanded force (`hrc_drake.cell.gripper.FingerServo`), and with all of it
-            once a finger stalls `force / kp` short of its target: 40 N (the RG2's most) at the
-            1 mm each finger is commanded past the part (`motion.options.grip_squeeze`, 2 mm).
+            most the commanded force (`hrc_drake.cell.station.gripper.FingerServo`), and with all
+            of it once a finger stalls `force / kp` short of its target: 40 N (the RG2's most) at
+            the 1 mm each finger is commanded past the part (`motion.options.grip_squeeze`, 2 mm).
         grip_tolerance: m; a measured opening farther than this from the width of the part the
             gripper should hold means it holds nothing (or something else).
     """

@@ -12,7 +12,7 @@ least: the wait plus the time the monitor is forecast to add to the motion (`for
 weighed `STOP_PENALTY` times for the braking and restarting it leaves out. The arm waits where
 its motions meet, so every trajectory it follows is still the validated plan; monitoring stays
 underneath and acts on the body as measured. The forecast's own timing spread
-(`hrc_drake.cell.desk.OperatorForecast`) covers a person early or late.
+(`hrc_drake.cell.controller.forecast.OperatorForecast`) covers a person early or late.
 """
 
 from __future__ import annotations

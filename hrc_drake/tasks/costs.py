@@ -33,8 +33,8 @@ A cost table file is JSON (written atomically)::
 (`bet_pairs`): a table without them serves the ``wait`` interaction only. Version 1 files (no
 milestones, no bets) are refused with the fix: plan a new table. The spec hash ties a table to
 the assembly it was made for, the cell hash to the robot, cell frames and motion options it was
-planned with (see `hrc_drake.cell.costs.cell_hash`). This module imports no Drake: tables are
-computed by `hrc_drake.cell.costs` and used here by the MDP, the solver and `evaluate`.
+planned with (see `hrc_drake.cell.run.costs.cell_hash`). This module imports no Drake: tables are
+computed by `hrc_drake.cell.run.costs` and used here by the MDP, the solver and `evaluate`.
 """
 
 from __future__ import annotations

@@ -24,14 +24,15 @@ sensor sees an obstacle waits for it to move or go, planning again each time it 
 `run.path_timeout`. A task the robot cannot do while it is itself sound (a part it dropped and
 cannot pick again, a path that stays blocked) is handed over: the arm holds still, the
 interface prompts `HANDOVER`, the operator does the task by hand and says so, and the robot
-reads the cell and goes on (`hrc_drake.cell.recovery`). Each is recorded as a `Detection`
-(what the run reports of the scenario's faults, `hrc_drake.cell.fault_report`).
+reads the cell and goes on (`hrc_drake.cell.controller.recovery`). Each is recorded as a `Detection`
+(what the run reports of the scenario's faults, `hrc_drake.cell.run.fault_report`).
 
 In `anticipate` mode it does not wait at step 3: it starts on the placement its policy commits
-to and turns when the indication names another task (`hrc_drake.cell.anticipation`). With
+to and turns when the indication names another task (`hrc_drake.cell.controller.anticipation`). With
 predictive separation it times its plan's moves around its forecast of the operator
-(`hrc_drake.cell.keep_clear`). The fault handling is `hrc_drake.cell.recovery`; the
-Supervisor's values (its mode, state, records and limits) are `hrc_drake.cell.supervisor_state`.
+(`hrc_drake.cell.controller.keep_clear`). The fault handling is
+`hrc_drake.cell.controller.recovery`; the Supervisor's values (its mode, state, records and limits)
+are `hrc_drake.cell.controller.supervisor_state`.
 
 The robot follows its plan in plan time `tau`, which advances at the speed scale s ∈ [0, 1] that
 the separation monitor allows on the optional `speed_limit` input: the robot slows down by
@@ -50,12 +51,17 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from hrc_drake.cell.anticipation import TAU_EPS, Anticipation, back_above, same_part, wait_point
-from hrc_drake.cell.intent import MotionIntent
-from hrc_drake.cell.keep_clear import KeepClear, KeepClearSettings
-from hrc_drake.cell.ports import CellConfiguration, PartStatus
-from hrc_drake.cell.recovery import FaultRecovery
-from hrc_drake.cell.supervisor_state import (
+from hrc_drake.cell.controller.anticipation import (
+    TAU_EPS,
+    Anticipation,
+    back_above,
+    same_part,
+    wait_point,
+)
+from hrc_drake.cell.controller.intent import MotionIntent
+from hrc_drake.cell.controller.keep_clear import KeepClear, KeepClearSettings
+from hrc_drake.cell.controller.recovery import FaultRecovery
+from hrc_drake.cell.controller.supervisor_state import (
     N_JOINTS,
     TASK_CAP,
     Detection,
@@ -65,6 +71,7 @@ from hrc_drake.cell.supervisor_state import (
     SupervisorStatus,
     TaskRecord,
 )
+from hrc_drake.cell.ports import CellConfiguration, PartStatus
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
 from hrc_drake.motion.plan import Plan
 from hrc_drake.motion.service import PlanFailure, PlanRequest, PlanService
@@ -82,15 +89,15 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
     (1), `speed_limit` (1: the speed scale the separation monitor allows; unconnected, 1),
     `safety.stop` (1: the robot's protective-stop input; unconnected, none), `operator.body`
     (BodySpheres, the tracked body: predictive separation holds it against its forecast,
-    `hrc_drake.cell.keep_clear`; unconnected, nobody).
+    `hrc_drake.cell.controller.keep_clear`; unconnected, nobody).
     Output ports: `command` (14: the arm's joint positions and velocities, then the gripper's
     opening and grip force; the controller splits it into `ur3.position`, `ur3.velocity`,
     `rg2.opening`, `rg2.force`),
     `hri.prompt` (Prompt), `intent` (MotionIntent), `status` (SupervisorStatus).
     `policy` needs `next_task(state)` and `matches(spec)` (a `Policy`, or a decider wrapped by
-    `hrc_drake.cell.evaluate.DeciderPolicy`), and may offer `predicted_tasks(state)` (most likely
-    first) for planning ahead; `on_task(record)`, if given, hears every task as the cell observed
-    it (a learning decider updates its operator model from it).
+    `hrc_drake.cell.run.evaluate.DeciderPolicy`), and may offer `predicted_tasks(state)` (most
+    likely first) for planning ahead; `on_task(record)`, if given, hears every task as the cell
+    observed it (a learning decider updates its operator model from it).
     """
 
     def __init__(

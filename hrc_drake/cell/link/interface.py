@@ -14,7 +14,7 @@ order across the two processes, so that each side reads at each t exactly what i
 one diagram; the two-process run then equals the in-process one:
 
 0. Before the first step the controller says which scenario it runs (a "hello" session message
-   with its `ScenarioIdentity`, `hrc_drake.cell.scenario_identity`), sent again until the
+   with its `ScenarioIdentity`, `hrc_drake.cell.link.scenario_identity`), sent again until the
    station answers with its own; each side compares the two, and a pair that differs stops on
    both sides with `ScenarioMismatch`, one line naming what differs. A station that serves no
    scenario (identity None: a real cell's driver, a test's stand-in) answers `{}` and serves any
@@ -66,7 +66,7 @@ from pydrake.systems.framework import (
     LeafSystem,
 )
 
-from hrc_drake.cell.lcm_messages import (
+from hrc_drake.cell.link.lcm_messages import (
     COMMANDS,
     END_CHANNEL,
     MEASUREMENTS,
@@ -81,7 +81,7 @@ from hrc_drake.cell.lcm_messages import (
     session_message,
     utime,
 )
-from hrc_drake.cell.scenario_identity import ScenarioIdentity, mismatch
+from hrc_drake.cell.link.scenario_identity import ScenarioIdentity, mismatch
 from hrc_drake.hri.scenario import Scenario, ScenarioError
 
 # Host-local multicast (ttl=0: the datagrams never leave this machine), on a port of its own so
@@ -738,9 +738,9 @@ class CellStationServer:
 
 
 def cell_station_hooks(station) -> StationHooks:
-    """The hooks of a `CellStation` (`hrc_drake.cell.station`): its welds, and the touching
+    """The hooks of a `CellStation` (`hrc_drake.cell.station.build`): its welds, and the touching
     pairs of `sim.contact_results` by owner."""
-    from hrc_drake.cell.contacts import geometry_owners, owner_pairs
+    from hrc_drake.cell.station.contacts import geometry_owners, owner_pairs
 
     owners = geometry_owners(station.plant)
     results_port = station.diagram.GetOutputPort("sim.contact_results")

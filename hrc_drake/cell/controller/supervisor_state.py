@@ -1,5 +1,5 @@
 """The Supervisor's values: its mode, its abstract state, what it records and its limits (no
-Drake systems; `hrc_drake.cell.supervisor` runs them)."""
+Drake systems; `hrc_drake.cell.controller.supervisor` runs them)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hrc_drake.cell.forecast import Anchor
+from hrc_drake.cell.controller.forecast import Anchor
 from hrc_drake.hri.messages import Prompt
 from hrc_drake.motion.clearance import Hold
 from hrc_drake.motion.plan import Plan
@@ -142,7 +142,7 @@ class SupervisorStatus:
     handover: str = ""  # why the task is handed over to the operator ("": it is not)
     away: bool = False  # the arm holds away from home: the next plan starts where it holds
     detections: tuple[Detection, ...] = ()
-    # Predictive separation (`hrc_drake.cell.keep_clear`): where the plan waits for the
+    # Predictive separation (`hrc_drake.cell.controller.keep_clear`): where the plan waits for the
     # operator (rest points and until when), what the waits were timed for, and what the
     # tracker showed of the operator's activity.
     holds: tuple[Hold, ...] = ()

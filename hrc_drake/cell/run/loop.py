@@ -1,7 +1,7 @@
 """The closed loop: a cell and its controller joined in one simulator, and its run.
 
 A cell side is either the simulated station in this process (`LocalCell`) or a station served
-elsewhere, reached through its LCM interface (`hrc_drake.cell.remote.RemoteCell`): the same
+elsewhere, reached through its LCM interface (`hrc_drake.cell.link.remote.RemoteCell`): the same
 ports (`docs/station.md`), the same controller. A `Simulator` monitor watches the run: it ends it
 when the Supervisor is done or has stopped, stops at the step where the station's welds change
 (the loop applies them and goes on), watches the robot's contacts, lights the stack light and
@@ -31,15 +31,15 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Diagram, DiagramBuilder, EventStatus
 
 from hrc_drake.atomic import atomic_write_bytes, atomic_write_text
-from hrc_drake.cell.contacts import Owner, geometry_owners, owner_pairs
-from hrc_drake.cell.controller import Controller, connect_controller
-from hrc_drake.cell.fault_report import fault_records
-from hrc_drake.cell.keep_clear import VIEW_TIMES
+from hrc_drake.cell.controller.build import Controller, connect_controller
+from hrc_drake.cell.controller.keep_clear import VIEW_TIMES
+from hrc_drake.cell.controller.separation import SafetyLog
+from hrc_drake.cell.controller.supervisor import Mode, SupervisorStatus, TaskRecord
 from hrc_drake.cell.ports import CellConfiguration
-from hrc_drake.cell.separation import SafetyLog
-from hrc_drake.cell.station import CellStation
-from hrc_drake.cell.supervisor import Mode, SupervisorStatus, TaskRecord
-from hrc_drake.cell.view import frame_cell
+from hrc_drake.cell.run.fault_report import fault_records
+from hrc_drake.cell.run.view import frame_cell
+from hrc_drake.cell.station.build import CellStation
+from hrc_drake.cell.station.contacts import Owner, geometry_owners, owner_pairs
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.hri.faults import FaultRecord
 from hrc_drake.hri.scenario import Scenario
@@ -176,7 +176,7 @@ def _step_json(t: TaskRecord) -> dict:
 
 @dataclass
 class Setup:
-    """What a run is built from (`hrc_drake.cell.run.prepare_run`)."""
+    """What a run is built from (`hrc_drake.cell.run.run.prepare_run`)."""
 
     scenario: Scenario
     space: StateSpace
@@ -204,7 +204,7 @@ class CellSide(Protocol):
         """Apply the wanted welds; returns them."""
 
     def injected(self, root) -> tuple:
-        """The faults the station has injected (`hrc_drake.cell.faults.Injection`, one per
+        """The faults the station has injected (`hrc_drake.cell.station.faults.Injection`, one per
         scenario fault; a station that does not say: none injected)."""
 
     def configuration(self, root) -> CellConfiguration:
@@ -266,7 +266,7 @@ class ClosedLoop:
 
     `run()` simulates until the Supervisor is done or stopped (or the time is up, or Ctrl-C)
     and returns the RunResult; tests may instead `advance_to(t)` in steps and act on the
-    simulation between them (`root_context`). `hrc_drake.cell.run.build_closed_loop` builds one
+    simulation between them (`root_context`). `hrc_drake.cell.run.run.build_closed_loop` builds one
     from a scenario."""
 
     def __init__(self, setup: Setup, cell: CellSide, controller: Controller, still=None):

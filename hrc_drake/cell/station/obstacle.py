@@ -18,8 +18,8 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import PdControllerGains
 
-from hrc_drake.cell.arm_servo import servo_actuators
-from hrc_drake.cell.contacts import geometry_owners
+from hrc_drake.cell.station.arm_servo import servo_actuators
+from hrc_drake.cell.station.contacts import geometry_owners
 from hrc_drake.cell_models import PLATE, POCKET_DEPTH, SEAT_GAP, TABLE, TRAY
 from hrc_drake.hri.faults import FaultKind
 from hrc_drake.hri.messages import Prompt

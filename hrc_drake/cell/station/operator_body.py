@@ -3,9 +3,9 @@
 The body is geometry in the SceneGraph (illustration and perception roles, so Meshcat and the
 camera show it) with no proximity role and no place in the MultibodyPlant: it never pushes a part
 and the plant never sees it. It is part of the simulated station: `OperatorBody` poses it from a
-`BodyScript` of the simulated operator's activity (`hrc_drake.cell.sim_operator`) — by default
-the operator of this cell, who waits with the hand at the table edge, reaches to the part while
-bolting it and withdraws before the bolts are done — and publishes the body as world-frame
+`BodyScript` of the simulated operator's activity (`hrc_drake.cell.station.sim_operator`) — by
+default the operator of this cell, who waits with the hand at the table edge, reaches to the part
+while bolting it and withdraws before the bolts are done — and publishes the body as world-frame
 spheres (each capsule as a chain of spheres): what a body tracker reports, at the separation
 monitor's rate.
 

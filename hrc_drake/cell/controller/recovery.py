@@ -2,7 +2,7 @@
 where it lies, a path blocked by an obstacle waited out, a protective stop and an operator's
 silence noted (each a `Detection`); and, when the robot cannot do the task but is itself sound,
 the task handed over to the operator, who does it by hand while the arm holds still, after
-which the assembly goes on. A mixin of `hrc_drake.cell.supervisor.Supervisor`: it uses
+which the assembly goes on. A mixin of `hrc_drake.cell.controller.supervisor.Supervisor`: it uses
 the Supervisor's ports (`_arm_port`, `_gripper_port`, `_grip_port`), its `_ask` of the
 planner, limits (`_limits`) and task space (`_space`).
 """
@@ -11,9 +11,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from hrc_drake.cell.anticipation import Turn, turn_at
-from hrc_drake.cell.ports import CellConfiguration, PartStatus
-from hrc_drake.cell.supervisor_state import (
+from hrc_drake.cell.controller.anticipation import Turn, turn_at
+from hrc_drake.cell.controller.supervisor_state import (
     GRIP_SETTLE,
     N_JOINTS,
     PART_FALL_TIME,
@@ -23,6 +22,7 @@ from hrc_drake.cell.supervisor_state import (
     SupervisorStatus,
     obstacle_moved,
 )
+from hrc_drake.cell.ports import CellConfiguration, PartStatus
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
 from hrc_drake.motion.plan import Stage
 from hrc_drake.motion.service import PlanFailure, PlanRequest

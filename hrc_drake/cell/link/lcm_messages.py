@@ -31,8 +31,8 @@ from typing import ClassVar
 import numpy as np
 from drake import lcmt_panda_command, lcmt_panda_status
 
-from hrc_drake.cell.contacts import Owner
 from hrc_drake.cell.ports import BodySpheres, CellConfiguration, PartPlacement, PartStatus
+from hrc_drake.cell.station.contacts import Owner
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
 from hrc_drake.robot_models import UR3_JOINTS
 
@@ -76,7 +76,7 @@ struct lcmt_hri_indication {
     double time;            // when it was given [s, station clock]
 }
 
-// One part's placement (hrc_drake.cell.slot_monitor.PartPlacement).
+// One part's placement (hrc_drake.cell.ports.PartPlacement).
 struct lcmt_part_placement {
     string instance;        // the part's model instance, e.g. "oval_flange_1"
     string status;          // "seated", "held", "misplaced", "tray" or "transit"
@@ -101,7 +101,7 @@ struct lcmt_cell_configuration {
     double obstacle[7];     // its world pose, as a part's (all zeros without one)
 }
 
-// The tracked operator body as world-frame spheres (hrc_drake.cell.operator_body.BodySpheres).
+// The tracked operator body as world-frame spheres (hrc_drake.cell.ports.BodySpheres).
 struct lcmt_operator_body {
     int64_t utime;
     int32_t num_spheres;
@@ -728,4 +728,4 @@ only the newest undelivered message of a channel, and a process also hears what 
 itself.)"""
 PRE_SUFFIX = "_PRE"
 """Lockstep: the commands as they stand just before the controller's update at a time (see
-`hrc_drake.cell.interface`) go on `<channel>_PRE`."""
+`hrc_drake.cell.link.interface`) go on `<channel>_PRE`."""

@@ -1,6 +1,6 @@
 """Monte Carlo runs through the physical cell: the cell side of `hrc-drake evaluate --cell`.
 
-A cell run is one closed-loop simulation (`hrc_drake.cell.run.run_scenario`) of a base scenario
+A cell run is one closed-loop simulation (`hrc_drake.cell.run.run.run_scenario`) of a base scenario
 (default `row1-optimal`, with the evaluated assembly) in which the decider proposes at every task
 boundary (`DeciderPolicy`), the population's operator model answers, and the decider learns from
 each task as the cell observed it (from contact, not from the answer). Every run builds its own
@@ -256,7 +256,7 @@ def decider_policy(scenario, space: StateSpace, progress=None) -> DeciderPolicy:
     if config.costs:
         costs = load_cost_table(config.costs, space)
     else:
-        from hrc_drake.cell.costs import default_cost_table
+        from hrc_drake.cell.run.costs import default_cost_table
 
         costs = default_cost_table(space, progress=progress)
     interaction = scenario.interaction_model()
@@ -298,7 +298,7 @@ def task_level_run(scenario, space: StateSpace, costs) -> RunResult:
     the simulated station waits (the same seeded draws, step by step), and each task takes
     the table's seconds plus what the interaction adds (`hrc_drake.evaluate.simulate_run`).
     What the cell's run of the scenario should take, if the task level mirrors the cell."""
-    from hrc_drake.cell.run import scenario_policy
+    from hrc_drake.cell.run.run import scenario_policy
 
     operator = scenario.operator_for(space)
     timeline = InteractionCosts(space, costs, scenario.interaction_model())
@@ -327,7 +327,7 @@ def play_cell_run(scenario, space: StateSpace, decider, operator):
     """One run of `decider` against `operator` through the cell; the decider is not reset.
     Returns an `hrc_drake.evaluate.RunResult` with the cell's idle times and interaction (the
     delays the operator drew, when it draws them: `DelayedIndications`)."""
-    from hrc_drake.cell.run import run_scenario
+    from hrc_drake.cell.run.run import run_scenario
     from hrc_drake.cell.scenario import cell_design, motion_options
     from hrc_drake.motion.planner import MotionPlanner
 

@@ -15,9 +15,9 @@ operator with its body, and a camera. Its ports (`docs/station.md`):
   `sim.contact_results`, `sim.body_poses`, `sim.query_object`, `sim.camera.rgb_image`.
 
 The gripper holds a part by its pads' contact and friction, squeezing with the commanded force
-(`hrc_drake.cell.gripper`): a part can slip, fall or fail to seat. What only a simulator can do
-stays inside: the simulated operator answers the prompts and bolts, its body moves by its
-activity, and its bolts fix each part where it sits when bolted (`hrc_drake.cell.welds`),
+(`hrc_drake.cell.station.gripper`): a part can slip, fall or fail to seat. What only a simulator can
+do stays inside: the simulated operator answers the prompts and bolts, its body moves by its
+activity, and its bolts fix each part where it sits when bolted (`hrc_drake.cell.station.welds`),
 switched through the station's `Simulator` monitor (`CellStation.welds_changed`,
 `CellStation.apply_welds`).
 """
@@ -56,24 +56,24 @@ from pydrake.systems.primitives import ConstantValueSource, Multiplexer
 from pydrake.systems.sensors import CameraConfig, RgbdSensor
 
 from hrc_drake.atomic import atomic_write_text
-from hrc_drake.cell.arm_servo import GravityCompensation, servo_actuators
-from hrc_drake.cell.contacts import geometry_owners, owner_pairs
-from hrc_drake.cell.desk import DeskScript, add_bins
-from hrc_drake.cell.faults import FaultInjector, SilentOperator
-from hrc_drake.cell.gripper import add_gripper_ports
-from hrc_drake.cell.obstacle import (
+from hrc_drake.cell.person import desk_of
+from hrc_drake.cell.ports import BodySpheres, CellConfiguration, PartStatus, placement_transform
+from hrc_drake.cell.scenario import cell_design, plant_config, scene_graph_config
+from hrc_drake.cell.station.arm_servo import GravityCompensation, servo_actuators
+from hrc_drake.cell.station.contacts import geometry_owners, owner_pairs
+from hrc_drake.cell.station.desk import DeskScript, add_bins
+from hrc_drake.cell.station.faults import FaultInjector, SilentOperator
+from hrc_drake.cell.station.gripper import add_gripper_ports
+from hrc_drake.cell.station.obstacle import (
     SeatPositions,
     filter_obstacle_contacts,
     mount_obstacle,
     mounted_obstacles,
 )
-from hrc_drake.cell.operator_body import BodyScript, OperatorBody
-from hrc_drake.cell.person import desk_of
-from hrc_drake.cell.ports import BodySpheres, CellConfiguration, PartStatus, placement_transform
-from hrc_drake.cell.scenario import cell_design, plant_config, scene_graph_config
-from hrc_drake.cell.sim_operator import SimulatedOperator
-from hrc_drake.cell.slot_monitor import SlotMonitor
-from hrc_drake.cell.welds import Bolts, Weld
+from hrc_drake.cell.station.operator_body import BodyScript, OperatorBody
+from hrc_drake.cell.station.sim_operator import SimulatedOperator
+from hrc_drake.cell.station.slot_monitor import SlotMonitor
+from hrc_drake.cell.station.welds import Bolts, Weld
 from hrc_drake.cell_models import CellDesign, add_cell_models
 from hrc_drake.hri.faults import check_faults
 from hrc_drake.hri.messages import Prompt
@@ -349,7 +349,7 @@ def _set_servo_gains(plant: MultibodyPlant, instances, scenario: Scenario) -> No
         actuator.set_controller_gains(PdControllerGains(p=kp, d=kd))
     for actuator in servo_actuators(plant, instances[GRIPPER]):
         actuator.set_controller_gains(PdControllerGains(p=gripper.kp, d=gripper.kd))
-    # The arm's servo compensates its links' weight (`hrc_drake.cell.arm_servo`), as a UR
+    # The arm's servo compensates its links' weight (`hrc_drake.cell.station.arm_servo`), as a UR
     # controller does; the gripper's fingers are servoed without a weight model. Held parts
     # still weigh on both.
     plant.set_gravity_enabled(instances[GRIPPER], False)

@@ -2,7 +2,7 @@
 
 `run_scenario` is the runner of `hrc-drake simulate` and of `evaluate --cell`: the station comes
 from the scenario (`make_cell_station`), the controller from the scenario, the policy and a
-planner beside it (`make_controller`), joined in a `ClosedLoop` (`hrc_drake.cell.loop`), which
+planner beside it (`make_controller`), joined in a `ClosedLoop` (`hrc_drake.cell.run.loop`), which
 simulates until the Supervisor is done or stops.
 """
 
@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatParams
 
-from hrc_drake.cell.controller import make_controller
-from hrc_drake.cell.loop import ClosedLoop, LocalCell, RunResult, Setup
+from hrc_drake.cell.controller.build import make_controller
+from hrc_drake.cell.run.loop import ClosedLoop, LocalCell, RunResult, Setup
 from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
-from hrc_drake.cell.station import make_cell_station, station_scenario
+from hrc_drake.cell.station.build import make_cell_station, station_scenario
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.hri.scenario import Scenario
 from hrc_drake.motion.options import MotionOptions
@@ -155,7 +155,7 @@ def run_scenario(
     `motion_planner` plans in this process instead of the shared planning worker (e.g. a
     fresh one, so that a run does not use plans cached by others). `still=(t, path)` saves a
     camera image at simulated time t. `operator` (`(step, state, proposal) -> task`) replaces
-    the scenario's; `body_script` the operator body's (`hrc_drake.cell.operator_body`).
+    the scenario's; `body_script` the operator body's (`hrc_drake.cell.station.operator_body`).
     `live`: a person is the operator, through Meshcat buttons (`hrc_drake.hri.live`), served on
     `port`; the run paces itself to the wall clock; `on_prompt` is handed to the `LiveOperator`
     (tests inject clicks from it). `on_task(record)` hears every task as the cell observed it.

@@ -7,9 +7,9 @@ callable; or a person clicking in the browser, asked without blocking at every u
 robot moves while they choose) and publishes the answer as an `Indication`,
 after the operator's `indication_delay(step)` when it has one (the interface's delay);
 on a `BOLT` prompt it bolts the held part for `bolt_time` seconds (its body reaches in, see
-`hrc_drake.cell.operator_body`) and says it is bolted; the bolts take once the robot has let
+`hrc_drake.cell.station.operator_body`) and says it is bolted; the bolts take once the robot has let
 the part go and it rests (`resting`) where the configuration sensor reads it in a seat, and
-fix it where it sits then, not at the nominal seat (`hrc_drake.cell.welds`): a part released
+fix it where it sits then, not at the nominal seat (`hrc_drake.cell.station.welds`): a part released
 settles in its pocket under contact first. Before an undo it takes the bolts out of the part
 that goes back. On a `HANDOVER` prompt it does the task by hand: it takes `handover_time`
 seconds to fetch the part and put it in its seat, then bolts it (`bolt_time`) and says it is
@@ -30,7 +30,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
 from hrc_drake.cell.ports import ActivityKind, CellConfiguration, OperatorActivity, PartStatus
-from hrc_drake.cell.welds import Weld
+from hrc_drake.cell.station.welds import Weld
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
 from hrc_drake.tasks.decide import Operator
 from hrc_drake.tasks.tokens import UNDO

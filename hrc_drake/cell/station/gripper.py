@@ -90,7 +90,7 @@ def add_gripper_ports(
     stroke), `rg2.force` (commanded gripping force [N], clipped to the RG2's range),
     `rg2.state_measured` (opening [m], rate [m/s]) and `rg2.grip_detected`; the fingers'
     servo has the plant's finger gain `kp` [N/m]. With `faults` (the station's
-    `hrc_drake.cell.faults.FaultInjector`) the command reaches the servo through it."""
+    `hrc_drake.cell.station.faults.FaultInjector`) the command reaches the servo through it."""
     clip = builder.AddNamedSystem("rg2_clip", Saturation([0.0], [RG2_MAX_OPENING]))
     force = builder.AddNamedSystem("rg2_force_clip", Saturation([RG2_MIN_FORCE], [RG2_MAX_FORCE]))
     servo = builder.AddNamedSystem("rg2_servo", FingerServo(kp, plant.time_step()))

@@ -3,17 +3,17 @@
 A real cell fixes a placed part with bolts; the simulated operator bolts it too, and the station
 then holds the part where it sits at that moment, relative to what it sits on (the plate, or the
 host part whose row it is in): never at the nominal seat. (The gripper holds a part by its
-fingers' contact and friction alone: `hrc_drake.cell.gripper`.)
+fingers' contact and friction alone: `hrc_drake.cell.station.gripper`.)
 
 A bolt locks the part's floating joint (SAP's joint locking, `Joint.Lock`): the part stays
 exactly where it is, and its degrees of freedom leave the contact problem. While it holds, the
 part's contact with its support is filtered out in the SceneGraph context: the two are one
 body, and that contact would cost the step most of its time while changing nothing; the
 configuration sensor reads such a filtered pair by distance instead
-(`hrc_drake.cell.slot_monitor`). A lock fixes the part in the world, which is fixing it relative
-to its support while the support does not move: the plate never does, and a host part is
-bolted before anything is bolted on it (`hrc_drake.cell.sim_operator`) and unbolted only after
-(an undo takes the parts off in the reverse order).
+(`hrc_drake.cell.station.slot_monitor`). A lock fixes the part in the world, which is fixing it
+relative to its support while the support does not move: the plate never does, and a host part is
+bolted before anything is bolted on it (`hrc_drake.cell.station.sim_operator`) and unbolted only
+after (an undo takes the parts off in the reverse order).
 
 Why not weld constraints: Drake 1.51 cannot change a weld constraint's poses once the plant is
 finalized, and SAP's weld constraints are compliant: an anchor body welded to a frame whose pose

@@ -14,8 +14,8 @@ s into the carry: the station moves it, `CellStation.apply_welds`, so the robot 
 that far off its seat), `protective-stop` (`safety.stop` is 1 from `after` s into the task for
 `duration` s), `pushed` (a torque on `joint` from `after` s into the task for `duration` s),
 `no-path` (when the task's prompt appears, a box is set down over the seat the robot proposes,
-`hrc_drake.cell.obstacle`, and taken away `duration` s later), `no-seat` with `obstacle: true`
-(when the task's prompt appears, debris drops into the pocket of the seat the robot proposes,
+`hrc_drake.cell.station.obstacle`, and taken away `duration` s later), `no-seat` with `obstacle:
+true` (when the task's prompt appears, debris drops into the pocket of the seat the robot proposes,
 and stays). `operator-silent` is the
 simulated operator's (`SilentOperator`); the injector notes when its task's prompt appears.
 """
@@ -30,8 +30,8 @@ from pydrake.common.value import AbstractValue
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from hrc_drake.cell.gripper import STALL_GAP, stopped_short
-from hrc_drake.cell.obstacle import SeatPositions
+from hrc_drake.cell.station.gripper import STALL_GAP, stopped_short
+from hrc_drake.cell.station.obstacle import SeatPositions
 from hrc_drake.hri.faults import FaultConfig, FaultKind
 from hrc_drake.hri.messages import Prompt, PromptKind
 from hrc_drake.obstacle_models import DEBRIS_PARK, OBSTACLE_PARK, obstacle_pose_over
@@ -97,7 +97,7 @@ class FaultInjector(LeafSystem):
     `force` (the command the fingers' servo obeys), `safety.stop` (1), `torque` (the plant's
     generalized forces), `obstacle` and `debris` (their carriages' desired states: x, y, z,
     then three zero rates), `injected` (tuple of Injection). Updated every `period` seconds.
-    `seat_position` (a `hrc_drake.cell.obstacle.SeatPositions`) places a no-path fault's box
+    `seat_position` (a `hrc_drake.cell.station.obstacle.SeatPositions`) places a no-path fault's box
     and a no-seat fault's debris."""
 
     def __init__(

@@ -1,6 +1,6 @@
 """The shared desk in the simulated station: the operator's bins drawn on the table, and the body
 script of an operator who uses them (`hrc_drake.hri.activity` is the model; the controller's
-forecast of the same body is `hrc_drake.cell.forecast`).
+forecast of the same body is `hrc_drake.cell.controller.forecast`).
 
 The station moves the simulated operator's body by `DeskScript` with this person's parameters
 (the controller forecasts it with the population's).

@@ -1,12 +1,12 @@
-"""Runs with the station in another process, over LCM (`hrc_drake.cell.interface`).
+"""Runs with the station in another process, over LCM (`hrc_drake.cell.link.interface`).
 
 `hrc-drake station --scenario S --lcm URL` serves the simulated station of S (`serve_scenario`);
 `hrc-drake simulate --scenario S --station-lcm URL` runs the controller of S against it
-(`run_over_lcm`). Both sides build what a one-process run (`hrc_drake.cell.run`) builds from
+(`run_over_lcm`). Both sides build what a one-process run (`hrc_drake.cell.run.run`) builds from
 the same scenario (the station with the arm at the motion planner's home; the controller with
 its policy and planner), and the lockstep keeps the order of its events: the two-process run
 has the same states, terminal and collisions as the one-process run. Before the first step the
-two compare the scenarios they were started with (`hrc_drake.cell.scenario_identity`) and
+two compare the scenarios they were started with (`hrc_drake.cell.link.scenario_identity`) and
 refuse, on both sides, a pair that differs (`ScenarioMismatch`).
 """
 
@@ -18,7 +18,7 @@ import re
 from pydrake.lcm import DrakeLcm
 from pydrake.systems.framework import Diagram
 
-from hrc_drake.cell.interface import (
+from hrc_drake.cell.link.interface import (
     DEFAULT_LCM_URL,
     LockstepTimeouts,
     StationLinkError,
@@ -27,16 +27,16 @@ from hrc_drake.cell.interface import (
     make_cell_station_interface,
     serve_cell_station,
 )
-from hrc_drake.cell.loop import ClosedLoop, RunResult
-from hrc_drake.cell.run import controller_of, prepare_run
+from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
+from hrc_drake.cell.run.loop import ClosedLoop, RunResult
+from hrc_drake.cell.run.run import controller_of, prepare_run
 from hrc_drake.cell.scenario import (
     LEAN,
     cell_design,
     load_cell_scenario,
     motion_options,
 )
-from hrc_drake.cell.scenario_identity import ScenarioIdentity
-from hrc_drake.cell.station import CellStation, make_cell_station
+from hrc_drake.cell.station.build import CellStation, make_cell_station
 from hrc_drake.hri.scenario import Scenario
 from hrc_drake.motion.planner import MotionPlanner
 from hrc_drake.paths import UsageError
@@ -89,7 +89,7 @@ def serve_scenario(
 
 class RemoteCell:
     """A station served over LCM, reached through its interface, as a closed loop's cell side
-    (`hrc_drake.cell.loop.CellSide`): no welds or stills here (the station applies its own), the
+    (`hrc_drake.cell.run.loop.CellSide`): no welds or stills here (the station applies its own), the
     touching pairs the station sends, and the session ended at the end of the run."""
 
     meshcat = None

@@ -18,18 +18,18 @@ import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import Demultiplexer
 
-from hrc_drake.cell.forecast import OperatorForecast
-from hrc_drake.cell.intent import MotionIntent
-from hrc_drake.cell.keep_clear import KeepClearSettings
-from hrc_drake.cell.person import desk_of
-from hrc_drake.cell.ports import BodySpheres
-from hrc_drake.cell.separation import (
+from hrc_drake.cell.controller.forecast import OperatorForecast
+from hrc_drake.cell.controller.intent import MotionIntent
+from hrc_drake.cell.controller.keep_clear import KeepClearSettings
+from hrc_drake.cell.controller.separation import (
     ControllerSeparationMonitor,
     RobotEnvelope,
     SafetyLog,
     assess,
 )
-from hrc_drake.cell.supervisor import Supervisor, SupervisorLimits, TaskRecord
+from hrc_drake.cell.controller.supervisor import Supervisor, SupervisorLimits, TaskRecord
+from hrc_drake.cell.person import desk_of
+from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.hri.scenario import Scenario
 from hrc_drake.motion.options import MotionOptions

@@ -1,6 +1,6 @@
 """The robot that moves on its prediction: where along a committed task it can turn to the task
 the operator indicates, and how (`turn_at`; the `Anticipation` mixin of
-`hrc_drake.cell.supervisor.Supervisor` acts on it).
+`hrc_drake.cell.controller.supervisor.Supervisor` acts on it).
 
 In ``anticipate`` mode (`hrc_drake.tasks.interaction`) the Supervisor starts, at a boundary, on
 the placement its policy commits to, while the operator's indication is still on its way. When
@@ -27,8 +27,8 @@ from __future__ import annotations
 import enum
 from dataclasses import replace
 
+from hrc_drake.cell.controller.supervisor_state import Mode, SupervisorError, SupervisorStatus
 from hrc_drake.cell.ports import CellConfiguration
-from hrc_drake.cell.supervisor_state import Mode, SupervisorError, SupervisorStatus
 from hrc_drake.motion.plan import HOME_LEG, LIFT, Plan, Stage
 from hrc_drake.motion.service import PlanRequest
 from hrc_drake.tasks.spec import AssemblySpec
@@ -104,7 +104,7 @@ def same_part(spec: AssemblySpec, committed: str, indicated: str) -> bool:
 
 class Anticipation:
     """The Supervisor's anticipation: commit, take the indication while moving, turn. A mixin
-    of `hrc_drake.cell.supervisor.Supervisor` (its `_policy`, `_space`, `_indicated`,
+    of `hrc_drake.cell.controller.supervisor.Supervisor` (its `_policy`, `_space`, `_indicated`,
     `_request`, `_ask`)."""
 
     def _commit(self, state: tuple[str, ...], proposal: str) -> str | None:

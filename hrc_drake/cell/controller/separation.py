@@ -57,7 +57,7 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 
-from hrc_drake.cell.intent import MotionIntent
+from hrc_drake.cell.controller.intent import MotionIntent
 from hrc_drake.cell.person import CHAIN_GAP
 from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell_models import CellDesign, add_cell_models

@@ -4,7 +4,7 @@ A part is in a seat iff it touches that seat's floor geometry (`slot_k_seat` on 
 `row_j_seat` on a host part) and its pose is within a tolerance of the seat frame. Nothing else
 counts: not the script that placed it, not a commanded pose. Touching is contact; for a pair
 whose contact the simulation skips (a bolted part and what it is bolted to,
-`hrc_drake.cell.welds`), it is the pair's signed distance within `SlotTolerances.touch`.
+`hrc_drake.cell.station.welds`), it is the pair's signed distance within `SlotTolerances.touch`.
 
 Every placement also carries the part's measured world pose, whatever its status: a part that
 fell on the table, lies askew on the plate or rests in the gripper is found where it is.
@@ -23,7 +23,6 @@ from pydrake.multibody.plant import ContactResults, MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex
 from pydrake.systems.framework import LeafSystem
 
-from hrc_drake.cell.contacts import contact_pairs, geometry_owners
 from hrc_drake.cell.ports import (
     CellConfiguration,
     PartPlacement,
@@ -31,6 +30,7 @@ from hrc_drake.cell.ports import (
     placement_transform,
     pose_tuple,
 )
+from hrc_drake.cell.station.contacts import contact_pairs, geometry_owners
 from hrc_drake.cell_models import BOSS, PLATE, POCKET_CLEARANCE, POCKET_DEPTH
 from hrc_drake.motion.poses import CellFrames, seat_pose
 from hrc_drake.obstacle_models import OBSTACLE, OBSTACLE_SEEN_ABOVE, OBSTACLE_SIZE
@@ -60,7 +60,7 @@ class SlotTolerances:
     # walls with its corners (half its length turned by this angle is the clearance).
     seat_yaw: float = 2 * POCKET_CLEARANCE / BOSS[0]
     # m: a part's boss and a seat floor whose contact the simulation skips (a bolted part's,
-    # `hrc_drake.cell.welds`) touch when they are this close (the hydroelastic margin).
+    # `hrc_drake.cell.station.welds`) touch when they are this close (the hydroelastic margin).
     touch: float = 0.0001
     held_position: float = 0.005
     held_angle: float = 0.1

@@ -2,17 +2,17 @@
 as the controller found them (`simulate --json` `faults`).
 
 The two sides never talk about faults: the station's injector says when each took effect
-(`hrc_drake.cell.faults.Injection`, simulator only) and the Supervisor what it detected from its
-measurements (`hrc_drake.cell.supervisor.Detection`). A fault counts as detected by the first
-detection of a cause it can produce, in its task, from its injection on.
+(`hrc_drake.cell.station.faults.Injection`, simulator only) and the Supervisor what it detected from
+its measurements (`hrc_drake.cell.controller.supervisor.Detection`). A fault counts as detected by
+the first detection of a cause it can produce, in its task, from its injection on.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
-from hrc_drake.cell.faults import Injection
-from hrc_drake.cell.supervisor import Detection
+from hrc_drake.cell.controller.supervisor import Detection
+from hrc_drake.cell.station.faults import Injection
 from hrc_drake.hri.faults import FaultConfig, FaultKind, FaultRecord
 
 # What each kind of fault shows as, in the controller's measurements.

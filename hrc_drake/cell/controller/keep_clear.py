@@ -1,7 +1,7 @@
 """Predictive separation: the Supervisor times its plan around where it forecasts the operator.
 
 With `safety.separation: predictive` and an operator who shares the desk, the Supervisor keeps an
-`OperatorForecast` (`hrc_drake.cell.desk`): from the task the operator indicated (before the
+`OperatorForecast` (`hrc_drake.cell.station.desk`): from the task the operator indicated (before the
 indication: the task the robot committed to, at the interface's median delay) it forecasts the
 body over the plan's horizon, and asks the motion layer (`hrc_drake.motion.clearance`) where the
 arm should wait so that speed-and-separation monitoring is forecast never to slow it. It times
@@ -35,10 +35,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 from pydrake.common.value import AbstractValue
 
-from hrc_drake.cell.forecast import Anchor, OperatorForecast
+from hrc_drake.cell.controller.forecast import Anchor, OperatorForecast
+from hrc_drake.cell.controller.supervisor_state import Mode, SupervisorStatus
 from hrc_drake.cell.person import ARM_SPHERES
 from hrc_drake.cell.ports import BodySpheres
-from hrc_drake.cell.supervisor_state import Mode, SupervisorStatus
 from hrc_drake.motion.clearance import Occupancy, ScaleFn, time_around
 from hrc_drake.tasks.tokens import UNDO
 
@@ -66,7 +66,7 @@ class KeepClearSettings:
 
 class KeepClear:
     """The Supervisor's predictive separation (see the module docstring); a mixin of
-    `hrc_drake.cell.supervisor.Supervisor`."""
+    `hrc_drake.cell.controller.supervisor.Supervisor`."""
 
     def _declare_keep_clear(self, settings: KeepClearSettings) -> None:
         self._forecast, self._scale = settings.forecast, settings.scale

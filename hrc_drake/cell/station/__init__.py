@@ -1,0 +1,11 @@
+"""The simulated station: the cell's plant and everything the simulator plays (see
+`hrc_drake.cell.station.build`, whose entry points are imported here)."""
+
+from hrc_drake.cell.station.build import (
+    CellStation,
+    make_cell_station,
+    simulate_station,
+    station_scenario,
+)
+
+__all__ = ["CellStation", "make_cell_station", "simulate_station", "station_scenario"]
