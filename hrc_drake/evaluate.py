@@ -61,6 +61,7 @@ from hrc_drake.tasks.interaction import (
     delay_generator,
 )
 from hrc_drake.tasks.operator_model import OnlineOperatorModel
+from hrc_drake.tasks.protocols import Commits, HasOperatorModel, TiresAlongTheRun
 from hrc_drake.tasks.tokens import UNDO
 
 MAX_TASKS = 100
@@ -118,7 +119,7 @@ def predicted_tasks(decider, state: tuple[str, ...], proposal: str) -> list[str]
     """What to plan ahead for `state`: the tasks the operator may perform, most likely first —
     the proposal, and with an operator model (`mpc`) every answer it expects with probability
     >= `PREDICT_PROBABILITY` (at most `PREDICT_AT_MOST`)."""
-    model = getattr(decider, "model", None)
+    model = decider.model if isinstance(decider, HasOperatorModel) else None
     if model is None:
         return [proposal]
     probs = model.outcome_probabilities(tuple(state), proposal)
@@ -131,10 +132,9 @@ def commitment(decider, state: tuple[str, ...], proposal: str, interaction: Inte
     choice (`commit`), or for a decider without one its proposal; always None in ``wait``."""
     if not interaction.anticipates:
         return None
-    commit = getattr(decider, "commit", None)
-    if commit is None:
+    if not isinstance(decider, Commits):
         return commit_to_proposal(interaction, proposal)
-    return commit(state, proposal)
+    return decider.commit(state, proposal)
 
 
 @dataclass
@@ -177,7 +177,7 @@ def simulate_run(
     delays = delays if delays is not None else delay_generator(0)
     index, tally = 0, _Tally()
     ready: list[bool] = []
-    scale = getattr(operator, "bolt_scale", None)
+    scale = operator.bolt_scale if isinstance(operator, TiresAlongTheRun) else None
     for step in range(1, max_tasks + 1):
         if space.kind[index] == StateKind.TERMINAL:
             return tally.result(True, step - 1, ready)

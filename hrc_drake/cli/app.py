@@ -150,6 +150,24 @@ def cmd_station(args) -> int:
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of `hrc-drake`."""
     parser = argparse.ArgumentParser(prog="hrc-drake", description=DESCRIPTION)
+    common = _common_flags()
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
+
+    def add(name, func, help_text):
+        p = sub.add_parser(name, parents=[common], help=help_text)
+        p.set_defaults(func=func)
+        return p
+
+    _add_task_commands(add)
+    _add_simulate(add("simulate", cmd_simulate, "run a scenario in the Drake cell"))
+    _add_station(add("station", cmd_station, "serve a scenario's simulated station over LCM"))
+    add_evaluate_parser(add)
+    return parser
+
+
+def _common_flags() -> argparse.ArgumentParser:
+    """The flags every command takes: the assembly, the seed, JSON, the MDP's discount and the
+    operator's mistake probability."""
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument(
         "--assembly",
@@ -171,13 +189,11 @@ def build_parser() -> argparse.ArgumentParser:
         default=0.05,
         help="probability in [0, 1] that the operator misplaces a part (spec `mistakes`)",
     )
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
+    return common
 
-    def add(name, func, help_text):
-        p = sub.add_parser(name, parents=[common], help=help_text)
-        p.set_defaults(func=func)
-        return p
 
+def _add_task_commands(add) -> None:
+    """The task layer's commands and `costs`, with `add(name, func, help)` of `build_parser`."""
     add("states", cmd_states, "the state table (Table 1)")
     costs_help = "cost table (hrc-drake costs): minimise seconds instead of tasks"
     out_help = "policy file to write (an existing file that is not a policy needs --force)"
@@ -205,26 +221,47 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True)
     p.add_argument("--schedule", choices=list(SCHEDULES), default="paper")
     add_force_flag(p)
-    p = add("simulate", cmd_simulate, "run a scenario in the Drake cell")
+
+
+def _add_scenario_flags(p, simulate: bool) -> None:
+    """The flags that make the scenario, which `simulate` and `station` share (a station and
+    its controller are started with the same ones)."""
     p.add_argument(
         "--scenario",
         default=None,
         help="scenario name in scenarios/ or a path (default: row1-optimal, or with --assembly "
-        "an operator who follows the robot)",
+        "an operator who follows the robot)"
+        if simulate
+        else "as for simulate",
     )
     p.add_argument(
         "--scenario-text",
         default=None,
-        help='YAML merged over the scenario, e.g. "{motion: {hold_time: 1.0}}"',
+        help='YAML merged over the scenario, e.g. "{motion: {hold_time: 1.0}}"'
+        if simulate
+        else "as for simulate",
     )
-    p.add_argument("--operator", default=None, help='operator script, e.g. "1:F3,2:S12"')
-    p.add_argument("--policy", type=Path, default=None, help="policy file (default: exact)")
-    p.add_argument("--record", type=Path, default=None, help="Meshcat HTML recording to write")
+    p.add_argument(
+        "--operator",
+        default=None,
+        help='operator script, e.g. "1:F3,2:S12"'
+        if simulate
+        else "the simulated operator's script, as for simulate",
+    )
     p.add_argument(
         "--lean",
         action="store_true",
-        help="0.5 s bolting holds (tests, previews); same as --scenario-text with LEAN",
+        help="0.5 s bolting holds (tests, previews); same as --scenario-text with LEAN"
+        if simulate
+        else "as for simulate",
     )
+
+
+def _add_simulate(p) -> None:
+    """`simulate`'s flags."""
+    _add_scenario_flags(p, simulate=True)
+    p.add_argument("--policy", type=Path, default=None, help="policy file (default: exact)")
+    p.add_argument("--record", type=Path, default=None, help="Meshcat HTML recording to write")
     p.add_argument("--still", type=Path, default=None, help="PNG of the cell at --still-time")
     p.add_argument(
         "--still-time", type=float, default=None, help="simulated time of --still (default 10)"
@@ -267,13 +304,11 @@ def build_parser() -> argparse.ArgumentParser:
         "exists (refused if made for another assembly), learned from this run and saved "
         "atomically; the cell's robot does not use it yet",
     )
-    p = add("station", cmd_station, "serve a scenario's simulated station over LCM")
-    p.add_argument("--scenario", default=None, help="as for simulate")
-    p.add_argument("--scenario-text", default=None, help="as for simulate")
-    p.add_argument(
-        "--operator", default=None, help="the simulated operator's script, as for simulate"
-    )
-    p.add_argument("--lean", action="store_true", help="as for simulate")
+
+
+def _add_station(p) -> None:
+    """`station`'s flags."""
+    _add_scenario_flags(p, simulate=False)
     p.add_argument(
         "--lcm",
         metavar="URL",
@@ -287,9 +322,6 @@ def build_parser() -> argparse.ArgumentParser:
         help="seconds to wait for the controller to come, and for each of its later messages",
     )
     p.set_defaults(policy=None)
-
-    add_evaluate_parser(add)
-    return parser
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -18,6 +18,7 @@ from hrc_drake.paths import MESHCAT_RECORDING, PNG_FILE, UsageError, check_outpu
 from hrc_drake.robot_models import UR3_JOINTS
 from hrc_drake.tasks.decide import check_script_within_run, run_decisions
 from hrc_drake.tasks.graph import generate_states
+from hrc_drake.tasks.protocols import ObservesTasks
 from hrc_drake.tasks.spec import load_spec
 from hrc_drake.tasks.tokens import UNDO
 
@@ -109,7 +110,7 @@ def _run(args, scenario, policy, record, still, live: bool, port):
     station another process serves (`hrc-drake station`)."""
     url = getattr(args, "station_lcm", None)
     # A scenario's decider learns from every task as the cell observed it (`DeciderPolicy`).
-    on_task = getattr(policy, "observe", None)
+    on_task = policy.observe if isinstance(policy, ObservesTasks) else None
     if url is None:
         return run_scenario(
             scenario, policy, record=record, progress=not live, still=still, live=live,

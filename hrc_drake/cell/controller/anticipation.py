@@ -31,6 +31,7 @@ from hrc_drake.cell.controller.supervisor_state import Mode, SupervisorError, Su
 from hrc_drake.cell.ports import CellConfiguration
 from hrc_drake.motion.plan import HOME_LEG, LIFT, Plan, Stage
 from hrc_drake.motion.service import PlanRequest
+from hrc_drake.tasks.protocols import Commits, PredictsTasks
 from hrc_drake.tasks.spec import AssemblySpec
 from hrc_drake.tasks.tokens import UNDO
 
@@ -110,9 +111,8 @@ class Anticipation:
     def _commit(self, state: tuple[str, ...], proposal: str) -> str | None:
         """The placement the policy bets on (its `commit`; a policy without one bets on its
         proposal when that is a placement)."""
-        commit = getattr(self._policy, "commit", None)
-        if commit is not None:
-            return commit(state, proposal)
+        if isinstance(self._policy, Commits):
+            return self._policy.commit(state, proposal)
         return None if proposal == UNDO else proposal
 
     def _await_indication(self, s: SupervisorStatus, context, now: float):
@@ -218,8 +218,8 @@ class Anticipation:
             return s
         committed, space = s.plan.task, self._space
         feasible = [t for t, _ in space.tasks(space.index(s.state))]
-        predict = getattr(self._policy, "predicted_tasks", None)
-        likely = list(predict(s.state)) if predict is not None else []
+        policy = self._policy
+        likely = list(policy.predicted_tasks(s.state)) if isinstance(policy, PredictsTasks) else []
         others = [
             t
             for t in dict.fromkeys([*likely, *feasible])

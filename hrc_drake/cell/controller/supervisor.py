@@ -78,6 +78,7 @@ from hrc_drake.motion.service import PlanFailure, PlanRequest, PlanService
 from hrc_drake.robot_models import UR3_JOINTS
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.policy import Policy
+from hrc_drake.tasks.protocols import PredictsTasks
 from hrc_drake.tasks.tokens import UNDO
 
 
@@ -556,8 +557,11 @@ class Supervisor(FaultRecovery, Anticipation, KeepClear, LeafSystem):
             return
         if space.kind[index] == StateKind.TERMINAL:
             return
-        predict = getattr(self._policy, "predicted_tasks", None)
-        tasks = predict(state) if predict is not None else [self._policy.next_task(state)]
+        policy = self._policy
+        if isinstance(policy, PredictsTasks):
+            tasks = policy.predicted_tasks(state)
+        else:
+            tasks = [policy.next_task(state)]
         last = state[-1] if state else None
         for task in (t for t in tasks if t is not None):
             try:

@@ -43,6 +43,7 @@ from hrc_drake.paths import UsageError
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.interaction import MODES, InteractionCosts, operator_delays
 from hrc_drake.tasks.policy import PolicyFileError
+from hrc_drake.tasks.protocols import TiresAlongTheRun, TotalDelay
 from hrc_drake.tasks.spec import AssemblySpec
 from hrc_drake.tasks.tokens import UNDO
 
@@ -311,9 +312,9 @@ def check_cell_operator(operator, model_name: str) -> None:
     """UsageError for an operator model the cell cannot play: one whose bolting scale
     (`bolt_scale(step)`, which the simulated operator's bolting time is multiplied by: `slow`
     tires along the run) is not a positive finite factor."""
-    scale = getattr(operator, "bolt_scale", None)
-    if scale is None:
+    if not isinstance(operator, TiresAlongTheRun):
         return
+    scale = operator.bolt_scale
     for step in (1, 2, 5, 30):
         factor = float(scale(step))
         if not (math.isfinite(factor) and factor > 0.0):
@@ -354,7 +355,7 @@ def play_cell_run(scenario, space: StateSpace, decider, operator):
         commits=sum(t.committed is not None for t in tasks),
         retargets=sum(bool(t.retargeted) for t in tasks),
         swaps=sum(bool(t.swapped) for t in tasks),
-        indication_delay=float(getattr(operator, "total_delay", lambda: 0.0)()),
+        indication_delay=float(operator.total_delay() if isinstance(operator, TotalDelay) else 0.0),
         states=tuple(result.names),
         violations=0 if result.safety is None else int(result.safety.violations),
         handovers=result.handovers,

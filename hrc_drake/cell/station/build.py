@@ -70,7 +70,7 @@ from hrc_drake.cell.station.obstacle import (
     mount_obstacle,
     mounted_obstacles,
 )
-from hrc_drake.cell.station.operator_body import BodyScript, OperatorBody
+from hrc_drake.cell.station.operator_body import BodyScript, KnowsWhenFree, OperatorBody
 from hrc_drake.cell.station.sim_operator import SimulatedOperator
 from hrc_drake.cell.station.slot_monitor import SlotMonitor
 from hrc_drake.cell.station.welds import Bolts, Weld
@@ -435,7 +435,7 @@ def _add_operator(builder, plant, scene_graph, parts, scenario: Scenario, operat
     """The simulated operator and its body (a tracker that sees nobody without one); returns
     the simulated operator."""
     run = scenario.run
-    busy = getattr(body_script, "busy_until", None)
+    busy = body_script.busy_until if isinstance(body_script, KnowsWhenFree) else None
     person = builder.AddNamedSystem(
         "operator",
         SimulatedOperator(operator, scenario.motion.hold_time, run.period, busy, run.handover_time),

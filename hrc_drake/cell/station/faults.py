@@ -35,6 +35,7 @@ from hrc_drake.cell.station.obstacle import SeatPositions
 from hrc_drake.hri.faults import FaultConfig, FaultKind
 from hrc_drake.hri.messages import Prompt, PromptKind
 from hrc_drake.obstacle_models import DEBRIS_PARK, OBSTACLE_PARK, obstacle_pose_over
+from hrc_drake.tasks.protocols import DelaysIndications
 
 # The fingers count as standing still below this rate (they close at about 0.5 m/s).
 STILL_RATE = 0.005  # m/s
@@ -326,8 +327,9 @@ class SilentOperator:
 
     def indication_delay(self, step: int) -> float:
         """Seconds from the prompt of `step` to the answer."""
-        own = getattr(self._operator, "indication_delay", None)
-        return (0.0 if own is None else float(own(step))) + self._silence.get(step, 0.0)
+        operator = self._operator
+        own = operator.indication_delay(step) if isinstance(operator, DelaysIndications) else 0.0
+        return float(own) + self._silence.get(step, 0.0)
 
 
 __all__ = ["FaultInjector", "Injection", "SilentOperator"]

@@ -17,6 +17,7 @@ than the arm is long.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -55,6 +56,22 @@ SHIRT = Rgba(0.25, 0.40, 0.65, 1.0)
 # (simulated time, the simulated operator's activity, position of the part it works on or None)
 #   -> the hand centre in world [m]
 BodyScript = Callable[[float, OperatorActivity, np.ndarray | None], np.ndarray]
+
+
+@runtime_checkable
+class KnowsWhenFree(Protocol):
+    """A body script whose hands may be busy elsewhere (at the desk's bins): the simulated
+    operator starts bolting once they are free."""
+
+    def busy_until(self, activity: OperatorActivity) -> float:
+        """When the hands are free for the activity's part [s, simulated]."""
+
+
+@runtime_checkable
+class Handed(Protocol):
+    """A body script that says which hand it moves (else the body config's)."""
+
+    left_handed: bool
 
 
 class BoltingScript:
@@ -133,7 +150,8 @@ class OperatorBody(LeafSystem):
         super().__init__()
         self._stance = np.asarray(config.stance, dtype=float)
         self._script = script if script is not None else BoltingScript(config)
-        self._left = bool(getattr(self._script, "left_handed", config.left_handed))
+        script = self._script
+        self._left = bool(script.left_handed if isinstance(script, Handed) else config.left_handed)
         self._part_body = {
             name: int(plant.GetBodyIndices(model)[0]) for name, model in part_instances.items()
         }
@@ -218,6 +236,8 @@ __all__ = [
     "BodyScript",
     "BodySpheres",
     "BoltingScript",
+    "Handed",
+    "KnowsWhenFree",
     "OperatorBody",
     "ReachInto",
     "body_pose",

@@ -33,6 +33,7 @@ from hrc_drake.cell.ports import ActivityKind, CellConfiguration, OperatorActivi
 from hrc_drake.cell.station.welds import Weld
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
 from hrc_drake.tasks.decide import Operator
+from hrc_drake.tasks.protocols import AskedWithoutBlocking, DelaysIndications, TiresAlongTheRun
 from hrc_drake.tasks.tokens import UNDO
 
 
@@ -148,9 +149,8 @@ class SimulatedOperator(LeafSystem):
         (an operator asked without blocking, `poll`) says so with a click. Done, the placement
         goes to the station (`placements`)."""
         now = context.get_time()
-        poll = getattr(self._operator, "poll", None)
-        if poll is not None:
-            done = poll(prompt) is not None
+        if isinstance(self._operator, AskedWithoutBlocking):
+            done = self._operator.poll(prompt) is not None
         else:
             step, due = context.get_abstract_state(self._by_hand).get_value()
             if step != prompt.step:
@@ -177,8 +177,9 @@ class SimulatedOperator(LeafSystem):
         """Seconds the operator bolts at decision `step`: `bolt_time`, scaled by the operator
         model's `bolt_scale(step)` when it has one (the `slow` population tires along the run;
         the robot holds the part until the operator says it is bolted)."""
-        scale = getattr(self._operator, "bolt_scale", None)
-        return self._bolt_time * (1.0 if scale is None else float(scale(step)))
+        if not isinstance(self._operator, TiresAlongTheRun):
+            return self._bolt_time
+        return self._bolt_time * float(self._operator.bolt_scale(step))
 
     def placements(self, context) -> tuple[tuple[str, str, tuple[str, ...]], ...]:
         """Sim only: the tasks done by hand whose part the station has still to put in place,
@@ -199,9 +200,8 @@ class SimulatedOperator(LeafSystem):
         """The operator's answer to a `CHOOSE` prompt: at once from an operator callable, or,
         from one that is asked without blocking (`poll`: a person clicking in the browser),
         None until it has one."""
-        poll = getattr(self._operator, "poll", None)
-        if poll is not None:
-            return poll(prompt)
+        if isinstance(self._operator, AskedWithoutBlocking):
+            return self._operator.poll(prompt)
         return self._operator(prompt.step, prompt.state, prompt.proposal)
 
     def _due(self, context, state, step: int, now: float) -> float:
@@ -210,8 +210,11 @@ class SimulatedOperator(LeafSystem):
         DelayedIndications`, the interface's delay), else at once (a person in the browser)."""
         asked, due = context.get_abstract_state(self._asked).get_value()
         if asked != step:
-            delay = getattr(self._operator, "indication_delay", None)
-            due = now + (0.0 if delay is None else float(delay(step)))
+            operator = self._operator
+            delay = (
+                operator.indication_delay(step) if isinstance(operator, DelaysIndications) else 0
+            )
+            due = now + float(delay)
             state.get_mutable_abstract_state(self._asked).set_value((step, due))
         return due
 
