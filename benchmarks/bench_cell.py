@@ -25,7 +25,7 @@ from pydrake.math import RigidTransform
 
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.station import make_cell_station, simulate_station, station_scenario
-from hrc_drake.hri.scenario import Scenario
+from hrc_drake.scenario.schema import Scenario
 
 REPORT = Path(__file__).resolve().parent / "reports" / "cell.md"
 STATE_11 = {"oval_flange_1": "F3", "square_flange": "S12", "oval_flange_2": "F01"}

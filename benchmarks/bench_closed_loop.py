@@ -18,7 +18,7 @@ from pathlib import Path
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.run.run import run_scenario
 from hrc_drake.cell.scenario import LEAN
-from hrc_drake.hri.scenario import table2_scenarios
+from hrc_drake.scenario.load import table2_scenarios
 
 HERE = Path(__file__).resolve().parent
 

@@ -52,10 +52,10 @@ from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.run.run import shared_planner
 from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
 from hrc_drake.cell.station import make_cell_station, station_scenario
-from hrc_drake.hri.scenario import Scenario
 from hrc_drake.motion.plan import Stage
 from hrc_drake.motion.poses import default_layout
 from hrc_drake.robot_models import GRIPPER, UR3, UR3_JOINTS
+from hrc_drake.scenario.schema import Scenario
 from hrc_drake.tasks.spec import load_spec
 
 REPORT = Path(__file__).resolve().parent / "reports" / "contact.md"

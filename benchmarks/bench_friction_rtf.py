@@ -58,7 +58,7 @@ def _worker(tree: str, scenario: str, texts: list[str], repeats: int) -> dict:
     from hrc_drake.cell.run.run import build_closed_loop, run_scenario
     from hrc_drake.cell.scenario import load_cell_scenario
     from hrc_drake.cell.station.build import make_cell_station
-    from hrc_drake.hri.scenario import Scenario
+    from hrc_drake.scenario.schema import Scenario
 
     if not hasattr(Scenario(), "interaction"):
         texts = [t for t in texts if t != NO_DELAY]

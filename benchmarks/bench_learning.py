@@ -18,8 +18,8 @@ from pathlib import Path
 
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.hri.operator import ScriptedOperator
-from hrc_drake.hri.scenario import table2_scenarios
 from hrc_drake.progress import ProgressLine
+from hrc_drake.scenario.load import table2_scenarios
 from hrc_drake.tasks.decide import DecisionError, minimum_effort_violations, run_decisions
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.learn import ExploringStartsSchedule, FullSchedule, PaperSchedule, train

@@ -22,7 +22,7 @@ from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.controller.separation import ControllerSeparationMonitor
 from hrc_drake.cell.run.run import run_scenario
 from hrc_drake.cell.scenario import LEAN
-from hrc_drake.hri.scenario import table2_scenarios
+from hrc_drake.scenario.load import table2_scenarios
 
 REPORT = Path(__file__).parent / "reports" / "safety.md"
 OFF = "{body: {enabled: false}}"

@@ -45,8 +45,8 @@ from hrc_drake.cell.controller.separation import SafetyLog, SeparationReading, a
 from hrc_drake.cell.controller.supervisor import Mode, SupervisorStatus
 from hrc_drake.cell.person import CHAIN_GAP
 from hrc_drake.cell.ports import BodySpheres
-from hrc_drake.hri.scenario import SafetyConfig
 from hrc_drake.motion.plan import Stage
+from hrc_drake.scenario.schema import SafetyConfig
 
 REACH = 0.8  # m; farther than S_p can be here (v_h ≤ 2 m/s, T_s ≤ 0.2 s at 0.25 m/s TCP)
 EXACT = 0.25  # m; the least separation is exact below this, a lower bound above

@@ -15,7 +15,7 @@ import matplotlib.image
 import numpy as np
 
 from hrc_drake.cell.station import make_cell_station, simulate_station, station_scenario
-from hrc_drake.hri.scenario import BodyConfig, Scenario
+from hrc_drake.scenario.schema import BodyConfig, Scenario
 
 
 def main() -> None:

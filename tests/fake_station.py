@@ -28,7 +28,7 @@ from hrc_drake.cell.ports import (
     pose_tuple,
 )
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
-from hrc_drake.hri.scenario import Scenario
+from hrc_drake.scenario.schema import Scenario
 
 STEP = Scenario().physics.time_step  # the plant's time step: the lockstep's exchange period
 CONTROL_PERIOD = 0.02  # the default scenario's run.period

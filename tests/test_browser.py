@@ -86,7 +86,7 @@ def chromium():
 def flange_frames():
     """The flange cell's frames (plate seats, tray homes), from the models without the robot."""
     from hrc_drake.cell.station.build import make_cell_station, station_scenario
-    from hrc_drake.hri.scenario import Scenario
+    from hrc_drake.scenario.schema import Scenario
 
     return make_cell_station(station_scenario(Scenario(), robot=False)).frames
 

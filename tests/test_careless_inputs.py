@@ -10,9 +10,10 @@ import pytest
 
 from hrc_drake.cli import evaluate as evaluate_command
 from hrc_drake.cli import main
-from hrc_drake.hri.scenario import ScenarioError, load_scenario
 from hrc_drake.paths import check_output_path, fresh_name
 from hrc_drake.resources import models_dir
+from hrc_drake.scenario.load import load_scenario
+from hrc_drake.scenario.schema import ScenarioError
 from hrc_drake.tasks.policy import POLICY_FILE, is_policy_file, load_policy, save_policy
 from hrc_drake.tasks.solve import exact_policy
 

@@ -10,8 +10,8 @@ from hrc_drake.cell.run.run import run_scenario
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 from hrc_drake.cli import main
 from hrc_drake.hri.populations import OPERATOR_MODELS
-from hrc_drake.hri.scenario import load_scenario, table2_scenarios
 from hrc_drake.resources import scenarios_dir
+from hrc_drake.scenario.load import load_scenario, table2_scenarios
 
 pytestmark = pytest.mark.slow
 

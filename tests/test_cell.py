@@ -21,10 +21,10 @@ from hrc_drake.cell.station.sim_operator import bolt_weld
 from hrc_drake.cell.station.welds import Weld
 from hrc_drake.cell_models import PLATE, CellDesign, CellModelError, add_cell_models
 from hrc_drake.hri.messages import Indication
-from hrc_drake.hri.scenario import Scenario, ScenarioError
 from hrc_drake.motion.poses import default_layout
 from hrc_drake.resources import models_dir
 from hrc_drake.robot_models import add_robot, make_parser
+from hrc_drake.scenario.schema import Scenario, ScenarioError
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.spec import load_spec
 

@@ -6,7 +6,7 @@ import pytest
 
 from hrc_drake.cell.run.run import run_scenario, shared_planner
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario, motion_options
-from hrc_drake.hri.scenario import table2_scenarios
+from hrc_drake.scenario.load import table2_scenarios
 from hrc_drake.tasks.decide import run_decisions
 from hrc_drake.tasks.graph import StateKind, generate_states
 from hrc_drake.tasks.solve import exact_policy

@@ -193,7 +193,7 @@ def test_cli_errors_are_one_line(cost_file, capsys, extra, message):
 
 
 def test_scenario_names_an_operator_model(space):
-    from hrc_drake.hri.scenario import load_scenario
+    from hrc_drake.scenario.load import load_scenario
 
     text = "{operator: {model: habitual, seed: 4, params: {}}}"
     operator = load_scenario(scenario_text=text).operator_for(space)

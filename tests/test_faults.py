@@ -376,7 +376,7 @@ def test_a_run_ended_by_a_fault_writes_its_json_and_recording(tmp_path):
     ],
 )
 def test_the_give_up_and_hand_over_times_are_checked(text, message):
-    from hrc_drake.hri.scenario import ScenarioError
+    from hrc_drake.scenario.schema import ScenarioError
 
     with pytest.raises(ScenarioError, match=message) as err:
         load_cell_scenario("row1-optimal", [LEAN, text])

@@ -7,7 +7,7 @@ from hrc_drake.cell.run.run import run_scenario
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 from hrc_drake.cell.station.build import make_cell_station
 from hrc_drake.cell.station.gripper import RG2_MIN_FORCE
-from hrc_drake.hri.scenario import Scenario
+from hrc_drake.scenario.schema import Scenario
 
 # The operator takes the square flange (the heaviest part) first.
 SQUARE_FIRST = "{operator: {deviations: [{step: 1, task: S23}]}}"

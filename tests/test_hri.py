@@ -8,7 +8,8 @@ from hrc_drake.hri.operator import (
     StochasticOperator,
     parse_operator_script,
 )
-from hrc_drake.hri.scenario import ScenarioError, load_scenario, table2_scenarios
+from hrc_drake.scenario.load import load_scenario, table2_scenarios
+from hrc_drake.scenario.schema import ScenarioError
 from hrc_drake.tasks.decide import run_decisions
 from hrc_drake.tasks.graph import StateKind
 from hrc_drake.tasks.solve import exact_policy

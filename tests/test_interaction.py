@@ -17,8 +17,9 @@ from hrc_drake.cli import main
 from hrc_drake.evaluate import Setup, evaluate, simulate_run
 from hrc_drake.hri.operator import ScriptedOperator
 from hrc_drake.hri.populations import make_operator_model
-from hrc_drake.hri.scenario import ScenarioError, load_scenario
 from hrc_drake.paths import UsageError
+from hrc_drake.scenario.load import load_scenario
+from hrc_drake.scenario.schema import ScenarioError
 from hrc_drake.tasks.costs import (
     CostTableError,
     load_cost_table,

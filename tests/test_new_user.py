@@ -22,9 +22,10 @@ from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cli import build_parser, main
 from hrc_drake.cli import tasks as task_commands
 from hrc_drake.evaluate import RunResult, Setup, evaluate, summarise
-from hrc_drake.hri.scenario import ScenarioError, load_scenario
 from hrc_drake.paths import UsageError, check_output_path
 from hrc_drake.progress import ProgressLine
+from hrc_drake.scenario.load import load_scenario
+from hrc_drake.scenario.schema import ScenarioError
 from hrc_drake.tasks.costs import save_cost_table
 from hrc_drake.tasks.graph import StateKind, generate_states
 from hrc_drake.tasks.spec import load_spec

@@ -11,7 +11,7 @@ from hrc_drake.cell.station.faults import SilentOperator
 from hrc_drake.cell.station.operator_body import BoltingScript, Handed, KnowsWhenFree
 from hrc_drake.hri.operator import ScriptedOperator
 from hrc_drake.hri.populations import make_operator_model
-from hrc_drake.hri.scenario import BodyConfig
+from hrc_drake.scenario.schema import BodyConfig
 from hrc_drake.tasks.deciders import make_decider
 from hrc_drake.tasks.interaction import DEFAULT_DELAYS, DelayedIndications
 from hrc_drake.tasks.protocols import (

@@ -22,10 +22,10 @@ from hrc_drake.cell.run.run import run_scenario, shared_planner
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario, motion_options
 from hrc_drake.cell.station.build import make_cell_station, station_scenario
 from hrc_drake.cell.station.operator_body import ReachInto
-from hrc_drake.hri.scenario import BodyConfig, SafetyConfig, Scenario, ScenarioError
 from hrc_drake.motion.plan import Stage
 from hrc_drake.motion.poses import part_pose
 from hrc_drake.robot_models import RG2_FINGER_JOINTS
+from hrc_drake.scenario.schema import BodyConfig, SafetyConfig, Scenario, ScenarioError
 
 
 def test_allowed_scale_is_the_largest_speed_that_keeps_the_separation():

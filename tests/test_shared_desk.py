@@ -9,9 +9,10 @@ import pytest
 from pydrake.trajectories import PiecewisePolynomial
 
 from hrc_drake.hri.activity import Desk, DeskBin, Person, indication_timeline, vary_person
-from hrc_drake.hri.scenario import ScenarioError, load_scenario
 from hrc_drake.motion.clearance import Occupancy, time_around
 from hrc_drake.motion.plan import MotionTiming, Plan, Segment, Stage
+from hrc_drake.scenario.load import load_scenario
+from hrc_drake.scenario.schema import ScenarioError
 
 DESK = Desk(
     bins=(DeskBin("b", "bolts", (0.44, -0.22, 0.05)), DeskBin("n", "nuts", (0.47, -0.10, 0.05))),

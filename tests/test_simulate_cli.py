@@ -12,8 +12,8 @@ import pytest
 from hrc_drake.cell.run.run import run_scenario
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 from hrc_drake.cli import main
-from hrc_drake.hri.scenario import load_scenario
 from hrc_drake.resources import scenarios_dir
+from hrc_drake.scenario.load import load_scenario
 from hrc_drake.tasks.decide import run_decisions
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.solve import exact_policy

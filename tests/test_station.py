@@ -11,8 +11,8 @@ from hrc_drake.cell.run.run import build_closed_loop
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 from hrc_drake.cell.station.build import make_cell_station
 from hrc_drake.cell.station.welds import Weld
-from hrc_drake.hri.scenario import table2_scenarios
 from hrc_drake.resources import scenarios_dir
+from hrc_drake.scenario.load import table2_scenarios
 
 CATALOGUE = sorted(p.stem for p in scenarios_dir().glob("*.yaml"))
 

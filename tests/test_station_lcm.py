@@ -48,7 +48,7 @@ from hrc_drake.cell.run.run import build_closed_loop, controller_of, run_scenari
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 from hrc_drake.cell.station.contacts import Owner, geometry_owners, owner_pairs
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
-from hrc_drake.hri.scenario import Scenario, ScenarioError
+from hrc_drake.scenario.schema import Scenario, ScenarioError
 
 sys.path.insert(0, str(Path(__file__).parent))
 from fake_station import (

@@ -28,7 +28,7 @@ from hrc_drake.cell.link.interface import (
 from hrc_drake.cell.link.scenario_identity import ScenarioIdentity, mismatch, spec_digest
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 from hrc_drake.cli.scenario_args import scenario_from_args, scenario_options
-from hrc_drake.hri.scenario import Scenario
+from hrc_drake.scenario.schema import Scenario
 
 sys.path.insert(0, str(Path(__file__).parent))
 from fake_station import STEP, FakeController, make_fake_station

@@ -1,6 +1,6 @@
 """Scenarios in the cell layer: Drake's typed YAML loader, and what a scenario builds.
 
-The schema is `hrc_drake.hri.scenario.Scenario` (Drake-free, shared with the task layer). Here it
+The schema is `hrc_drake.scenario.schema.Scenario` (Drake-free, shared with the task layer). Here it
 is loaded as Drake's `hardware_sim` loads its scenarios: `yaml_load_typed` on the file, then on
 the command line's `--scenario-text` with the file's values as defaults, so a misspelt key or a
 value of the wrong type fails loudly either way.
@@ -17,14 +17,10 @@ from pydrake.geometry import DefaultProximityProperties, SceneGraphConfig
 from pydrake.multibody.plant import MultibodyPlantConfig
 
 from hrc_drake.cell_models import CellDesign
-from hrc_drake.hri.scenario import (
-    Scenario,
-    ScenarioError,
-    check_scenario,
-    load_scenario,
-    scenario_file,
-)
 from hrc_drake.motion.options import MotionOptions
+from hrc_drake.scenario.check import check_scenario
+from hrc_drake.scenario.load import load_scenario, scenario_file
+from hrc_drake.scenario.schema import Scenario, ScenarioError
 from hrc_drake.tasks.spec import AssemblySpec
 
 # `--lean`: the same models, physics and limits, with 0.5 s bolting holds (tests, previews).
@@ -39,7 +35,7 @@ def load_cell_scenario(
     or several applied in turn).
 
     With no file, the overrides apply to the defaults. The text is checked first by the strict
-    loader of the task layer (`hrc_drake.hri.scenario.load_scenario`), whose ScenarioError names
+    loader of the task layer (`hrc_drake.scenario.load.load_scenario`), whose ScenarioError names
     the file (or `--scenario-text`), the key and the type it expects, or the line and column of a
     YAML syntax error; Drake's own errors are several lines of traceback about its conversion.
     Then Drake's `yaml_load_typed` loads it, as `hardware_sim` does."""

@@ -28,8 +28,8 @@ from hrc_drake.cli.tasks import (
     cmd_train,
 )
 from hrc_drake.hri.operator import OperatorScriptError
-from hrc_drake.hri.scenario import ScenarioError
 from hrc_drake.paths import UsageError
+from hrc_drake.scenario.schema import ScenarioError
 from hrc_drake.tasks.costs import CostTableError
 from hrc_drake.tasks.decide import (
     DecisionError,

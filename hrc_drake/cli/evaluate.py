@@ -138,7 +138,7 @@ def add_separation_flag(p, note: str = "") -> None:
 
 def separation_from_flags(args) -> str | None:
     """The `--separation` mode (None: the scenario's); UsageError naming the choices."""
-    from hrc_drake.hri.scenario import SEPARATION_MODES
+    from hrc_drake.scenario.check import SEPARATION_MODES
 
     mode = getattr(args, "separation", None)
     if mode is not None and mode not in SEPARATION_MODES:

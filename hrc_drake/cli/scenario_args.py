@@ -9,7 +9,8 @@ from pathlib import Path
 
 from hrc_drake.cell.scenario import DEFAULT_SCENARIO, LEAN, load_cell_scenario
 from hrc_drake.cli.evaluate import interaction_from_flags, separation_from_flags
-from hrc_drake.hri.scenario import Scenario, with_operator_script
+from hrc_drake.scenario.load import with_operator_script
+from hrc_drake.scenario.schema import Scenario
 
 
 def scenario_from_args(args) -> Scenario:

@@ -13,9 +13,9 @@ from hrc_drake.cell.run.run import run_scenario, scenario_policy
 from hrc_drake.cli.scenario_args import scenario_from_args, scenario_options
 from hrc_drake.hri.faults import FaultError, check_faults
 from hrc_drake.hri.operator import ScriptedOperator
-from hrc_drake.hri.scenario import Scenario
 from hrc_drake.paths import MESHCAT_RECORDING, PNG_FILE, UsageError, check_output_path
 from hrc_drake.robot_models import UR3_JOINTS
+from hrc_drake.scenario.schema import Scenario
 from hrc_drake.tasks.decide import check_script_within_run, run_decisions
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.protocols import ObservesTasks
@@ -164,7 +164,7 @@ def check_assembly_matches(args) -> None:
     description speak of its own assembly's tasks."""
     if getattr(args, "assembly", None) is None or getattr(args, "scenario", None) is None:
         return
-    from hrc_drake.hri.scenario import load_scenario
+    from hrc_drake.scenario.load import load_scenario
 
     named = load_scenario(args.scenario)  # Drake-free; its own errors are one line
     theirs, ours = load_spec(named.assembly_path), load_spec(args.assembly)

@@ -8,9 +8,9 @@ import sys
 from pathlib import Path
 
 from hrc_drake.hri.operator import ScriptedOperator, parse_operator_script
-from hrc_drake.hri.scenario import table2_scenarios
 from hrc_drake.paths import UsageError, check_output_path, image_kind
 from hrc_drake.progress import ProgressLine
+from hrc_drake.scenario.load import table2_scenarios
 from hrc_drake.tasks.costs import CostTable, load_cost_table
 from hrc_drake.tasks.decide import (
     DecisionError,

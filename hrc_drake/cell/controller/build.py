@@ -31,10 +31,10 @@ from hrc_drake.cell.controller.supervisor import Supervisor, SupervisorLimits, T
 from hrc_drake.cell.person import desk_of
 from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell_models import CellDesign
-from hrc_drake.hri.scenario import Scenario
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.scene import load_cell_frames
 from hrc_drake.motion.service import PlanService
+from hrc_drake.scenario.schema import Scenario
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.policy import Policy
 

@@ -61,9 +61,9 @@ from hrc_drake.cell.controller.intent import MotionIntent
 from hrc_drake.cell.person import CHAIN_GAP
 from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell_models import CellDesign, add_cell_models
-from hrc_drake.hri.scenario import SafetyConfig
 from hrc_drake.motion.scene import TCP
 from hrc_drake.robot_models import GRIPPER, RG2_FINGER_JOINTS, UR3, UR3_JOINTS
+from hrc_drake.scenario.schema import SafetyConfig
 
 GRASP = "grasp"  # the frame of a part where the gripper's tcp holds it (cell_models)
 # A joint this much faster than commanded is moved from outside [rad/s] (our choice: the

@@ -82,7 +82,7 @@ from hrc_drake.cell.link.lcm_messages import (
     utime,
 )
 from hrc_drake.cell.link.scenario_identity import ScenarioIdentity, mismatch
-from hrc_drake.hri.scenario import Scenario, ScenarioError
+from hrc_drake.scenario.schema import Scenario, ScenarioError
 
 # Host-local multicast (ttl=0: the datagrams never leave this machine), on a port of its own so
 # that another LCM user's default group (239.255.76.67:7667) does not mix in.

@@ -37,9 +37,9 @@ from hrc_drake.cell.scenario import (
     motion_options,
 )
 from hrc_drake.cell.station.build import CellStation, make_cell_station
-from hrc_drake.hri.scenario import Scenario
 from hrc_drake.motion.planner import MotionPlanner
 from hrc_drake.paths import UsageError
+from hrc_drake.scenario.schema import Scenario
 from hrc_drake.tasks.policy import Policy
 from hrc_drake.tasks.spec import load_spec
 

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import yaml
 
-from hrc_drake.hri.scenario import Scenario
+from hrc_drake.scenario.schema import Scenario
 
 # Settings the station never reads, or that are labels only (dotted keys and their sub-keys).
 NOT_COMPARED = (

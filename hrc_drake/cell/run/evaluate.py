@@ -131,7 +131,7 @@ class CellOptions:
         the simulated operator draws from it and the forecast reads it), the run's operator (the
         population's model and parameters, seeded `run_seed(seed, run)`, its delays drawn from
         `delay_generator(seed, run)`, whatever the base's operator was) and the decider."""
-        from hrc_drake.hri.scenario import load_scenario
+        from hrc_drake.scenario.load import load_scenario
 
         data: dict[str, Any] = {}
         for text in self.overrides[1:] if self._lean() else self.overrides:
@@ -196,7 +196,7 @@ class CellOptions:
     def describe(self, space: StateSpace) -> dict[str, Any]:
         """What ran: the base scenario's settings with the evaluated assembly (when it is not
         the base's own) and the population's operator, and the overrides applied on top."""
-        from hrc_drake.hri.scenario import load_scenario
+        from hrc_drake.scenario.load import load_scenario
 
         spec = space.spec
         base = load_scenario(self.scenario)

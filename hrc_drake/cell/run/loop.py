@@ -42,11 +42,11 @@ from hrc_drake.cell.station.build import CellStation
 from hrc_drake.cell.station.contacts import Owner, geometry_owners, owner_pairs
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.hri.faults import FaultRecord
-from hrc_drake.hri.scenario import Scenario
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.service import PlanService
 from hrc_drake.progress import ProgressLine
 from hrc_drake.robot_models import GRIPPER, UR3
+from hrc_drake.scenario.schema import Scenario
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.policy import Policy
 

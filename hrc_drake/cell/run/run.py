@@ -20,7 +20,6 @@ from hrc_drake.cell.run.loop import ClosedLoop, LocalCell, RunResult, Setup
 from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
 from hrc_drake.cell.station.build import make_cell_station, station_scenario
 from hrc_drake.cell_models import CellDesign
-from hrc_drake.hri.scenario import Scenario
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.planner import MotionPlanner, check_reach
 from hrc_drake.motion.service import (
@@ -29,6 +28,7 @@ from hrc_drake.motion.service import (
     planner_function,
     shared_plan_service,
 )
+from hrc_drake.scenario.schema import Scenario
 from hrc_drake.tasks.decide import Operator
 from hrc_drake.tasks.graph import StateSpace, generate_states
 from hrc_drake.tasks.policy import Policy, load_policy

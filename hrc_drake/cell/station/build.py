@@ -77,11 +77,11 @@ from hrc_drake.cell.station.welds import Bolts, Weld
 from hrc_drake.cell_models import CellDesign, add_cell_models
 from hrc_drake.hri.faults import check_faults
 from hrc_drake.hri.messages import Prompt
-from hrc_drake.hri.scenario import CameraSettings, Scenario
 from hrc_drake.motion.poses import IN_TRAY, CellFrames, layout_poses, part_pose
 from hrc_drake.motion.scene import read_cell_frames
 from hrc_drake.obstacle_models import DEBRIS, DEBRIS_PARK, OBSTACLE
 from hrc_drake.robot_models import GRIPPER, UR3, UR3_JOINTS
+from hrc_drake.scenario.schema import CameraSettings, Scenario
 from hrc_drake.tasks.decide import Operator
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.spec import SpecError, load_spec

@@ -48,7 +48,7 @@ from hrc_drake.cell.person import (
 )
 from hrc_drake.cell.ports import ActivityKind, BodySpheres, OperatorActivity
 from hrc_drake.hri.activity import bolting_hand, min_jerk
-from hrc_drake.hri.scenario import BodyConfig
+from hrc_drake.scenario.schema import BodyConfig
 
 SKIN = Rgba(0.93, 0.75, 0.62, 1.0)
 SHIRT = Rgba(0.25, 0.40, 0.65, 1.0)

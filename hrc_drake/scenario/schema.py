@@ -1,11 +1,11 @@
-"""Scenarios: one typed file for a run — the assembly, the cell, the operator, motion and run
-settings, and what the run should show.
+"""The scenario schema: one typed file for a run — the assembly, the cell, the operator, motion
+and run settings, and what the run should show.
 
 A scenario file (`scenarios/*.yaml`) is loaded strictly: a misspelt key or a value of the wrong
 type is an error naming it, and keys left out take the defaults below. The cell layer loads the
-same schema with Drake's `yaml_load_typed` (`hrc_drake.cell.scenario`); this module reads it
-without Drake for the task layer (`react`, `table2`, evaluations). Command-line overrides are
-more YAML merged on top (`--scenario-text "{motion: {hold_time: 0.5}}"`).
+same schema with Drake's `yaml_load_typed` (`hrc_drake.cell.scenario`); `hrc_drake.scenario.load`
+reads it without Drake for the task layer (`react`, `table2`, evaluations). Command-line overrides
+are more YAML merged on top (`--scenario-text "{motion: {hold_time: 0.5}}"`).
 
     name: row8-forces-4-then-8
     description: the operator mounts F3, then S12
@@ -21,35 +21,27 @@ more YAML merged on top (`--scenario-text "{motion: {hold_time: 0.5}}"`).
                   sigma: 0.3}}       # optional; the delay defaults to the interface's
 """
 
-import dataclasses
-import math
 import os
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from hrc_drake.hri.activity import Person, vary_person
-from hrc_drake.hri.faults import FaultConfig, FaultError, check_faults
-from hrc_drake.hri.operator import ScriptedOperator, StochasticOperator, parse_operator_script
+from hrc_drake.hri.faults import FaultConfig
+from hrc_drake.hri.operator import ScriptedOperator, StochasticOperator
 from hrc_drake.layout import CellLayout
 from hrc_drake.motion.options import MotionOptions
-from hrc_drake.paths import not_a_file
-from hrc_drake.resources import models_dir, scenarios_dir
+from hrc_drake.resources import models_dir
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.interaction import (
     DEFAULT_DELAYS,
     DEFAULT_INTERFACE,
     DEFAULT_MODE,
-    INTERFACES,
-    MODES,
     DelayedIndications,
     IndicationDelay,
     Interaction,
-    InteractionError,
     delay_generator,
     make_interaction,
 )
-from hrc_drake.typed_yaml import TypedYamlError, YamlSyntaxError, load_typed
 
 
 class ScenarioError(ValueError):
@@ -58,55 +50,6 @@ class ScenarioError(ValueError):
 
 # The source `check_scenario` names when a value came from the command line's YAML overrides.
 TEXT_SOURCE = "--scenario-text"
-
-
-def _check_finite(value, key: str, fail) -> None:
-    """Refuse NaN and infinity anywhere in a scenario (YAML's `.nan`, `.inf`): every number of a
-    scenario is a quantity of the cell, and a NaN passes every `<` and `>` check below, to fail
-    later in Drake (a NaN hold time is an assertion in the planning worker, an infinite one a
-    run that never ends)."""
-    if isinstance(value, float):
-        if not math.isfinite(value):
-            raise fail(key, f"{value} is not a number the cell can use; give a finite number")
-    elif dataclasses.is_dataclass(value):
-        for f in dataclasses.fields(value):
-            _check_finite(getattr(value, f.name), f"{key}.{f.name}" if key else f.name, fail)
-    elif isinstance(value, list | tuple):
-        for i, item in enumerate(value):
-            _check_finite(item, f"{key}[{i}]", fail)
-    elif isinstance(value, dict):
-        for k, item in value.items():
-            _check_finite(item, f"{key}.{k}", fail)
-
-
-def _check_limits(scenario, fail) -> None:
-    """The signs and ranges of the numbers no other check covers: each of these, out of range,
-    fails only once the cell is built or the run has started (or never, silently)."""
-    if scenario.run.max_steps < 1:
-        raise fail("run.max_steps", f"a run takes at least 1 step, got {scenario.run.max_steps}")
-    for key in ("robot_uncertainty", "slow_band", "moving_speed"):
-        if getattr(scenario.safety, key) < 0:
-            raise fail(f"safety.{key}", f"must be >= 0, got {getattr(scenario.safety, key)}")
-    arm, rg2, camera = scenario.station.ur3, scenario.station.rg2, scenario.station.camera
-    if arm.tracking_tolerance <= 0:
-        raise fail("station.ur3.tracking_tolerance", "give an angle > 0 rad (0.05)")
-    for key in ("kp", "kd"):
-        if any(g < 0 for g in getattr(arm, key)):
-            raise fail(f"station.ur3.{key}", "gains are >= 0")
-    if not 0 <= rg2.initial_opening <= 0.110:
-        raise fail("station.rg2.initial_opening", "the RG2 opens 0 to 0.110 m")
-    if rg2.kp <= 0 or rg2.kd < 0:
-        raise fail("station.rg2.kp" if rg2.kp <= 0 else "station.rg2.kd", "give kp > 0, kd >= 0")
-    if rg2.grip_tolerance <= 0:
-        raise fail("station.rg2.grip_tolerance", "give a distance > 0 m (0.004)")
-    if camera.width < 1 or camera.height < 1:
-        raise fail(
-            "station.camera", f"give an image size >= 1 px, got {camera.width}x{camera.height}"
-        )
-    if not 0 < camera.fov_y < 180:
-        raise fail(
-            "station.camera.fov_y", f"give a field of view in (0, 180) deg, got {camera.fov_y}"
-        )
 
 
 @dataclass
@@ -593,279 +536,24 @@ class Scenario:
         return make_interaction(it.mode, it.interface, delay)
 
 
-def check_scenario(scenario: Scenario, source: str) -> Scenario:
-    """Value checks the types cannot express; ScenarioError naming the key."""
-
-    where = source if source == TEXT_SOURCE else f"scenario {source}"
-
-    def fail(key: str, problem: str) -> ScenarioError:
-        return ScenarioError(f"{where}: {key}: {problem}")
-
-    _check_finite(scenario, "", fail)
-    _check_limits(scenario, fail)
-
-    op = scenario.operator
-    for key in ("override_prob", "mistake_prob"):
-        value = getattr(op, key)
-        if not 0.0 <= value <= 1.0:
-            raise fail(f"operator.{key}", f"a probability is within [0, 1], got {value}")
-    steps = set()
-    for i, d in enumerate(op.deviations):
-        if d.step < 1:
-            raise fail(f"operator.deviations[{i}].step", f"steps count from 1, got {d.step}")
-        if not d.task:
-            raise fail(f"operator.deviations[{i}].task", "name a task, e.g. F3 or undo")
-        if d.step in steps:
-            raise fail(f"operator.deviations[{i}]", f"step {d.step} is given twice")
-        steps.add(d.step)
-    if op.deviations and (scenario.stochastic or op.model):
-        raise fail("operator", "give scripted deviations or a stochastic operator, not both")
-    if op.delay_seed and len(op.delay_seed) != 2:
-        raise fail(
-            "operator.delay_seed",
-            f"give [evaluation seed, run], e.g. [0, 3], or leave it out; got {op.delay_seed}",
-        )
-    _check_decider(scenario.decider, fail)
-    for key in ("hold_time", "approach_distance"):
-        if getattr(scenario.motion, key) < 0:
-            raise fail(f"motion.{key}", "must be >= 0")
-    if scenario.motion.tcp_speed_limit <= 0:
-        raise fail(
-            "motion.tcp_speed_limit",
-            f"the robot cannot move at {scenario.motion.tcp_speed_limit} m/s; give a speed > 0 "
-            "(0.25: ISO 10218-1's reduced speed)",
-        )
-    contact = scenario.physics.contact
-    for key in ("hydroelastic_modulus", "resolution_hint"):
-        if getattr(contact, key) <= 0:
-            raise fail(f"physics.contact.{key}", "must be > 0")
-    for key in ("margin", "relaxation_time", "hunt_crossley_dissipation", "dynamic_friction"):
-        if getattr(contact, key) < 0:
-            raise fail(f"physics.contact.{key}", "must be >= 0")
-    if contact.static_friction < contact.dynamic_friction:
-        raise fail("physics.contact.static_friction", "must be >= dynamic_friction")
-    if scenario.physics.time_step <= 0:
-        raise fail("physics.time_step", "the cell is a discrete plant: give a step > 0 (1e-2)")
-    for key in ("period", "settle_time", "max_sim_time", "indication_timeout", "path_timeout"):
-        if getattr(scenario.run, key) <= 0:
-            raise fail(f"run.{key}", "must be > 0")
-    give_up = scenario.run.indication_give_up
-    if not (math.isfinite(give_up) and give_up > 0):
-        raise fail("run.indication_give_up", f"give finite seconds > 0, got {give_up}")
-    handover = scenario.run.handover_time
-    if not (math.isfinite(handover) and handover >= 0):
-        raise fail("run.handover_time", f"give finite seconds >= 0, got {handover}")
-    if scenario.run.recover_tries < 0:
-        raise fail("run.recover_tries", "must be >= 0 (0: hand every lost part over)")
-    for key in ("human_speed", "reaction_time", "intrusion", "human_uncertainty"):
-        if getattr(scenario.safety, key) < 0:
-            raise fail(f"safety.{key}", "must be >= 0")
-    for key in ("stance", "rest_hand", "reach_offset"):
-        want = 2 if key == "stance" else 3
-        if len(getattr(scenario.body, key)) != want:
-            raise fail(f"body.{key}", f"give {want} coordinates in metres")
-    if not 3.0 <= scenario.station.rg2.grip_force <= 40.0:
-        raise fail("station.rg2.grip_force", "the RG2 grips with 3 to 40 N")
-    if scenario.cell is not None:
-        try:
-            scenario.cell.check("cell")
-        except ValueError as err:
-            raise ScenarioError(f"{where}: {err}") from err
-    _check_body(scenario, fail)
-    _check_separation(scenario.safety, fail)
-    _check_interaction(scenario.interaction, fail)
-    try:
-        check_faults(scenario.faults, source)
-    except FaultError as err:
-        raise ScenarioError(str(err)) from err
-    return scenario
-
-
-def _check_decider(decider: DeciderConfig, fail) -> None:
-    """A known decider name (or none)."""
-    from hrc_drake.tasks.deciders import DECIDERS
-
-    if decider.name and decider.name not in DECIDERS:
-        known = ", ".join(DECIDERS)
-        raise fail("decider.name", f"unknown decider {decider.name!r}; use one of {known}")
-
-
-SEPARATION_MODES = ("predictive", "reactive")
-ACTIVITIES = ("bolting", "desk")
-
-
-def _check_separation(safety: SafetyConfig, fail) -> None:
-    """The separation mode and the forecast's bounds."""
-    if safety.separation not in SEPARATION_MODES:
-        raise fail(
-            "safety.separation",
-            f"unknown mode {safety.separation!r}; use {' or '.join(SEPARATION_MODES)}",
-        )
-    if safety.departure <= 0:
-        raise fail("safety.departure", f"give a distance > 0 m, got {safety.departure}")
-    if safety.max_wait < 0:
-        raise fail("safety.max_wait", f"give seconds >= 0, got {safety.max_wait}")
-    if not 0.0 <= safety.forecast_spread <= 1.0:
-        raise fail(
-            "safety.forecast_spread", f"give a fraction in [0, 1], got {safety.forecast_spread}"
-        )
-
-
-def _check_body(scenario: Scenario, fail) -> None:
-    """The operator's body: its values, and bins its hand reaches (with either hand, when
-    persons vary)."""
-    body = scenario.body
-    if not 0 < body.hand_speed <= 2.0:
-        raise fail("body.hand_speed", "give a speed in (0, 2] m/s (1.6 m/s: ISO 13855)")
-    if body.activity not in ACTIVITIES:
-        raise fail("body.activity", f"unknown activity {body.activity!r}; use one of {ACTIVITIES}")
-    for key in ("reach", "reach_time"):
-        if getattr(body, key) <= 0:
-            raise fail(f"body.{key}", f"must be > 0, got {getattr(body, key)}")
-    for key in ("fetch_lag", "grab_time", "point_time"):
-        if getattr(body, key) < 0:
-            raise fail(f"body.{key}", f"give seconds >= 0, got {getattr(body, key)}")
-    if body.handful < 1:
-        raise fail("body.handful", f"a hand takes at least 1 bolt per grab, got {body.handful}")
-    if not 0 <= body.spread <= 0.5:
-        raise fail("body.spread", f"give a fraction in [0, 0.5], got {body.spread}")
-    if body.activity != "desk" or not body.enabled:
-        return
-    layout = scenario.cell
-    if layout is None:
-        from hrc_drake.layout import layout_from
-        from hrc_drake.tasks.spec import SpecError, load_spec
-
-        try:
-            layout = layout_from(load_spec(scenario.assembly_path).cell)
-        except (SpecError, OSError, ValueError):
-            return  # the spec's own errors are reported where it is loaded
-    person = body.person()
-    hands = [person]
-    if body.spread > 0:
-        hands.append(dataclasses.replace(person, left_handed=not person.left_handed))
-    for i, b in enumerate(layout.bins):
-        for hand in hands:
-            if not hand.reaches(b.grab_point()):
-                side = "left" if hand.left_handed else "right"
-                raise fail(
-                    f"cell.bins[{i}]",
-                    f"bin {b.name!r} at {b.position} is out of the operator's {side} hand's "
-                    f"reach ({body.reach} m from the shoulder, standing at {body.stance}); "
-                    "move it toward the operator",
-                )
-
-
-def _check_interaction(it: InteractionConfig, fail) -> None:
-    """The `interaction` section: a known mode and interface, a valid delay."""
-    if it.mode not in MODES:
-        raise fail("interaction.mode", f"unknown mode {it.mode!r}; use one of {', '.join(MODES)}")
-    if it.interface not in INTERFACES:
-        raise fail(
-            "interaction.interface",
-            f"unknown interface {it.interface!r}; use one of {', '.join(INTERFACES)}",
-        )
-    if it.delay is not None:
-        delay = IndicationDelay(it.delay.distribution, it.delay.median, it.delay.sigma)
-        try:
-            delay.check("delay")
-        except InteractionError as err:
-            key, _, problem = str(err).partition(": ")
-            raise fail(f"interaction.{key}", problem) from None
-
-
-def scenario_file(name_or_path: str | Path) -> Path:
-    """The file of a scenario: a path, or a name under scenarios/; ScenarioError if missing, or
-    if what is there is not a regular file (a folder, a device such as /dev/null, a pipe)."""
-    path = Path(name_or_path)
-    # A name without a suffix is a scenario of the catalogue, unless it is a path to something
-    # that exists (`--scenario /bin/ls`): then say what that is, not "not found".
-    if not path.suffix and not (os.sep in str(name_or_path) and path.exists()):
-        path = scenarios_dir() / f"{name_or_path}.yaml"
-    if path.exists() and not path.is_file():
-        raise ScenarioError(
-            f"scenario {name_or_path}: {not_a_file(path)}; give a scenario YAML file or the "
-            "name of one in scenarios/"
-        )
-    if not path.is_file():
-        known = ", ".join(sorted(p.stem for p in scenarios_dir().glob("*.yaml")))
-        raise ScenarioError(f"scenario {name_or_path!r} not found; known scenarios: {known}")
-    return path
-
-
-def load_scenario(
-    name_or_path: str | Path | None = None, scenario_text: str | Sequence[str] | None = None
-) -> Scenario:
-    """Load a scenario file (a path, or a name under scenarios/), then the YAML overrides in
-    `scenario_text` (one text, or several applied in turn); with no file, the overrides on top
-    of the defaults. Strict: ScenarioError naming the key and the expected type for an unknown
-    key or a value of the wrong type, and the line and column of a YAML syntax error."""
-    scenario, source = Scenario(), "<defaults>"
-    if name_or_path is not None:
-        path = scenario_file(name_or_path)
-        source = str(path)
-        scenario = _load_typed(_read_text(path), f"scenario {path}", None)
-        if not scenario.name:
-            scenario.name = path.stem
-    texts = [scenario_text] if isinstance(scenario_text, str) else list(scenario_text or ())
-    base = scenario
-    for text in texts:
-        scenario = _load_typed(text, "--scenario-text", scenario)
-    if scenario is base:
-        return check_scenario(scenario, source)
-    return _check_overridden(base, scenario, source)
-
-
-def _check_overridden(base: Scenario, scenario: Scenario, source: str) -> Scenario:
-    """`check_scenario` of `scenario`, the file `base` with `--scenario-text` over it. A problem
-    the file alone shows is the file's; any other came from the text, and the message names
-    `--scenario-text` (the user looks there, not in a file they did not touch)."""
-    try:
-        return check_scenario(scenario, source)
-    except ScenarioError as err:
-        try:
-            check_scenario(base, source)
-        except ScenarioError as own:
-            if str(own) == str(err):
-                raise
-        check_scenario(scenario, TEXT_SOURCE)  # the same problem, blamed on the text
-        raise  # not reached: the check above raises the same problem
-
-
-def _read_text(path: Path) -> str:
-    """The text of the scenario file `path`; ScenarioError if it cannot be read or is not text
-    (`--scenario /bin/ls`)."""
-    try:
-        return path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as err:
-        raise ScenarioError(
-            f"scenario {path}: not a text file (byte {err.object[err.start]:#04x} at offset "
-            f"{err.start} is not UTF-8); give a scenario YAML file"
-        ) from None
-    except OSError as err:
-        raise ScenarioError(
-            f"scenario {path}: cannot be read ({err.strerror or err}); give a readable file"
-        ) from None
-
-
-def _load_typed(text: str, source: str, defaults: Scenario | None) -> Scenario:
-    try:
-        return load_typed(Scenario, text=text, defaults=defaults, source=source)
-    except YamlSyntaxError as err:
-        raise ScenarioError(str(err)) from None
-    except TypedYamlError as err:
-        raise ScenarioError(f"{source}: {err}") from None
-
-
-def with_operator_script(scenario: Scenario, script: str) -> Scenario:
-    """A copy whose operator follows the command-line script ``"1:F3,2:S12"``."""
-    steps = parse_operator_script(script)
-    operator = OperatorConfig(deviations=[Deviation(k, t) for k, t in sorted(steps.items())])
-    return dataclasses.replace(scenario, operator=operator)
-
-
-def table2_scenarios() -> list[Scenario]:
-    """The scenarios that reproduce the rows of the paper's Table 2, in the table's order."""
-    rows = [load_scenario(p) for p in sorted(scenarios_dir().glob("*.yaml"))]
-    rows = [r for r in rows if r.table2_row is not None]
-    return sorted(rows, key=lambda r: r.table2_row)
+__all__ = [
+    "TEXT_SOURCE",
+    "ArmConfig",
+    "BodyConfig",
+    "CameraSettings",
+    "ContactConfig",
+    "DeciderConfig",
+    "DelayConfig",
+    "Deviation",
+    "Expected",
+    "GripperConfig",
+    "InteractionConfig",
+    "MotionConfig",
+    "OperatorConfig",
+    "PhysicsConfig",
+    "RunConfig",
+    "SafetyConfig",
+    "Scenario",
+    "ScenarioError",
+    "StationConfig",
+]
