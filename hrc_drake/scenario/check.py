@@ -72,7 +72,8 @@ def _check_limits(scenario, fail) -> None:
 
 
 def check_scenario(scenario: Scenario, source: str) -> Scenario:
-    """Value checks the types cannot express; ScenarioError naming the key."""
+    """Value checks the types cannot express; ScenarioError naming the key. The sections are
+    checked in the order of the file (the first problem is the one named)."""
 
     where = source if source == TEXT_SOURCE else f"scenario {source}"
 
@@ -81,7 +82,28 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
 
     _check_finite(scenario, "", fail)
     _check_limits(scenario, fail)
+    _check_operator(scenario, fail)
+    _check_decider(scenario.decider, fail)
+    _check_motion_and_physics(scenario, fail)
+    _check_run(scenario, fail)
+    _check_safety_body_and_station(scenario, fail)
+    if scenario.cell is not None:
+        try:
+            scenario.cell.check("cell")
+        except ValueError as err:
+            raise ScenarioError(f"{where}: {err}") from err
+    _check_body(scenario, fail)
+    _check_separation(scenario.safety, fail)
+    _check_interaction(scenario.interaction, fail)
+    try:
+        check_faults(scenario.faults, source)
+    except FaultError as err:
+        raise ScenarioError(str(err)) from err
+    return scenario
 
+
+def _check_operator(scenario: Scenario, fail) -> None:
+    """The operator's probabilities, scripted deviations and delay seed."""
     op = scenario.operator
     for key in ("override_prob", "mistake_prob"):
         value = getattr(op, key)
@@ -103,7 +125,10 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
             "operator.delay_seed",
             f"give [evaluation seed, run], e.g. [0, 3], or leave it out; got {op.delay_seed}",
         )
-    _check_decider(scenario.decider, fail)
+
+
+def _check_motion_and_physics(scenario: Scenario, fail) -> None:
+    """Motion times and speeds; the contact model's values and the plant's step."""
     for key in ("hold_time", "approach_distance"):
         if getattr(scenario.motion, key) < 0:
             raise fail(f"motion.{key}", "must be >= 0")
@@ -124,6 +149,10 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
         raise fail("physics.contact.static_friction", "must be >= dynamic_friction")
     if scenario.physics.time_step <= 0:
         raise fail("physics.time_step", "the cell is a discrete plant: give a step > 0 (1e-2)")
+
+
+def _check_run(scenario: Scenario, fail) -> None:
+    """The run's periods, timeouts and retries."""
     for key in ("period", "settle_time", "max_sim_time", "indication_timeout", "path_timeout"):
         if getattr(scenario.run, key) <= 0:
             raise fail(f"run.{key}", "must be > 0")
@@ -135,6 +164,10 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
         raise fail("run.handover_time", f"give finite seconds >= 0, got {handover}")
     if scenario.run.recover_tries < 0:
         raise fail("run.recover_tries", "must be >= 0 (0: hand every lost part over)")
+
+
+def _check_safety_body_and_station(scenario: Scenario, fail) -> None:
+    """The separation formula's terms, the body's coordinates and the gripper's force."""
     for key in ("human_speed", "reaction_time", "intrusion", "human_uncertainty"):
         if getattr(scenario.safety, key) < 0:
             raise fail(f"safety.{key}", "must be >= 0")
@@ -144,19 +177,6 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
             raise fail(f"body.{key}", f"give {want} coordinates in metres")
     if not 3.0 <= scenario.station.rg2.grip_force <= 40.0:
         raise fail("station.rg2.grip_force", "the RG2 grips with 3 to 40 N")
-    if scenario.cell is not None:
-        try:
-            scenario.cell.check("cell")
-        except ValueError as err:
-            raise ScenarioError(f"{where}: {err}") from err
-    _check_body(scenario, fail)
-    _check_separation(scenario.safety, fail)
-    _check_interaction(scenario.interaction, fail)
-    try:
-        check_faults(scenario.faults, source)
-    except FaultError as err:
-        raise ScenarioError(str(err)) from err
-    return scenario
 
 
 def _check_decider(decider: DeciderConfig, fail) -> None:

@@ -614,10 +614,7 @@ def make_cell_station(
     design = cell_design(scenario, load_spec(scenario.assembly_path))
     check_station_scenario(scenario, design)
     space = generate_states(design.spec)
-    if operator is None:
-        operator = scenario.operator_for(space)
-    if any(f.fault_kind in SilentOperator.KINDS for f in scenario.faults):
-        operator = SilentOperator(operator, scenario.faults)
+    operator = _station_operator(scenario, space, operator)
     builder = DiagramBuilder()
     plant, scene_graph, instances, bolts, frames = _add_plant(builder, scenario, design)
     injector = None
@@ -659,6 +656,16 @@ def make_cell_station(
         injector,
         person,
     )
+
+
+def _station_operator(scenario: Scenario, space, operator: Operator | None) -> Operator:
+    """Who answers the prompts: `operator`, else the scenario's; slowed by the scenario's
+    `operator-silent` and `no-path` faults, if any."""
+    if operator is None:
+        operator = scenario.operator_for(space)
+    if any(f.fault_kind in SilentOperator.KINDS for f in scenario.faults):
+        operator = SilentOperator(operator, scenario.faults)
+    return operator
 
 
 def simulate_station(
