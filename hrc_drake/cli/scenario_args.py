@@ -19,10 +19,7 @@ def scenario_from_args(args) -> Scenario:
     `--scenario-text`, `--assembly`, `--operator`, `--policy`, and what `simulate` alone has
     (`--interaction`, `--interface`, `--separation`)."""
     overrides = [t for t in (LEAN if args.lean else None, args.scenario_text) if t]
-    name = args.scenario
-    if name is None and args.assembly is None:
-        name = DEFAULT_SCENARIO
-    scenario = load_cell_scenario(name, overrides)
+    scenario = load_cell_scenario(_scenario_name(args), overrides)
     if args.assembly is not None:
         # A missing file is refused by `load_spec`, before anything is built.
         scenario = dataclasses.replace(scenario, assembly=str(args.assembly))
@@ -82,10 +79,16 @@ def scenario_argv(args) -> list[str]:
     """`--scenario NAME` (unless the scenario is the assembly's own, `--assembly` without
     `--scenario`) and `scenario_options(args)`: what starts the other side of a station link
     with the same scenario."""
-    name = args.scenario
-    if name is None and args.assembly is None:
-        name = DEFAULT_SCENARIO
+    name = _scenario_name(args)
     return [*(["--scenario", name] if name is not None else []), *scenario_options(args)]
+
+
+def _scenario_name(args) -> str | None:
+    """`--scenario`, else `DEFAULT_SCENARIO` unless `--assembly` gives the assembly's own
+    (None)."""
+    if args.scenario is None and args.assembly is None:
+        return DEFAULT_SCENARIO
+    return args.scenario
 
 
 __all__ = ["scenario_argv", "scenario_from_args", "scenario_options"]

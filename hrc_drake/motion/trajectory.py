@@ -65,6 +65,11 @@ def path_clearance(scene: PlanningScene, path: Trajectory, samples: int) -> tupl
     return worst, pair
 
 
+def _keeps_clearance(scene: PlanningScene, path: Trajectory, options: MotionOptions) -> bool:
+    """Whether `path` stays `options.clearance` from everything at its check samples."""
+    return path_clearance(scene, path, options.check_samples)[0] >= options.clearance
+
+
 def free_path(
     scene: PlanningScene,
     q_start: np.ndarray,
@@ -88,9 +93,10 @@ def free_path(
     order = 4
     base_duration = float(np.max(np.abs(q_end - q_start) / limits.velocity)) * 2.0 + 0.5
     line = _joint_line(q_start, q_end, base_duration, order, options.kto_control_points)
+    line_clear = None  # whether the straight line keeps the clearance, once checked
     if float(np.max(np.abs(q_end - q_start))) < SHORT_MOVE:
-        worst, _ = path_clearance(scene, line, options.check_samples)
-        if worst >= options.clearance:
+        line_clear = _keeps_clearance(scene, line, options)
+        if line_clear:
             return line, False
     trajopt = KinematicTrajectoryOptimization(n, options.kto_control_points, spline_order=order)
     prog = trajopt.get_mutable_prog()
@@ -121,8 +127,9 @@ def free_path(
         if result.is_success():
             break
     else:
-        worst, _ = path_clearance(scene, line, options.check_samples)
-        if worst >= options.clearance:
+        if line_clear is None:
+            line_clear = _keeps_clearance(scene, line, options)
+        if line_clear:
             return line, False
         raise PlanningError(f"KTO without collisions failed: {result.get_solution_result()}")
     path = trajopt.ReconstructTrajectory(result)
@@ -311,7 +318,7 @@ def _refit_and_time(
     for count in (8, 12, 16, 24, 40):
         times = np.linspace(path.start_time(), path.end_time(), count)
         refit = spline_through([path.value(t).ravel() for t in times])
-        if path_clearance(scene, refit, options.check_samples)[0] < options.clearance:
+        if not _keeps_clearance(scene, refit, options):
             continue
         s_of_t = time_optimal(scene, refit, limits, options, min_grid_points=40)
         if s_of_t is not None:
