@@ -144,7 +144,7 @@ def hold_levers(scenario_name: str, repeats: int) -> dict[str, float]:
         loop.advance_to(t)
     plant = loop.station.plant
     x = plant.GetPositions(plant.GetMyContextFromRoot(loop.root_context))
-    opening = loop.status.command(t)[2]
+    opening = loop.status.command(t).opening
     bolts = {Weld("oval_flange_1", "F1"), Weld("square_flange", "S23")}
 
     def rtf(station, filtered: bool) -> float:

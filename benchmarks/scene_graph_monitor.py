@@ -265,9 +265,9 @@ class SeparationMonitor(LeafSystem):
             hold = [(g.start, g.end) for g in status.plan.segments if g.stage == Stage.HOLD]
             holding = any(start <= tau < end for start, end in hold)
             if not holding and tau < status.plan.duration:
-                if status.rate <= 1e-9:
+                if status.clock.rate <= 1e-9:
                     log = replace(log, stopped_time=log.stopped_time + self._period)
-                elif status.rate < 1.0 - 1e-9:
+                elif status.clock.rate < 1.0 - 1e-9:
                     log = replace(log, slowed_time=log.slowed_time + self._period)
         state.get_mutable_abstract_state(self._log_index).set_value(log)
 

@@ -73,13 +73,13 @@ def test_a_wrong_seat_is_retargeted_with_the_part_in_the_gripper():
     t = 0.0
     while loop.advance_to(t) not in (Mode.DONE, Mode.FAILED) and t < 120:
         status = loop.status
-        if status.step == 1 and status.indicated_at is not None and status.bolted is False:
+        if status.step == 1 and status.question.indicated_at is not None and status.bolted is False:
             plan = status.plan
             if plan is None or status.plan_time(t) < plan.t_in_place:
                 held.append(loop.cell.configuration(loop.root_context).status("oval_flange_1"))
                 context = plant.GetMyContextFromRoot(loop.root_context)
                 v = plant.GetVelocities(context, station.instances[UR3])
-                moving.append((status.speed, float(np.abs(v).max())))
+                moving.append((status.clock.speed, float(np.abs(v).max())))
         t += 0.02
     result = loop.result()
     assert result.done and [t.observed for t in result.tasks] == ["F3", "S12", "F01"]

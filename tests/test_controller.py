@@ -88,7 +88,8 @@ def test_the_controller_runs_against_a_cell_that_offers_only_real_ports():
     root = simulator.get_context()
     status = diagram.GetOutputPort("status").Eval(diagram.GetMyContextFromRoot(root))
     # It proposed the policy's first task, took the confirmation, planned, and started moving.
-    assert status.prompt.kind == PromptKind.CHOOSE and status.prompt.proposal == "F1"
+    prompt = status.question.prompt
+    assert prompt.kind == PromptKind.CHOOSE and prompt.proposal == "F1"
     assert status.mode == Mode.EXECUTE and status.plan.task == "F1"
     assert status.error is None
 
@@ -123,7 +124,7 @@ def test_an_arm_pushed_off_its_path_stops_the_task_with_the_reason():
         loop.station.plant.GetMyContextFromRoot(loop.root_context),
         loop.station.instances["ur3"],
     )
-    assert np.allclose(status.command(loop.root_context.get_time())[0], status.q_hold)
+    assert np.allclose(status.command(loop.root_context.get_time()).q, status.q_hold)
     assert np.abs(q - np.asarray(status.q_hold)).max() < 0.2
     assert status.history == ()  # the task was not counted as done
 
@@ -147,8 +148,8 @@ def test_an_empty_gripper_where_it_should_hold_a_part_stops_the_task():
     # sensor reads it, finds it out of the arm's reach, and hands the task over (the operator
     # then does it by hand: tests/test_faults.py).
     assert any(f"{part} is not in the gripper" in e for e in status.events)
-    assert f"cannot pick {part} from where it lies" in status.handover
-    assert "out of reach" in status.handover
-    assert status.prompt.kind == "handover" and status.prompt.part == part
+    assert f"cannot pick {part} from where it lies" in status.recovery.handover
+    assert "out of reach" in status.recovery.handover
+    assert status.question.prompt.kind == "handover" and status.question.prompt.part == part
     assert [d.cause for d in status.detections] == ["grip"]
     assert status.history == ()

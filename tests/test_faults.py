@@ -170,7 +170,7 @@ def test_a_part_resting_tilted_within_half_a_radian_is_picked_again():
         if loop.status.mode == Mode.RECOVER and tilt is None:
             loop.advance_to(loop.status.settle_until)
             context = plant.GetMyContextFromRoot(loop.root_context)
-            X = plant.EvalBodyPoseInWorld(context, station.part_body(loop.status.pending[2]))
+            X = plant.EvalBodyPoseInWorld(context, station.part_body(loop.status.task.part))
             tilt = float(np.arccos(np.clip(X.rotation().col(2)[2], -1.0, 1.0)))
     status = loop.status
     assert tilt is not None and 0.3 < tilt < 0.5, tilt
@@ -283,8 +283,8 @@ def test_debris_in_the_pocket_keeps_the_part_off_its_seat_and_the_task_is_handed
     while loop.advance_to(t) not in (Mode.HANDOVER, Mode.DONE, Mode.FAILED) and t < 120:
         t += 0.1
     assert loop.status.mode == Mode.HANDOVER, loop.status.events
-    assert "oval_flange_1 is" in loop.status.handover
-    assert "not in a seat" in loop.status.handover
+    assert "oval_flange_1 is" in loop.status.recovery.handover
+    assert "not in a seat" in loop.status.recovery.handover
     context = loop.station.plant.GetMyContextFromRoot(loop.root_context)
     flange = loop.station.plant.EvalBodyPoseInWorld(
         context, loop.station.part_body("oval_flange_1")

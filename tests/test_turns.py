@@ -138,22 +138,29 @@ def test_another_part_indicated_as_the_arm_reaches_the_pre_place_pose_stops_it_t
     run stopped (random operator, population sweep)."""
     from dataclasses import replace
 
-    from hrc_drake.cell.controller.supervisor_state import Mode, SupervisorStatus
+    from hrc_drake.cell.controller.supervisor_state import (
+        Mode,
+        PlanClock,
+        SupervisorStatus,
+        TurnState,
+    )
     from hrc_drake.cell.run.run import build_closed_loop
     from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 
     supervisor = build_closed_loop(load_cell_scenario("row1-optimal", LEAN)).controller.supervisor
     above = wait_point(f1)
+    committed = TurnState(committed="F1")
     moving = SupervisorStatus(
-        mode=Mode.EXECUTE, plan=f1, tau=above - 0.01, tau_time=10.0, committed="F1"
+        mode=Mode.EXECUTE, clock=PlanClock(plan=f1, tau=above - 0.01, tau_time=10.0), turn=committed
     )
-    turning = supervisor._advance(replace(moving, change=UNDO), 1.0, 10.02)
-    assert turning.tau == pytest.approx(above) and turning.speed == 0.0
+    turning = supervisor._advance(replace(moving, turn=replace(committed, change=UNDO)), 1.0, 10.02)
+    assert turning.clock.tau == pytest.approx(above) and turning.clock.speed == 0.0
     assert turning.plan_time(10.1) == pytest.approx(above)
     assert turn_at(f1, turning.plan_time(10.02), supervisor._space.spec, UNDO) == Turn.RETURN
     # Still waiting for the indication: it waits there at speed; with none to wait for and no
     # turn, it goes on down to the seat.
-    waiting = supervisor._advance(replace(moving, awaiting=True), 1.0, 10.02)
-    assert waiting.tau == pytest.approx(above) and waiting.speed == 1.0
+    awaiting = replace(moving, turn=replace(committed, awaiting=True))
+    waiting = supervisor._advance(awaiting, 1.0, 10.02)
+    assert waiting.clock.tau == pytest.approx(above) and waiting.clock.speed == 1.0
     placing = supervisor._advance(moving, 1.0, 10.02)
     assert placing.plan_time(10.02) > above

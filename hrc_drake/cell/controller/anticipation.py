@@ -1,6 +1,6 @@
 """The robot that moves on its prediction: where along a committed task it can turn to the task
-the operator indicates, and how (`turn_at`; the `Anticipation` mixin of
-`hrc_drake.cell.controller.supervisor.Supervisor` acts on it).
+the operator indicates, and how (`turn_at`; `Anticipation`, a part of
+`hrc_drake.cell.controller.supervisor.Supervisor`, acts on it).
 
 In ``anticipate`` mode (`hrc_drake.tasks.interaction`) the Supervisor starts, at a boundary, on
 the placement its policy commits to, while the operator's indication is still on its way. When
@@ -27,10 +27,13 @@ from __future__ import annotations
 import enum
 from dataclasses import replace
 
+from hrc_drake.cell.controller.planning import PlanAsker
 from hrc_drake.cell.controller.supervisor_state import Mode, SupervisorError, SupervisorStatus
 from hrc_drake.cell.ports import CellConfiguration
 from hrc_drake.motion.plan import HOME_LEG, LIFT, Plan, Stage
 from hrc_drake.motion.service import PlanRequest
+from hrc_drake.tasks.graph import StateSpace
+from hrc_drake.tasks.policy import Policy
 from hrc_drake.tasks.protocols import Commits, PredictsTasks
 from hrc_drake.tasks.spec import AssemblySpec
 from hrc_drake.tasks.tokens import UNDO
@@ -104,52 +107,59 @@ def same_part(spec: AssemblySpec, committed: str, indicated: str) -> bool:
 
 
 class Anticipation:
-    """The Supervisor's anticipation: commit, take the indication while moving, turn. A mixin
-    of `hrc_drake.cell.controller.supervisor.Supervisor` (its `_policy`, `_space`, `_indicated`,
-    `_request`, `_ask`)."""
+    """The Supervisor's anticipation (a part of
+    `hrc_drake.cell.controller.supervisor.Supervisor`): commit, take the indication while
+    moving, turn. It asks the planner through the `PlanAsker` it is given and keeps its own
+    record, `TurnState`, in the status."""
 
-    def _commit(self, state: tuple[str, ...], proposal: str) -> str | None:
+    def __init__(self, space: StateSpace, policy: Policy, asker: PlanAsker):
+        self._space, self._policy, self._asker = space, policy, asker
+
+    def commit(self, state: tuple[str, ...], proposal: str) -> str | None:
         """The placement the policy bets on (its `commit`; a policy without one bets on its
         proposal when that is a placement)."""
         if isinstance(self._policy, Commits):
             return self._policy.commit(state, proposal)
         return None if proposal == UNDO else proposal
 
-    def _await_indication(self, s: SupervisorStatus, context, now: float):
-        """Moving on its commitment: take the indication when it comes; another task than
-        the committed one is turned to (`_turn`) once the robot can."""
-        s, indicated = self._indicated(s, context, now)
-        if indicated is None:
-            return s
+    def on_indication(self, s: SupervisorStatus, indicated: str, now: float) -> SupervisorStatus:
+        """Moving on its commitment, the indication came: another task than the committed one
+        is turned to (`turn`) once the robot can."""
         event = f"{now:.2f}: step {s.step}: operator indicates {indicated}"
-        s = replace(s, awaiting=False, indicated_at=now, events=(*s.events, event))
-        if indicated == s.committed:
+        s = s.noted(
+            event,
+            turn=replace(s.turn, awaiting=False),
+            question=replace(s.question, indicated_at=now),
+        )
+        committed = s.turn.committed
+        if indicated == committed:
             return s
-        proposed, _, part = s.pending
-        same = same_part(self._space.spec, s.committed, indicated)
+        same = same_part(self._space.spec, committed, indicated)
         return replace(
             s,
-            change=indicated,
-            pending=(proposed, indicated, part),
-            retargeted=same,
-            swapped=not same,
+            task=replace(s.task, indicated=indicated),
+            turn=replace(s.turn, change=indicated, retargeted=same, swapped=not same),
         )
 
-    def _stopping_to_turn(self, s: SupervisorStatus, now: float) -> bool:
+    def stopping_to_turn(self, s: SupervisorStatus, now: float) -> bool:
         """Whether the robot decelerates to turn to another task (not while its fingers
         close on the part or lift it, nor on its way to a re-target's rest point)."""
-        if s.change is None or s.mode != Mode.EXECUTE or s.plan is None:
+        change = s.turn.change
+        if change is None or s.mode != Mode.EXECUTE or s.plan is None:
             return False
-        turn = turn_at(s.plan, s.plan_time(now), self._space.spec, s.change)
+        turn = turn_at(s.plan, s.plan_time(now), self._space.spec, change)
         return turn not in (Turn.LATER, Turn.RETARGET)
 
-    def _turn(self, s: SupervisorStatus, config: CellConfiguration, now: float):
-        """Turn to the indicated task `s.change`: before the robot moves, ask for its plan
+    def turn(
+        self, s: SupervisorStatus, config: CellConfiguration, now: float
+    ) -> SupervisorStatus | None:
+        """Turn to the indicated task `s.turn.change`: before the robot moves, ask for its plan
         instead; once it stands still on its path, plan from there (with the part it holds:
         on to the indicated seat, or back to its tray home). None while it cannot yet."""
-        indicated, last = s.change, (s.state[-1] if s.state else None)
+        indicated, last = s.turn.change, (s.state[-1] if s.state else None)
         if s.mode in (Mode.PLAN, Mode.BLOCKED):
-            return self._request(replace(s, change=None), indicated, config, now)
+            s = replace(s, turn=replace(s.turn, change=None))
+            return self._asker.ask_task(s, indicated, config, now)
         if s.mode != Mode.EXECUTE:
             return None
         plan, tau = s.plan, s.plan_time(now)
@@ -161,7 +171,7 @@ class Anticipation:
             )
         if turn == Turn.RETARGET:
             return self._retarget_on_the_way(s, config, now)
-        if turn == Turn.LATER or s.speed > 0.0:
+        if turn == Turn.LATER or s.clock.speed > 0.0:
             return None
         q = tuple(float(x) for x in plan.trajectory.value(tau).ravel())
         opening = plan.gripper_opening(tau)
@@ -177,17 +187,14 @@ class Anticipation:
             s.tokens_before, task, last, layout, obstacle=config.obstacle, **keywords
         )
         event = f"{now:.2f}: turns to {indicated} ({turn.value}) at {tau:.2f} s into its plan"
-        return self._ask(
-            s,
-            request,
-            now,
-            plan=None,
+        s = s.noted(
+            event,
+            clock=replace(s.clock, plan=None),
             q_hold=q,
             opening_hold=opening,
-            change=None,
-            returning=turn == Turn.RETURN,
-            events=(*s.events, event),
+            turn=replace(s.turn, change=None, returning=turn == Turn.RETURN),
         )
+        return self._asker.ask(s, request, now)
 
     def _retarget_request(
         self, s: SupervisorStatus, turn: float, task: str, config: CellConfiguration
@@ -208,13 +215,13 @@ class Anticipation:
             held=True,
         )
 
-    def _plan_retargets(self, s: SupervisorStatus, config: CellConfiguration):
+    def plan_retargets(self, s: SupervisorStatus, config: CellConfiguration) -> SupervisorStatus:
         """Starting on a commitment: ask ahead for the re-targets from the lift's end to the
         other seats the same part may be indicated to (`RETARGETS_AHEAD`, the policy's
         predictions first; none when the run does not plan ahead), so that a re-target
         indicated before the lift's end finds its plan ready there. One indicated later, while
         carrying, is planned during the carry. Returns the status noting what was asked."""
-        if not self._limits.plan_ahead:
+        if not self._asker.plan_ahead:
             return s
         committed, space = s.plan.task, self._space
         feasible = [t for t, _ in space.tasks(space.index(s.state))]
@@ -229,43 +236,42 @@ class Anticipation:
         for task in others[:RETARGETS_AHEAD]:
             try:
                 request = self._retarget_request(s, lift_end(s.plan), task, config)
-                self._plans.request(request)
+                self._asker.plans.request(request)
             except ValueError:
                 continue  # a layout this task cannot be planned in: asked at the indication
             asked.add(request.key())
-        return replace(s, retargets_ahead=frozenset(asked))
+        return replace(s, turn=replace(s.turn, retargets_ahead=frozenset(asked)))
 
-    def _retarget_on_the_way(self, s: SupervisorStatus, config: CellConfiguration, now: float):
+    def _retarget_on_the_way(
+        self, s: SupervisorStatus, config: CellConfiguration, now: float
+    ) -> SupervisorStatus:
         """The same part to another seat: ask now for the plan from the next rest point of the
         committed plan (`turn_point`) on to the indicated seat, with the part in the gripper,
         and go on there; at the rest point, start on it (the arm still, as the plan's own
         motions leave it there)."""
-        plan, tau = s.plan, s.plan_time(now)
-        if s.turn_tau is None:
+        plan, tau, turning = s.plan, s.plan_time(now), s.turn
+        if turning.turn_tau is None:
             turn = turn_point(plan, tau)
-            request = self._retarget_request(s, turn, s.change, config)
-            self._plans.request(request)  # made while the arm goes on (or asked ahead)
+            request = self._retarget_request(s, turn, turning.change, config)
+            self._asker.plans.request(request)  # made while the arm goes on (or asked ahead)
             where = "the lift's end" if turn < wait_point(plan) else "the pre-place pose"
             event = (
-                f"{now:.2f}: re-targets to {s.change} at {where} ({turn:.2f} s into its plan), "
-                "without slowing down"
+                f"{now:.2f}: re-targets to {turning.change} at {where} ({turn:.2f} s into its "
+                "plan), without slowing down"
             )
-            return replace(s, turn_tau=turn, turn_request=request, events=(*s.events, event))
-        if tau < s.turn_tau - TAU_EPS:
+            return s.noted(event, turn=replace(turning, turn_tau=turn, turn_request=request))
+        if tau < turning.turn_tau - TAU_EPS:
             return s
-        q = tuple(float(x) for x in plan.trajectory.value(s.turn_tau).ravel())
-        return self._ask(
+        q = tuple(float(x) for x in plan.trajectory.value(turning.turn_tau).ravel())
+        s = replace(
             s,
-            s.turn_request,
-            now,
-            plan_ready=s.turn_request.key() in s.retargets_ahead,
-            plan=None,
+            clock=replace(s.clock, plan=None),
             q_hold=q,
-            opening_hold=plan.gripper_opening(s.turn_tau),
-            change=None,
-            turn_tau=None,
-            turn_request=None,
+            opening_hold=plan.gripper_opening(turning.turn_tau),
+            turn=replace(turning, change=None, turn_tau=None, turn_request=None),
         )
+        ready = turning.turn_request.key() in turning.retargets_ahead
+        return self._asker.ask(s, turning.turn_request, now, plan_ready=ready)
 
 
 __all__ = [

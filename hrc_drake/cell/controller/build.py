@@ -16,7 +16,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import Demultiplexer
 
 from hrc_drake.cell.controller.forecast import OperatorForecast
 from hrc_drake.cell.controller.intent import MotionIntent
@@ -27,7 +26,12 @@ from hrc_drake.cell.controller.separation import (
     SafetyLog,
     assess,
 )
-from hrc_drake.cell.controller.supervisor import Supervisor, SupervisorLimits, TaskRecord
+from hrc_drake.cell.controller.supervisor import (
+    ARM_PORTS,
+    Supervisor,
+    SupervisorLimits,
+    TaskRecord,
+)
 from hrc_drake.cell.person import desk_of
 from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell_models import CellDesign
@@ -47,7 +51,7 @@ MEASURED = (
     "operator.body",
     "hri.indication",
 )
-COMMANDED = ("ur3.position", "ur3.velocity", "rg2.opening", "rg2.force", "hri.prompt")
+COMMANDED = (*ARM_PORTS, "hri.prompt")
 
 
 @dataclass(frozen=True)
@@ -150,12 +154,7 @@ def make_controller(
     for name in MEASURED:
         if name != "operator.body":
             builder.ExportInput(supervisor.GetInputPort(name), name)
-    n = len(home)
-    split = builder.AddNamedSystem("command_split", Demultiplexer([n, n, 1, 1]))
-    builder.Connect(supervisor.GetOutputPort("command"), split.get_input_port())
-    for k, name in enumerate(("ur3.position", "ur3.velocity", "rg2.opening", "rg2.force")):
-        builder.ExportOutput(split.get_output_port(k), name)
-    for name in ("hri.prompt", "status"):
+    for name in (*ARM_PORTS, "hri.prompt", "status"):
         builder.ExportOutput(supervisor.GetOutputPort(name), name)
     monitor = None
     if scenario.body.enabled:

@@ -1,11 +1,11 @@
 """Predictive separation: the Supervisor times its plan around where it forecasts the operator.
 
-With `safety.separation: predictive` and an operator who shares the desk, the Supervisor keeps an
-`OperatorForecast` (`hrc_drake.cell.station.desk`): from the task the operator indicated (before the
-indication: the task the robot committed to, at the interface's median delay) it forecasts the
-body over the plan's horizon, and asks the motion layer (`hrc_drake.motion.clearance`) where the
-arm should wait so that speed-and-separation monitoring is forecast never to slow it. It times
-the plan again
+With `safety.separation: predictive` and an operator who shares the desk, the Supervisor keeps
+an `OperatorForecast` (`hrc_drake.cell.controller.forecast`): from the task the operator
+indicated (before the indication: the task the robot committed to, at the interface's median
+delay) it forecasts the body over the plan's horizon, and asks the motion layer
+(`hrc_drake.motion.clearance`) where the arm should wait so that speed-and-separation
+monitoring is forecast never to slow it. It times the plan again
 
 - when the plan, the indicated task or the bolts change (each task boundary: the forecast is
   solved again there);
@@ -30,10 +30,10 @@ it from having to.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
-from pydrake.common.value import AbstractValue
 
 from hrc_drake.cell.controller.forecast import Anchor, OperatorForecast
 from hrc_drake.cell.controller.supervisor_state import Mode, SupervisorStatus
@@ -49,8 +49,6 @@ STILL = 0.02  # m/s: a hand this slow is at rest
 VISIT, LEAVE = 0.06, 0.10  # m: the hand is at a stay within VISIT of it, and left past LEAVE
 VIEW_TIMES = np.arange(0.0, 3.01, 0.25)  # s ahead at which the forecast hand is drawn
 
-_NOBODY = BodySpheres(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
-
 
 @dataclass(frozen=True)
 class KeepClearSettings:
@@ -65,49 +63,49 @@ class KeepClearSettings:
 
 
 class KeepClear:
-    """The Supervisor's predictive separation (see the module docstring); a mixin of
-    `hrc_drake.cell.controller.supervisor.Supervisor`."""
+    """The Supervisor's predictive separation (see the module docstring); a part of
+    `hrc_drake.cell.controller.supervisor.Supervisor` that keeps its own record,
+    `KeepClearState`, and the plan clock's waits in the status."""
 
-    def _declare_keep_clear(self, settings: KeepClearSettings) -> None:
+    def __init__(self, settings: KeepClearSettings):
         self._forecast, self._scale = settings.forecast, settings.scale
         # Fitted to the person once seen at rest: the controller's model of who stands there,
         # learned once per run (a Supervisor runs one simulation).
         self._fitted: OperatorForecast | None = None
         self._max_wait, self._departure = settings.max_wait, settings.departure
-        self._body_port = self.DeclareAbstractInputPort(
-            "operator.body", AbstractValue.Make(_NOBODY)
-        )
 
     def _anchor(self, s: SupervisorStatus) -> Anchor | None:
         """The indication the forecast starts from: the operator's, or the one predicted."""
-        if s.pending is None:
+        if s.task is None:
             return None
-        if s.seen is not None:
-            return s.seen
-        if s.indicated_at is not None:
-            return Anchor(s.pending[1], s.indicated_at)
-        task = s.committed or s.pending[1]
-        return Anchor(task, s.asked_at + self._forecast.delay)
+        if s.clear.seen is not None:
+            return s.clear.seen
+        if s.question.indicated_at is not None:
+            return Anchor(s.task.indicated, s.question.indicated_at)
+        task = s.turn.committed or s.task.indicated
+        return Anchor(task, s.question.asked_at + self._forecast.delay)
 
     def _offsets(self, s: SupervisorStatus) -> tuple[float, ...]:
         """The forecast's timing spread: narrower once the tracker showed where it is."""
-        if s.seen is not None and (s.seen.done > 0 or s.visiting is not None):
+        seen = s.clear.seen
+        if seen is not None and (seen.done > 0 or s.clear.visiting is not None):
             return self._forecast.offsets("seen")
-        return self._forecast.offsets(s.indicated_at is not None)
+        return self._forecast.offsets(s.question.indicated_at is not None)
 
     def _progress(self, s: SupervisorStatus, hand: np.ndarray, now: float):
         """(the anchor, the stay visited) when the tracked hand reached a stay of the activity
         (pointing, a bin) or left the one it was at; None otherwise."""
-        if s.indicated_at is None:
+        if s.question.indicated_at is None:
             return None
-        task = s.pending[1]
+        task = s.task.indicated
         stays = self._forecast.stays(task)
         here = tuple(float(x) for x in hand)
-        if s.visiting is not None:
-            if np.linalg.norm(hand - stays[s.visiting].where) > LEAVE:
-                return Anchor(task, now, done=s.visiting + 1, start=here), None
+        visiting = s.clear.visiting
+        if visiting is not None:
+            if np.linalg.norm(hand - stays[visiting].where) > LEAVE:
+                return Anchor(task, now, done=visiting + 1, start=here), None
             return None
-        first = s.seen.done if s.seen is not None else 0
+        first = s.clear.seen.done if s.clear.seen is not None else 0
         for k in range(first, len(stays)):
             if stays[k].what != "rest" and np.linalg.norm(hand - stays[k].where) < VISIT:
                 return Anchor(task, now, done=k, start=here), k
@@ -116,11 +114,11 @@ class KeepClear:
     def _at_last_bin(self, s: SupervisorStatus) -> bool:
         """Whether the tracker shows the hand in the last bin of its fetch: from there it only
         goes back to rest, away from the robot."""
-        if s.visiting is None or s.pending is None:
+        if s.clear.visiting is None or s.task is None:
             return False
-        stays = self._forecast.stays(s.pending[1])
+        stays = self._forecast.stays(s.task.indicated)
         fetches = [k for k, stay in enumerate(stays) if stay.what == "fetch"]
-        return bool(fetches) and s.visiting == fetches[-1]
+        return bool(fetches) and s.clear.visiting == fetches[-1]
 
     def _fit(self, body: BodySpheres) -> None:
         """Fit the forecast to the person the tracker shows at rest before the first task (the
@@ -130,42 +128,40 @@ class KeepClear:
             self._forecast = self._forecast.fitted(body)
             self._fitted = self._forecast
 
-    def _tracked_body(self, context) -> BodySpheres:
-        if not self._body_port.HasValue(context):
-            return _NOBODY
-        return self._body_port.Eval(context)
-
-    def _keep_clear(self, s: SupervisorStatus, context, now: float) -> SupervisorStatus:
+    def update(
+        self, s: SupervisorStatus, tracked_body: Callable[[], BodySpheres], now: float
+    ) -> SupervisorStatus:
         """Re-time the plan when what it was timed for changed, or the body departs from the
-        forecast (see the module docstring)."""
+        forecast (see the module docstring). `tracked_body()` reads the tracked body."""
         if self._forecast is None:
             return s
-        if self._fitted is None and s.step <= 1 and s.indicated_at is None:
-            self._fit(self._tracked_body(context))  # before the operator's first move
+        if self._fitted is None and s.step <= 1 and s.question.indicated_at is None:
+            self._fit(tracked_body())  # before the operator's first move
         if s.mode != Mode.EXECUTE or s.plan is None:
             return s
-        key = (id(s.plan), s.step, s.pending[1], s.indicated_at, s.bolted)
-        if key != s.clear_key:
-            s = replace(s, seen=None, visiting=None)
+        key = (id(s.plan), s.step, s.task.indicated, s.question.indicated_at, s.bolted)
+        clear = s.clear
+        if key != clear.clear_key:
+            s = replace(s, clear=replace(clear, seen=None, visiting=None))
             return self._retime(s, key, now, None)
-        if now - s.checked_at < CHECK_PERIOD:
+        if now - clear.checked_at < CHECK_PERIOD:
             return s
-        body = self._tracked_body(context)
+        body = tracked_body()
         anchor = self._anchor(s)
         if len(body.radii) == 0 or anchor is None:
             return s
         hand = body.centres[0]
         progress = self._progress(s, hand, now)
         if progress is not None:
-            s = replace(s, seen=progress[0], visiting=progress[1])
+            s = replace(s, clear=replace(clear, seen=progress[0], visiting=progress[1]))
             return self._retime(s, key, now, None)
         offsets = self._offsets(s)
         if self._forecast.departure(anchor, hand, now, offsets) <= self._departure:
-            return replace(s, checked_at=now)
-        if now - s.timed_at < RETIME_PERIOD:
-            return replace(s, checked_at=now)
+            return replace(s, clear=replace(clear, checked_at=now))
+        if now - clear.timed_at < RETIME_PERIOD:
+            return replace(s, clear=replace(clear, checked_at=now))
         moved, left = self._forecast.reanchored(anchor, hand, now)
-        s = replace(s, seen=moved, replans=s.replans + 1)
+        s = replace(s, clear=replace(clear, seen=moved, replans=clear.replans + 1))
         unexplained = body if left > self._departure else None
         return self._retime(s, key, now, unexplained)
 
@@ -183,8 +179,9 @@ class KeepClear:
         if unexplained is not None:
             occupancy = _staying(occupancy, unexplained, now + STAY)
         holds, spent = (), None
-        if s.held_since is not None:
-            spent = (s.held_since[0], now - s.held_since[1])
+        held_since = s.clock.held_since
+        if held_since is not None:
+            spent = (held_since.tau, now - held_since.since)
         if tau < end_tau:
             holds = time_around(
                 plan,
@@ -199,9 +196,8 @@ class KeepClear:
             )
         timeline = self._forecast.timeline(anchor)
         view = tuple(tuple(float(x) for x in timeline.at(now + d)) for d in VIEW_TIMES)
-        return replace(
-            s, holds=holds, clear_key=key, timed_at=now, checked_at=now, forecast_view=view
-        )
+        clear = replace(s.clear, clear_key=key, timed_at=now, checked_at=now, forecast_view=view)
+        return replace(s, clock=replace(s.clock, holds=holds), clear=clear)
 
 
 def _staying(occupancy: Occupancy, body: BodySpheres, until: float) -> Occupancy:

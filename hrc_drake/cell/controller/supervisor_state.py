@@ -4,7 +4,7 @@ Drake systems; `hrc_drake.cell.controller.supervisor` runs them)."""
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -66,67 +66,121 @@ class TaskRecord:
     handed_over: str = ""  # why the operator did the task by hand ("": the robot did it)
 
 
+class Cause(enum.StrEnum):
+    """What the Supervisor found wrong, from its measurements (a `Detection`'s cause)."""
+
+    STOP = "stop"  # the protective-stop input
+    SILENCE = "silence"  # no indication within the timeout
+    TRACKING = "tracking"  # a joint off its command
+    GRIP = "grip"  # the fingers do not hold the part
+    RELEASE = "release"  # the fingers do not open
+    SEAT = "seat"  # a part let go does not sit in its seat
+    PLAN = "plan"  # no plan
+    CONFIGURATION = "configuration"  # the cell shows what no task explains
+    TASK_CAP = "task-cap"  # the run's own task cap (`run.max_steps`): no fault
+
+
+class Recovery(enum.StrEnum):
+    """How a `Detection` was resolved, or how the task's part is being picked again."""
+
+    RESUME = "resume"  # the stop cleared: the robot goes on where it stopped
+    ASK = "ask"  # asked again: the indication came
+    REGRASP = "regrasp"  # a part slipped out of the fingers, picked again where it lies
+    REPLACE = "replace"  # a part let go out of its seat, picked again and re-placed
+    RETRY = "retry"  # planned again once the obstacle moved
+    OPERATOR = "operator"  # handed over: the operator did the task (or the run stopped)
+
+
 @dataclass(frozen=True)
 class Detection:
     """Something the Supervisor found wrong from its measurements, and what came of it.
 
-    `cause`: `stop` (the protective-stop input), `silence` (no indication within the timeout),
-    `tracking` (a joint off its command), `grip` (the fingers do not hold the part), `release`
-    (the fingers do not open), `seat` (a part let go does not sit in its seat), `plan` (no
-    plan), `configuration` (the cell shows what no task explains). `recovery`: `resume`, `ask`,
-    `regrasp`, `replace` (the cell went on by itself), or `operator` (the task is handed
-    over: `resolved_at` is when the operator said it is done, or when the run stopped)."""
+    `resolved_at` is when the cell went on (for `Recovery.OPERATOR`: when the operator said
+    the handed-over task is done, or when the run stopped)."""
 
-    cause: str
+    cause: Cause
     step: int
     at: float
     resolved_at: float | None = None
-    recovery: str = ""
+    recovery: Recovery | None = None
 
     @property
     def recovered(self) -> bool:
         """The cell itself recovered and went on."""
-        return self.resolved_at is not None and self.recovery != "operator"
+        return self.resolved_at is not None and self.recovery != Recovery.OPERATOR
 
 
 @dataclass(frozen=True)
-class SupervisorStatus:
-    """The Supervisor's abstract state (one value, replaced at every update)."""
+class TaskInFlight:
+    """The task under way between the indication and the cell's reading of it."""
 
-    mode: Mode = Mode.DECIDE
-    state: tuple[str, ...] = ()
-    step: int = 0
-    prompt: Prompt = field(default_factory=Prompt)
+    proposed: str  # the policy's proposal
+    indicated: str  # the task the operator indicated (or the robot committed to)
+    part: str = ""  # the part instance its plan moves ("": not chosen yet)
+
+
+@dataclass(frozen=True)
+class PlanAsk:
+    """The planner's request in flight, and what its wait cost the current task."""
+
     request: PlanRequest | None = None
     requested_at: float = 0.0  # simulated time when the plan was asked for
     requested_wall: float = 0.0  # perf_counter() when the plan was asked for
-    plan_ready: bool = False
+    plan_ready: bool = False  # the plan was made ahead of the indication
+    idle: float = 0.0  # simulated seconds waited on the planner for the current task
+    wall_idle: float = 0.0  # the same wait in wall-clock seconds
+
+
+@dataclass(frozen=True)
+class Question:
+    """The operator's interface: the prompt up and when the operator was asked and answered."""
+
+    prompt: Prompt = field(default_factory=Prompt)
+    asked_at: float = 0.0  # when the operator was last asked to choose
+    prompted_at: float = 0.0  # when the question now up was first asked (for the give-up)
+    indicated_at: float | None = None  # when the indication came
+    held_at: float | None = None  # when the robot last held the part for the bolts
+
+
+@dataclass(frozen=True)
+class HeldWait:
+    """A planned wait the arm stands in: at plan time `tau`, since simulated time `since`."""
+
+    tau: float
+    since: float
+
+
+@dataclass(frozen=True)
+class PlanClock:
+    """The plan the robot follows and its plan time `tau`, which advances at `rate`."""
+
     plan: Plan | None = None
-    plan_start: float = 0.0
-    pending: tuple[str, str, str] | None = None  # (proposed, indicated, part) of the task
-    tokens_before: frozenset[str] = frozenset()
-    settle_until: float = 0.0
-    bolted: bool = False
-    planned_ahead: bool = False
-    q_hold: tuple[float, ...] = ()
-    opening_hold: float = 0.0
-    history: tuple[TaskRecord, ...] = ()
-    error: str | None = None
-    events: tuple[str, ...] = ()
+    plan_start: float = 0.0  # simulated time the plan started
     tau: float = 0.0  # plan time at `tau_time` (simulated time)
     tau_time: float = 0.0
     rate: float = 1.0  # d tau / dt from `tau_time` on
     speed: float = 1.0  # the speed scale s the robot runs at (1: the plan's own speed)
-    idle: float = 0.0  # simulated seconds waited on the planner for the current task
-    wall_idle: float = 0.0  # the same wait in wall-clock seconds
-    grip_lost_at: float | None = None  # when the grasp (or the release) started to look wrong
-    asked_at: float = 0.0  # when the operator was last asked to choose
-    prompted_at: float = 0.0  # when the question now up was first asked (for the give-up)
-    blocked_at: float = 0.0  # when the task's path was found blocked
-    committed: str | None = None  # anticipating: the task the robot started on
+    # Predictive separation's waits for the operator (rest points of the plan and until when),
+    # the one the arm stands in, and the seconds spent in them.
+    holds: tuple[Hold, ...] = ()
+    held_since: HeldWait | None = None
+    waited: float = 0.0
+
+    def hold_at(self, now: float) -> Hold | None:
+        """The planned wait the arm is in, or comes to, at `now` (None: none ahead)."""
+        for hold in self.holds:
+            if now < hold.until and self.tau <= hold.tau + 1e-9:
+                return hold
+        return None
+
+
+@dataclass(frozen=True)
+class TurnState:
+    """Anticipation (`hrc_drake.cell.controller.anticipation`): the task the robot started on
+    before the indication, and its turn to the task indicated instead."""
+
+    committed: str | None = None  # the task the robot started on
     awaiting: bool = False  # started on `committed`; the indication is not in yet
-    indicated_at: float | None = None
-    held_at: float | None = None  # when the robot last held the part for the bolts
     change: str | None = None  # the indicated task the robot is stopping to turn to
     # Re-targeting on the way: the plan time of the rest point of the plan (the lift's end, the
     # pre-place pose) where the arm turns to `turn_request`, asked for while it goes there.
@@ -136,53 +190,89 @@ class SupervisorStatus:
     retargeted: bool = False
     swapped: bool = False
     returning: bool = False  # carrying the committed part back to its tray (a swap)
-    recovering: str = ""  # "regrasp" or "replace" while the task's part is picked again
-    recoveries: int = 0  # how often the task's part was picked again
-    stopped: bool = False  # the protective-stop input is on
-    handover: str = ""  # why the task is handed over to the operator ("": it is not)
-    away: bool = False  # the arm holds away from home: the next plan starts where it holds
-    detections: tuple[Detection, ...] = ()
-    # Predictive separation (`hrc_drake.cell.controller.keep_clear`): where the plan waits for the
-    # operator (rest points and until when), what the waits were timed for, and what the
-    # tracker showed of the operator's activity.
-    holds: tuple[Hold, ...] = ()
+
+
+@dataclass(frozen=True)
+class KeepClearState:
+    """Predictive separation (`hrc_drake.cell.controller.keep_clear`): what the plan's waits
+    were timed for and what the tracker showed of the operator's activity."""
+
     clear_key: tuple = ()
     timed_at: float = float("-inf")  # when the plan was last timed around the forecast
     seen: Anchor | None = None  # the activity as the tracker showed it (None: as forecast)
     visiting: int | None = None  # the stay of the activity the hand is seen at
     checked_at: float = float("-inf")  # when the tracked body was last held against it
     replans: int = 0  # re-timed because the body departed from the forecast
-    waited: float = 0.0  # s spent in planned waits
-    capped: bool = False  # ended by its own task cap (`run.max_steps`), not by a failure
-    held_since: tuple[float, float] | None = None  # (plan time, since when) of the wait now
     forecast_view: tuple[tuple[float, float, float], ...] = ()  # forecast hand, for drawing
+
+
+@dataclass(frozen=True)
+class RecoveryState:
+    """Fault handling (`hrc_drake.cell.controller.recovery`): a part being picked again, a grasp
+    that looks lost, a blocked path, a stop, a task handed over."""
+
+    recovering: Recovery | None = None  # REGRASP or REPLACE while the part is picked again
+    recoveries: int = 0  # how often the task's part was picked again
+    grip_lost_at: float | None = None  # when the grasp (or the release) started to look wrong
+    blocked_at: float = 0.0  # when the task's path was found blocked
+    stopped: bool = False  # the protective-stop input is on
+    handover: str = ""  # why the task is handed over to the operator ("": it is not)
+    away: bool = False  # the arm holds away from home: the next plan starts where it holds
+
+
+@dataclass(frozen=True)
+class SupervisorStatus:
+    """The Supervisor's abstract state (one value, replaced at every update): its mode and
+    MDP state, the task in flight, the records of its parts, and what the run recorded."""
+
+    mode: Mode = Mode.DECIDE
+    state: tuple[str, ...] = ()
+    step: int = 0
+    task: TaskInFlight | None = None
+    tokens_before: frozenset[str] = frozenset()  # the cell's tokens at the task's boundary
+    settle_until: float = 0.0
+    bolted: bool = False
+    planned_ahead: bool = False
+    # Where the arm holds when it follows no plan, and the gripper's opening there.
+    q_hold: tuple[float, ...] = ()
+    opening_hold: float = 0.0
+    ask: PlanAsk = PlanAsk()
+    question: Question = Question()
+    clock: PlanClock = PlanClock()
+    turn: TurnState = TurnState()
+    clear: KeepClearState = KeepClearState()
+    recovery: RecoveryState = RecoveryState()
+    history: tuple[TaskRecord, ...] = ()
+    detections: tuple[Detection, ...] = ()
+    events: tuple[str, ...] = ()
+    error: str | None = None
+    capped: bool = False  # ended by its own task cap (`run.max_steps`), not by a failure
 
     def __deepcopy__(self, memo) -> SupervisorStatus:
         # Drake copies abstract values at every update and output evaluation; this value is
         # immutable (its plan's trajectories are never modified), so the copy is itself.
         return self
 
+    @property
+    def plan(self) -> Plan | None:
+        """The plan the robot follows (None: it holds still)."""
+        return self.clock.plan
+
     def plan_time(self, now: float) -> float:
         """The plan time `tau` at simulated time `now` (clamped to the plan, and to the turn
         point of a re-target on the way)."""
-        tau = self.tau + self.rate * (now - self.tau_time)
-        if self.turn_tau is not None:
-            tau = min(tau, self.turn_tau)
-        hold = self.hold_at(now)
+        clock = self.clock
+        tau = clock.tau + clock.rate * (now - clock.tau_time)
+        if self.turn.turn_tau is not None:
+            tau = min(tau, self.turn.turn_tau)
+        hold = clock.hold_at(now)
         if hold is not None:
             tau = min(tau, hold.tau)
-        return float(np.clip(tau, 0.0, self.plan.duration)) if self.plan is not None else tau
-
-    def hold_at(self, now: float) -> Hold | None:
-        """The planned wait the arm is in, or comes to, at `now` (None: none ahead)."""
-        for hold in self.holds:
-            if now < hold.until and self.tau <= hold.tau + 1e-9:
-                return hold
-        return None
+        return float(np.clip(tau, 0.0, clock.plan.duration)) if clock.plan is not None else tau
 
     def held(self, now: float) -> bool:
         """Whether the arm stands in a planned wait at `now`."""
-        hold = self.hold_at(now)
+        hold = self.clock.hold_at(now)
         return hold is not None and self.plan_time(now) >= hold.tau - 1e-9
 
     def holding_for_bolts(self, tau: float) -> bool:
@@ -195,26 +285,53 @@ class SupervisorStatus:
             and plan.t_in_place <= tau < plan.t_release
         )
 
-    def command(self, now: float) -> tuple[np.ndarray, np.ndarray, float]:
-        """(joint positions, joint velocities, gripper opening) commanded at `now`."""
-        if self.mode != Mode.EXECUTE or self.plan is None:
+    def command(self, now: float) -> ArmCommand:
+        """What the arm and the gripper are commanded at `now`."""
+        plan = self.plan
+        if self.mode != Mode.EXECUTE or plan is None:
             q = np.asarray(self.q_hold, dtype=float)
-            return q, np.zeros(len(q)), self.opening_hold
+            return ArmCommand(q, np.zeros(len(q)), self.opening_hold)
         tau = self.plan_time(now)
-        q = self.plan.trajectory.value(tau).ravel()
-        v = self.plan.trajectory.EvalDerivative(tau, 1).ravel() * self.rate
-        if tau >= self.plan.duration:
+        q = plan.trajectory.value(tau).ravel()
+        v = plan.trajectory.EvalDerivative(tau, 1).ravel() * self.clock.rate
+        if tau >= plan.duration:
             v = np.zeros_like(v)
-        return q, v, self.plan.gripper_opening(tau)
+        return ArmCommand(q, v, plan.gripper_opening(tau))
 
     @property
     def visited(self) -> list[tuple[str, ...]]:
         """The MDP states visited, from the start."""
         return [(), *(r.next_state for r in self.history)]
 
-    def open_detection(self, cause: str | None = None) -> bool:
+    def open_detection(self, cause: Cause | None = None) -> bool:
         """Whether a detection of `cause` (None: of any cause) is not resolved yet."""
         return any(d.resolved_at is None and cause in (None, d.cause) for d in self.detections)
+
+    def noted(self, event: str, **changes) -> SupervisorStatus:
+        """This status with `event` appended to its events (and `changes` made)."""
+        return replace(self, events=(*self.events, event), **changes)
+
+
+@dataclass(frozen=True)
+class ArmCommand:
+    """What the Supervisor commands: the arm's joint positions [rad] and velocities [rad/s],
+    and the gripper's opening [m]."""
+
+    q: np.ndarray
+    v: np.ndarray
+    opening: float
+
+
+def resolve(s: SupervisorStatus, cause: Cause | None, now: float, recovery: Recovery):
+    """`s` with its open detections of `cause` (None: every cause) marked recovered by
+    `recovery` at `now`."""
+    detections = tuple(
+        replace(d, resolved_at=now, recovery=recovery)
+        if cause in (None, d.cause) and d.resolved_at is None
+        else d
+        for d in s.detections
+    )
+    return replace(s, detections=detections)
 
 
 # An obstacle counts as moved (worth planning again) past this distance [m].
@@ -228,9 +345,9 @@ def obstacle_moved(planned: tuple[float, ...] | None, seen: tuple[float, ...]) -
     return float(np.linalg.norm(np.subtract(planned[:3], seen[:3]))) > OBSTACLE_MOVED
 
 
-TASK_CAP = "task-cap"
-"""The cause of a run ended by its task cap (`run.max_steps`): an operator who keeps undoing can
-outlast any cap; the run ends with that reason, and it is no fault detection."""
+# The cause of a run ended by its task cap (`run.max_steps`): an operator who keeps undoing can
+# outlast any cap; the run ends with that reason, and it is no fault detection.
+TASK_CAP = Cause.TASK_CAP
 
 
 class SupervisorError(RuntimeError):
@@ -238,7 +355,7 @@ class SupervisorError(RuntimeError):
     `hand_over` the operator can do the task by hand (the part is out of the gripper, the robot
     itself is sound) and the assembly goes on; without, the run stops."""
 
-    def __init__(self, message: str, cause: str = "configuration", hand_over: bool = False):
+    def __init__(self, message: str, cause: Cause = Cause.CONFIGURATION, hand_over: bool = False):
         super().__init__(message)
         self.cause = cause
         self.hand_over = hand_over
@@ -268,11 +385,24 @@ __all__ = [
     "N_JOINTS",
     "OBSTACLE_MOVED",
     "PART_FALL_TIME",
+    "TASK_CAP",
+    "ArmCommand",
+    "Cause",
     "Detection",
+    "HeldWait",
+    "KeepClearState",
     "Mode",
+    "PlanAsk",
+    "PlanClock",
+    "Question",
+    "Recovery",
+    "RecoveryState",
     "SupervisorError",
     "SupervisorLimits",
     "SupervisorStatus",
+    "TaskInFlight",
     "TaskRecord",
+    "TurnState",
     "obstacle_moved",
+    "resolve",
 ]

@@ -11,21 +11,21 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from hrc_drake.cell.controller.supervisor import Detection
+from hrc_drake.cell.controller.supervisor_state import Cause, Detection
 from hrc_drake.cell.station.faults import Injection
 from hrc_drake.hri.faults import FaultConfig, FaultKind, FaultRecord
 
 # What each kind of fault shows as, in the controller's measurements.
 CAUSES = {
-    FaultKind.PROTECTIVE_STOP: {"stop"},
-    FaultKind.OPERATOR_SILENT: {"silence"},
-    FaultKind.PUSHED: {"tracking"},
-    FaultKind.GRIPPER_STUCK: {"grip", "release"},
-    FaultKind.GRIP_LOST: {"grip"},
-    FaultKind.NO_PATH: {"plan"},
+    FaultKind.PROTECTIVE_STOP: {Cause.STOP},
+    FaultKind.OPERATOR_SILENT: {Cause.SILENCE},
+    FaultKind.PUSHED: {Cause.TRACKING},
+    FaultKind.GRIPPER_STUCK: {Cause.GRIP, Cause.RELEASE},
+    FaultKind.GRIP_LOST: {Cause.GRIP},
+    FaultKind.NO_PATH: {Cause.PLAN},
     # Let go off its seat; pushed out of the fingers on the pocket's rim; or the arm blocked by
     # the part landing on the rim.
-    FaultKind.NO_SEAT: {"seat", "grip", "tracking"},
+    FaultKind.NO_SEAT: {Cause.SEAT, Cause.GRIP, Cause.TRACKING},
 }
 # A detection in the same Supervisor update as the injection may carry a time a period earlier.
 SLACK = 0.05  # s
@@ -70,7 +70,7 @@ def fault_records(
                 injected_at=injected,
                 detected_at=None if found is None else found.at,
                 recovered=found is not None and found.recovered,
-                recovery=found.recovery if found is not None and found.resolved_at else "",
+                recovery=found.recovery.value if found is not None and found.resolved_at else "",
                 seconds_lost=max(lost, 0.0),
             )
         )

@@ -423,8 +423,8 @@ class _StackLight:
         # The speed the monitor allows, also during the hold (a monitored stop: red while the
         # person is within S_p of the still robot).
         state = "moving"
-        if status.speed < 1.0 - 1e-9:
-            state = "stopped" if status.speed <= 1e-9 else "slowed"
+        if status.clock.speed < 1.0 - 1e-9:
+            state = "stopped" if status.clock.speed <= 1e-9 else "slowed"
         if state == self.state:
             return
         self.state = state
@@ -454,7 +454,7 @@ class _ForecastView:
         """Draw the forecast of `status` when it changed (recorded at `now`)."""
         from pydrake.math import RigidTransform
 
-        view = status.forecast_view if status.plan is not None else ()
+        view = status.clear.forecast_view if status.plan is not None else ()
         if view == self.shown:
             return
         self.shown = view
@@ -491,7 +491,7 @@ def _monitor(loop: ClosedLoop):
         status: SupervisorStatus = status_port.Eval(controller_context)
         if now >= watch.next_check:
             watch.next_check = now + period
-            handled = status.pending[2] if status.pending else None
+            handled = status.task.part if status.task else None
             watch.contacts.check(cell.touching(context), handled or None, now)
         if watch.lights is not None:
             watch.lights.show(status, now)
@@ -509,7 +509,7 @@ def _monitor(loop: ClosedLoop):
             # was ready depends on what was predicted, not on the machine.
             setup.plans.wait_all()
         if waits and status.mode == Mode.PLAN:
-            setup.plans.wait(status.request)
+            setup.plans.wait(status.ask.request)
         if cell.welds_changed(context, watch.welds):
             return EventStatus.ReachedTermination(loop.controller.supervisor, "welds")
         return EventStatus.DidNothing()
@@ -573,8 +573,8 @@ def _result(loop: ClosedLoop, wall: float, path, interrupted: bool) -> RunResult
         interrupted=interrupted,
         interaction=setup.scenario.interaction.mode,
         separation=setup.scenario.safety.separation,
-        waited=status.waited,
-        replans=status.replans,
+        waited=status.clock.waited,
+        replans=status.clear.replans,
         capped=status.capped,
         faults=tuple(
             fault_records(
