@@ -19,7 +19,8 @@ from pydrake.lcm import DrakeLcm
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.systems.framework import BasicVector, Diagram, DiagramBuilder, LeafSystem
 
-from hrc_drake.cell.link.interface import CellStationServer, LockstepTimeouts
+from hrc_drake.cell.link.lockstep import LockstepTimeouts
+from hrc_drake.cell.link.station_server import CellStationServer
 from hrc_drake.cell.ports import (
     BodySpheres,
     CellConfiguration,

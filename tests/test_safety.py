@@ -6,15 +6,14 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.analysis import Simulator
 
 from hrc_drake.cell.controller.intent import MotionIntent
+from hrc_drake.cell.controller.robot_envelope import RobotEnvelope, nearest_points
 from hrc_drake.cell.controller.separation import (
     ControllerSeparationMonitor,
-    RobotEnvelope,
     SafetyLog,
     SeparationReading,
     allowed_scale,
     assess,
     log_step,
-    nearest_points,
 )
 from hrc_drake.cell.person import CHAIN_GAP, body_pose
 from hrc_drake.cell.ports import BodySpheres
@@ -100,7 +99,7 @@ def test_a_row_with_a_mistake_and_undo_runs_with_the_body_and_no_violation():
 
 
 # The controller's separation monitor (hrc_drake.cell.controller.separation): its own model of the
-# robot, measured inputs only.
+# robot (hrc_drake.cell.controller.robot_envelope), measured inputs only.
 
 POSTURES = (
     (0.0, -1.57, 1.2, -1.2, -1.57, 0.0),

@@ -25,16 +25,18 @@ from pydrake.systems.framework import DiagramBuilder, EventStatus
 
 from hrc_drake.cell.controller.build import connect_controller
 from hrc_drake.cell.link import lcm_messages as lm
-from hrc_drake.cell.link.interface import (
-    CellStationServer,
-    LockstepTimeouts,
-    StationLinkError,
-    cell_station_hooks,
-    end_station_session,
-    exchange_period,
-    make_cell_station_interface,
+from hrc_drake.cell.link.channels import (
+    COMMANDS,
+    END_CHANNEL,
+    MEASUREMENTS,
+    PRE_SUFFIX,
+    SIM_CONTACTS,
 )
+from hrc_drake.cell.link.interface import end_station_session, make_cell_station_interface
+from hrc_drake.cell.link.lcm_struct import Field, LcmDecodeError, struct_hash
+from hrc_drake.cell.link.lockstep import LockstepTimeouts, StationLinkError, exchange_period
 from hrc_drake.cell.link.remote import RemoteCell, run_over_lcm, station_of
+from hrc_drake.cell.link.station_server import CellStationServer, cell_station_hooks
 from hrc_drake.cell.ports import (
     BodySpheres,
     CellConfiguration,
@@ -76,10 +78,10 @@ LCM_PRIMITIVES = {"int8_t", "int16_t", "int32_t", "int64_t", "byte", "float", "d
 LCM_PRIMITIVES |= {"boolean"}
 
 
-def _drake_fields(cls) -> list[lm.Field]:
+def _drake_fields(cls) -> list[Field]:
     """The members of one of Drake's lcm-gen classes (a struct member's type as a class)."""
     return [
-        lm.Field(
+        Field(
             kind if kind in LCM_PRIMITIVES else object,
             name,
             tuple(int(d) if str(d).isdigit() else d for d in dims or ()),
@@ -98,7 +100,7 @@ def test_struct_hash_is_lcm_gens_for_every_drake_type():
     for name in names:
         source = Path(importlib.import_module(f"drake.{name}").__file__).read_text()
         written = int(re.search(r"tmphash = \(\(?(0x[0-9a-f]+)", source).group(1), 16)
-        assert lm.struct_hash(_drake_fields(getattr(drake, name))) == written, name
+        assert struct_hash(_drake_fields(getattr(drake, name))) == written, name
 
 
 # The fake station's configuration and a part that fell on the table, tilted: every pose bit.
@@ -151,7 +153,7 @@ def _same(a, b) -> bool:
     return a == b
 
 
-@pytest.mark.parametrize("channel", [*lm.COMMANDS, *lm.MEASUREMENTS, lm.SIM_CONTACTS])
+@pytest.mark.parametrize("channel", [*COMMANDS, *MEASUREMENTS, SIM_CONTACTS])
 def test_every_message_round_trips(channel):
     """Port values -> message -> LCM bytes -> message -> port values, bit for bit; and the
     message bytes' stamp is read without decoding."""
@@ -221,15 +223,15 @@ def test_ur3_status_leaves_what_a_simulation_does_not_measure_unknown():
 
 def test_decode_errors_name_the_type():
     prompt = lm.prompt_message(1, Prompt()).encode()
-    with pytest.raises(lm.LcmDecodeError, match="not a lcmt_hri_indication message"):
+    with pytest.raises(LcmDecodeError, match="not a lcmt_hri_indication message"):
         lm.lcmt_hri_indication.decode(prompt)
-    with pytest.raises(lm.LcmDecodeError, match="truncated"):
+    with pytest.raises(LcmDecodeError, match="truncated"):
         lm.lcmt_hri_prompt.decode(prompt[:-3])
-    with pytest.raises(lm.LcmDecodeError, match="HRI_INDICATION: not a lcmt_hri_indication"):
-        lm.MEASUREMENTS[-1].stamp_of(prompt)
+    with pytest.raises(LcmDecodeError, match="HRI_INDICATION: not a lcmt_hri_indication"):
+        MEASUREMENTS[-1].stamp_of(prompt)
     short = lm.lcmt_panda_status()
     short.num_joints, short.joint_position, short.joint_velocity = 0, [], []
-    with pytest.raises(lm.LcmDecodeError, match="UR3 status positions: 0 values where 6"):
+    with pytest.raises(LcmDecodeError, match="UR3 status positions: 0 values where 6"):
         lm.ur3_status_values(short)
 
 
@@ -314,14 +316,14 @@ def test_repeated_commands_are_answered_again():
     heard = []
     lcm.Subscribe("UR3_STATUS", heard.append)
     # The session's hello first (a controller that states no scenario): then the lockstep.
-    lcm.Publish(lm.END_CHANNEL, lm.session_message(0, "hello", "{}").encode())
+    lcm.Publish(END_CHANNEL, lm.session_message(0, "hello", "{}").encode())
     commands = [
         (c.channel, c.encode(0, *(np.zeros(p.size) if p.size else p.model() for p in c.ports)))
-        for c in lm.COMMANDS
+        for c in COMMANDS
     ]
     for _ in range(2):
         for channel, message in commands:
-            lcm.Publish(channel + lm.PRE_SUFFIX, message.encode())
+            lcm.Publish(channel + PRE_SUFFIX, message.encode())
         lcm.HandleSubscriptions(0)
         lcm.HandleSubscriptions(0)
     assert len(heard) == 2 and heard[0] == heard[1]
@@ -528,7 +530,7 @@ def test_simulate_over_lcm_refuses_what_needs_the_station_here(tmp_path):
 def test_hardware_doc_shows_the_definitions_the_classes_are_made_from():
     doc = (Path(__file__).parents[1] / "docs" / "hardware.md").read_text()
     assert lm.lcm_definitions() in doc
-    for channel in (*lm.COMMANDS, *lm.MEASUREMENTS, lm.SIM_CONTACTS):
+    for channel in (*COMMANDS, *MEASUREMENTS, SIM_CONTACTS):
         assert f"`{channel.channel}`" in doc
 
 

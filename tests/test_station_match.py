@@ -1,6 +1,6 @@
 """The station and the controller over LCM check that they run the same scenario before the
 first step (hrc_drake.cell.link.scenario_identity, the session's hello in
-hrc_drake.cell.link.interface), and the station's hint is a command to paste."""
+hrc_drake.cell.link.lockstep), and the station's hint is a command to paste."""
 
 from __future__ import annotations
 
@@ -18,14 +18,10 @@ from pydrake.systems.framework import DiagramBuilder
 
 from hrc_drake import cli
 from hrc_drake.cell.controller.build import connect_controller
-from hrc_drake.cell.link.interface import (
-    CellStationServer,
-    LockstepTimeouts,
-    ScenarioMismatch,
-    end_station_session,
-    make_cell_station_interface,
-)
+from hrc_drake.cell.link.interface import end_station_session, make_cell_station_interface
+from hrc_drake.cell.link.lockstep import LockstepTimeouts, ScenarioMismatch
 from hrc_drake.cell.link.scenario_identity import ScenarioIdentity, mismatch, spec_digest
+from hrc_drake.cell.link.station_server import CellStationServer
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 from hrc_drake.cli.scenario_args import scenario_from_args, scenario_options
 from hrc_drake.scenario.schema import Scenario

@@ -117,7 +117,7 @@ def cmd_costs(args) -> int:
 
 def cmd_simulate(args) -> int:
     """Run a scenario through the Drake cell (headless) and record it."""
-    from hrc_drake.cell.link.interface import ScenarioMismatch, StationLinkError
+    from hrc_drake.cell.link.lockstep import ScenarioMismatch, StationLinkError
     from hrc_drake.cell_models import CellModelError
     from hrc_drake.cli.simulate import simulate_command
 

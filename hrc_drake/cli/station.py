@@ -7,7 +7,7 @@ import json
 import shlex
 import sys
 
-from hrc_drake.cell.link.interface import (
+from hrc_drake.cell.link.lockstep import (
     DEFAULT_LCM_URL,
     LockstepTimeouts,
     ScenarioMismatch,

@@ -1,3 +1,4 @@
-"""The station and the controller in two processes: LCM messages (`lcm_messages`), the two
-halves of the link (`interface`), the runs over it (`remote`) and the check that both sides
-run the same scenario (`scenario_identity`)."""
+"""The station and the controller in two processes: LCM messages (`lcm_struct`, `lcm_messages`)
+on their channels (`channels`), the lockstep both sides follow (`lockstep`), its two halves
+(`interface` the controller's, `station_server` the station's), the runs over it (`remote`) and
+the check that both sides run the same scenario (`scenario_identity`)."""

@@ -1,5 +1,5 @@
-"""The cell station's ports as LCM messages: the types, the channels, and the one conversion of
-each port value to its message and back.
+"""The cell station's ports as LCM messages: the types, and the one conversion of each port value
+to its message and back (which channel carries which: `hrc_drake.cell.link.channels`).
 
 The UR3 uses Drake's own types: `lcmt_panda_command` carries joint positions *and* velocities
 with a control-mode word (Drake's `lcmt_iiwa_command` has positions and torques only), and
@@ -10,27 +10,22 @@ lockstep co-simulation's equality needs) and carry no "grip detected" flag, and 
 carries the configuration, the tracked body or the operator's messages.
 
 Our types are written in LCM's own syntax (`DEFINITIONS`, also printed in `docs/hardware.md`) and
-turned into Python classes by `LcmStruct` at import time: no code generator. Their encoding and
-their fingerprint are those lcm-gen gives the same definitions (the hash is checked against
-every Drake type in the tests), so a driver in C++ or Java built with lcm-gen from
-`lcm_definitions()` talks to them unchanged. A message of another type or definition fails to
-decode with `LcmDecodeError`, naming both fingerprints.
+turned into Python classes by `LcmStruct` (`hrc_drake.cell.link.lcm_struct`) at import time: no
+code generator. Their encoding and their fingerprint are those lcm-gen gives the same
+definitions (the hash is checked against every Drake type in the tests), so a driver in C++ or
+Java built with lcm-gen from `lcm_definitions()` talks to them unchanged. A message of another
+type or definition fails to decode with `LcmDecodeError`, naming both fingerprints.
 """
 
 from __future__ import annotations
 
 import json
 import math
-import re
-import struct
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
-from io import BytesIO
-from typing import ClassVar
 
 import numpy as np
 from drake import lcmt_panda_command, lcmt_panda_status
 
+from hrc_drake.cell.link.lcm_struct import LcmDecodeError, parse_definitions
 from hrc_drake.cell.ports import BodySpheres, CellConfiguration, PartPlacement, PartStatus
 from hrc_drake.cell.station.contacts import Owner
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
@@ -129,223 +124,7 @@ struct lcmt_station_session {
 }
 """
 
-_PRIMITIVES = {
-    "int8_t": "b",
-    "int16_t": "h",
-    "int32_t": "i",
-    "int64_t": "q",
-    "byte": "B",
-    "float": "f",
-    "double": "d",
-    "boolean": "b",
-}
-_DEFAULTS = {"float": 0.0, "double": 0.0, "boolean": False, "string": ""}
-_MASK = (1 << 64) - 1
-_FINGERPRINTS: dict[type, bytes] = {}
-
-
-class LcmDecodeError(ValueError):
-    """Bytes that are not a message of the expected type."""
-
-
-@dataclass(frozen=True)
-class Field:
-    """A member of an LCM struct: its type (a primitive name or a struct class), its name, and
-    its dimensions (a number for a fixed size, the name of an earlier member for a variable
-    one)."""
-
-    type: str | type
-    name: str
-    dims: tuple[int | str, ...] = ()
-
-
-def _hash_update(v: int, c: int) -> int:
-    """lcm-gen's hash step on a signed 64-bit value (`c` is a C `char`)."""
-    c = (c + 128) % 256 - 128
-    v = ((v << 8) ^ (v >> 55)) + c
-    v &= _MASK
-    return v - (1 << 64) if v >> 63 else v
-
-
-def _hash_string(v: int, text: str) -> int:
-    v = _hash_update(v, len(text))
-    for byte in text.encode():
-        v = _hash_update(v, byte)
-    return v
-
-
-def struct_hash(fields: Sequence[Field]) -> int:
-    """lcm-gen's hash of a struct's members (`lcm_struct_hash`): names, primitive types and
-    dimensions; the struct's own name does not count, nor the members' struct types (their
-    own hashes are added by `_get_hash_recursive`)."""
-    v = 0x12345678
-    for f in fields:
-        v = _hash_string(v, f.name)
-        if isinstance(f.type, str):
-            v = _hash_string(v, f.type)
-        v = _hash_update(v, len(f.dims))
-        for d in f.dims:
-            v = _hash_update(v, 0 if isinstance(d, int) else 1)  # LCM_CONST, LCM_VAR
-            v = _hash_string(v, str(d))
-    return v & _MASK
-
-
-class LcmStruct:
-    """Base of our LCM types: encode/decode and the fingerprint from `FIELDS`, as lcm-gen's
-    Python code does for the same definition."""
-
-    FIELDS: ClassVar[tuple[Field, ...]] = ()
-    __slots__ = ()
-
-    def __init__(self, **values):
-        for f in self.FIELDS:
-            value = values.pop(f.name) if f.name in values else self._default(f, 0)
-            setattr(self, f.name, value)
-        if values:
-            raise TypeError(f"{type(self).__name__} has no members {sorted(values)}")
-
-    @classmethod
-    def _default(cls, f: Field, depth: int):
-        if depth < len(f.dims):
-            size = f.dims[depth]
-            n = size if isinstance(size, int) else 0
-            return [cls._default(f, depth + 1) for _ in range(n)]
-        if isinstance(f.type, type):
-            return f.type()
-        return _DEFAULTS.get(f.type, 0)
-
-    def __eq__(self, other) -> bool:
-        if type(other) is not type(self):
-            return NotImplemented
-        return all(getattr(self, f.name) == getattr(other, f.name) for f in self.FIELDS)
-
-    def __repr__(self) -> str:
-        members = ", ".join(f"{f.name}={getattr(self, f.name)!r}" for f in self.FIELDS)
-        return f"{type(self).__name__}({members})"
-
-    @classmethod
-    def _get_hash_recursive(cls, parents: list) -> int:
-        if cls in parents:
-            return 0
-        parents = [*parents, cls]
-        children = sum(f.type._get_hash_recursive(parents) for f in cls.FIELDS if _is_struct(f))
-        h = (struct_hash(cls.FIELDS) + children) & _MASK
-        return ((h << 1) & _MASK) + (h >> 63)
-
-    @classmethod
-    def _get_packed_fingerprint(cls) -> bytes:
-        if cls not in _FINGERPRINTS:  # computed once per type, as lcm-gen's code does
-            _FINGERPRINTS[cls] = struct.pack(">Q", cls._get_hash_recursive([]))
-        return _FINGERPRINTS[cls]
-
-    def encode(self) -> bytes:
-        """The message as LCM bytes (fingerprint, then the members)."""
-        buf = BytesIO()
-        buf.write(self._get_packed_fingerprint())
-        self._encode_one(buf)
-        return buf.getvalue()
-
-    def _encode_one(self, buf: BytesIO) -> None:
-        for f in self.FIELDS:
-            sizes = [d if isinstance(d, int) else getattr(self, d) for d in f.dims]
-            _encode_value(buf, f.type, sizes, getattr(self, f.name))
-
-    @classmethod
-    def decode(cls, data: bytes):
-        """The message in `data`; LcmDecodeError if it is not one of this type."""
-        buf = BytesIO(data)
-        fingerprint, expected = buf.read(8), cls._get_packed_fingerprint()
-        if fingerprint != expected:
-            raise LcmDecodeError(
-                f"not a {cls.__name__} message: fingerprint {fingerprint.hex() or 'none'}, "
-                f"{cls.__name__} has {expected.hex()}; both sides must use the same message "
-                "definitions (the same hrc_drake version)"
-            )
-        try:
-            return cls._decode_one(buf)
-        except (struct.error, UnicodeDecodeError) as err:
-            raise LcmDecodeError(f"a truncated or garbled {cls.__name__} message: {err}") from None
-
-    @classmethod
-    def _decode_one(cls, buf: BytesIO):
-        message = cls.__new__(cls)
-        for f in cls.FIELDS:
-            sizes = [d if isinstance(d, int) else getattr(message, d) for d in f.dims]
-            setattr(message, f.name, _decode_value(buf, f.type, sizes))
-        return message
-
-    @classmethod
-    def definition(cls) -> str:
-        """The struct in LCM syntax (for lcm-gen)."""
-        lines = [f"struct {cls.__name__} {{"]
-        for f in cls.FIELDS:
-            kind = f.type if isinstance(f.type, str) else f.type.__name__
-            lines.append(f"    {kind} {f.name}{''.join(f'[{d}]' for d in f.dims)};")
-        return "\n".join([*lines, "}"])
-
-
-def _is_struct(f: Field) -> bool:
-    return isinstance(f.type, type)
-
-
-def _encode_value(buf: BytesIO, kind, sizes: list[int], value) -> None:
-    if sizes:
-        items = list(value)[: sizes[0]]
-        if len(items) != sizes[0]:
-            raise ValueError(f"array of {len(items)} items where {sizes[0]} are declared")
-        if len(sizes) == 1 and kind in _PRIMITIVES:
-            buf.write(struct.pack(f">{sizes[0]}{_PRIMITIVES[kind]}", *items))
-            return
-        for item in items:
-            _encode_value(buf, kind, sizes[1:], item)
-    elif isinstance(kind, type):
-        value._encode_one(buf)
-    elif kind == "string":
-        text = value.encode("utf-8")
-        buf.write(struct.pack(">I", len(text) + 1) + text + b"\0")
-    else:
-        buf.write(struct.pack(f">{_PRIMITIVES[kind]}", value))
-
-
-def _decode_value(buf: BytesIO, kind, sizes: list[int]):
-    if sizes:
-        if len(sizes) == 1 and kind in _PRIMITIVES:
-            code = _PRIMITIVES[kind]
-            values = struct.unpack(f">{sizes[0]}{code}", buf.read(sizes[0] * struct.calcsize(code)))
-            return [bool(v) for v in values] if kind == "boolean" else list(values)
-        return [_decode_value(buf, kind, sizes[1:]) for _ in range(sizes[0])]
-    if isinstance(kind, type):
-        return kind._decode_one(buf)
-    if kind == "string":
-        (length,) = struct.unpack(">I", buf.read(4))
-        return buf.read(length)[:-1].decode("utf-8")
-    code = _PRIMITIVES[kind]
-    (value,) = struct.unpack(f">{code}", buf.read(struct.calcsize(code)))
-    return bool(value) if kind == "boolean" else value
-
-
-_MEMBER = re.compile(r"^(\w+)\s+(\w+)((?:\s*\[\s*\w+\s*\])*)$")
-
-
-def _parse_definitions(text: str) -> dict[str, type]:
-    """Our structs from LCM syntax (a member's struct type must be defined before it)."""
-    text = re.sub(r"//[^\n]*", "", text)
-    types: dict[str, type] = {}
-    for name, body in re.findall(r"struct\s+(\w+)\s*\{([^}]*)\}", text):
-        fields = []
-        for statement in filter(None, (s.strip() for s in body.split(";"))):
-            match = _MEMBER.match(" ".join(statement.split()))
-            if match is None:
-                raise ValueError(f"struct {name}: cannot read the member {statement!r}")
-            kind, member, dims = match.groups()
-            sizes = tuple(int(d) if d.isdigit() else d for d in re.findall(r"\w+", dims))
-            fields.append(Field(types.get(kind, kind), member, sizes))
-        slots = tuple(f.name for f in fields)
-        types[name] = type(name, (LcmStruct,), {"FIELDS": tuple(fields), "__slots__": slots})
-    return types
-
-
-_TYPES = _parse_definitions(DEFINITIONS)
+_TYPES = parse_definitions(DEFINITIONS, __name__)
 lcmt_rg2_command = _TYPES["lcmt_rg2_command"]
 lcmt_rg2_status = _TYPES["lcmt_rg2_status"]
 lcmt_hri_prompt = _TYPES["lcmt_hri_prompt"]
@@ -610,122 +389,3 @@ def session_message(stamp: int, kind: str, payload: str | dict = "") -> object:
     """A session message; a dict payload is sent as JSON."""
     text = payload if isinstance(payload, str) else json.dumps(payload)
     return lcmt_station_session(utime=stamp, kind=kind, text=text)
-
-
-@dataclass(frozen=True)
-class Port:
-    """A station port: a vector of `size`, or an abstract value like `model()`."""
-
-    name: str
-    size: int | None = None
-    model: Callable[[], object] | None = None
-
-
-@dataclass(frozen=True)
-class StationChannel:
-    """An LCM channel carrying station ports: `encode(utime, *values)` makes its message from
-    the ports' values, `decode(message)` gives them back (in `ports` order)."""
-
-    channel: str
-    message: type
-    ports: tuple[Port, ...]
-    encode: Callable[..., object]
-    decode: Callable[[object], tuple]
-
-    def stamp_of(self, data: bytes) -> int:
-        """The `utime` of an encoded message (its first member, after the fingerprint)."""
-        if data[:8] != self.message._get_packed_fingerprint():
-            raise LcmDecodeError(
-                f"{self.channel}: not a {self.message.__name__} message; both sides must use "
-                "the same message definitions (the same hrc_drake version)"
-            )
-        return struct.unpack(">q", data[8:16])[0]
-
-
-def _no_body() -> BodySpheres:
-    return BodySpheres(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
-
-
-COMMANDS: tuple[StationChannel, ...] = (
-    StationChannel(
-        "UR3_COMMAND",
-        lcmt_panda_command,
-        (Port("ur3.position", N_JOINTS), Port("ur3.velocity", N_JOINTS)),
-        ur3_command,
-        ur3_command_values,
-    ),
-    StationChannel(
-        "RG2_COMMAND",
-        lcmt_rg2_command,
-        (Port("rg2.opening", 1), Port("rg2.force", 1)),
-        rg2_command,
-        rg2_command_values,
-    ),
-    StationChannel(
-        "HRI_PROMPT",
-        lcmt_hri_prompt,
-        (Port("hri.prompt", model=Prompt),),
-        prompt_message,
-        prompt_value,
-    ),
-)
-"""What the controller commands (the station's inputs)."""
-
-MEASUREMENTS: tuple[StationChannel, ...] = (
-    StationChannel(
-        "UR3_STATUS",
-        lcmt_panda_status,
-        (Port("ur3.state_estimated", 2 * N_JOINTS), Port("safety.stop", 1)),
-        ur3_status,
-        ur3_status_values,
-    ),
-    StationChannel(
-        "RG2_STATUS",
-        lcmt_rg2_status,
-        (Port("rg2.state_measured", 2), Port("rg2.grip_detected", 1)),
-        rg2_status,
-        rg2_status_values,
-    ),
-    StationChannel(
-        "CELL_CONFIGURATION",
-        lcmt_cell_configuration,
-        (Port("configuration", model=CellConfiguration),),
-        configuration_message,
-        configuration_value,
-    ),
-    StationChannel(
-        "OPERATOR_BODY",
-        lcmt_operator_body,
-        (Port("operator.body", model=_no_body),),
-        body_message,
-        body_value,
-    ),
-    StationChannel(
-        "HRI_INDICATION",
-        lcmt_hri_indication,
-        (Port("hri.indication", model=Indication),),
-        indication_message,
-        indication_value,
-    ),
-)
-"""What the station measures (its outputs)."""
-
-SIM_CONTACTS = StationChannel(
-    "SIM_CONTACTS",
-    lcmt_contacts,
-    (Port("sim.contacts", model=tuple),),
-    contacts_message,
-    contacts_value,
-)
-"""Simulation only: the touching pairs, for a run's collision watch."""
-
-END_CHANNEL = "CELL_STATION_END"
-"""The controller's session messages: its "hello" (the scenario it runs), and "end"."""
-REPORT_CHANNEL = "CELL_STATION_REPORT"
-"""The station's session messages: its "hello" (the scenario it serves), and its last word, its
-"report" or the "error" that stopped it. (Each direction has its own channels: DrakeLcm keeps
-only the newest undelivered message of a channel, and a process also hears what it publishes
-itself.)"""
-PRE_SUFFIX = "_PRE"
-"""Lockstep: the commands as they stand just before the controller's update at a time (see
-`hrc_drake.cell.link.interface`) go on `<channel>_PRE`."""

@@ -18,16 +18,15 @@ import re
 from pydrake.lcm import DrakeLcm
 from pydrake.systems.framework import Diagram
 
-from hrc_drake.cell.link.interface import (
+from hrc_drake.cell.link.interface import end_station_session, make_cell_station_interface
+from hrc_drake.cell.link.lockstep import (
     DEFAULT_LCM_URL,
     LockstepTimeouts,
     StationLinkError,
-    end_station_session,
     exchange_period,
-    make_cell_station_interface,
-    serve_cell_station,
 )
 from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
+from hrc_drake.cell.link.station_server import serve_cell_station
 from hrc_drake.cell.run.loop import ClosedLoop, RunResult
 from hrc_drake.cell.run.run import controller_of, prepare_run
 from hrc_drake.cell.scenario import (

@@ -2,7 +2,7 @@
 
 `hrc-drake station` and `hrc-drake simulate --station-lcm` are started separately, each with its
 own scenario options; nothing but the lockstep joins them. Before the first step they exchange a
-`ScenarioIdentity` (`hrc_drake.cell.link.interface`, the session's "hello") and refuse to run when
+`ScenarioIdentity` (`hrc_drake.cell.link.lockstep`, the session's "hello") and refuse to run when
 the two differ: a controller of one scenario against the station of another would run to the end and
 report the controller's scenario with the station's states.
 

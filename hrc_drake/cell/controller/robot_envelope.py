@@ -1,0 +1,328 @@
+"""The controller's own kinematic model of the robot, for its separation monitor
+(`hrc_drake.cell.controller.separation`): the robot's collision shapes as convex primitives, the
+distance from points to them, and how fast the robot's points move toward them.
+
+Like a real controller, the monitor has its own kinematic model: a MultibodyPlant of the cell
+parsed from the project's models (`add_cell_models`), of which it uses the UR3, the gripper and the
+parts' shapes. At construction every collision shape of the robot, and of each part as it sits in
+the gripper (the gripper's `tcp` at the part's `grasp` frame), becomes a convex primitive in numpy
+(`RobotEnvelope`): a box, a cylinder (a disc swept along z), a capsule or a sphere, each the shape
+itself, so the distance from a point is exact; an ellipsoid or a mesh becomes its enclosing box.
+Fingers whose opening is not measured take the box they sweep over their whole travel. So the
+monitor's distance is never more than the true one.
+
+Apart from the monitor because this is geometry and kinematics, the same whatever the
+standard asks: the monitor turns these distances and speeds into ISO/TS 15066's separation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.geometry import Box, Capsule, Convex, Cylinder, Ellipsoid, Mesh, Sphere
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+from pydrake.systems.framework import DiagramBuilder
+
+from hrc_drake.cell_models import CellDesign, add_cell_models
+from hrc_drake.motion.scene import TCP
+from hrc_drake.robot_models import GRIPPER, RG2_FINGER_JOINTS, UR3, UR3_JOINTS
+
+GRASP = "grasp"  # the frame of a part where the gripper's tcp holds it (cell_models)
+_TINY = 1e-12  # keeps the divisions by a length finite where it vanishes
+_YZX, _ZXY = [1, 2, 0], [2, 0, 1]
+
+
+@dataclass(frozen=True)
+class Primitives:
+    """Convex shapes on the robot's bodies, as arrays over the m shapes.
+
+    A shape is, in its own frame C, the box |x|, |y|, |z| ≤ `half`, swept in x–y by a disc of
+    radius `disc` (a cylinder along z when the box is the segment of z), grown by `round` (a
+    capsule or a sphere). `body` indexes `RobotEnvelope.bodies` (the pose it moves with), `link`
+    the arm link whose motion it shares (`RobotEnvelope.links`; the last row is the fixed base)."""
+
+    names: tuple[str, ...]
+    body: np.ndarray
+    link: np.ndarray
+    R_BC: np.ndarray
+    p_BC: np.ndarray
+    half: np.ndarray
+    disc: np.ndarray
+    round: np.ndarray
+
+    @staticmethod
+    def join(parts: list[Primitives]) -> Primitives:
+        """One set of all the shapes of `parts`."""
+        fields = ("body", "link", "R_BC", "p_BC", "half", "disc", "round")
+        columns = {f: np.concatenate([getattr(p, f) for p in parts]) for f in fields}
+        return Primitives(tuple(n for p in parts for n in p.names), **columns)
+
+
+def primitive(shape, name: str = "") -> tuple[RigidTransform, np.ndarray, float, float]:
+    """(X_GC, half, disc, round) of a collision shape (see `Primitives`): exact for a box,
+    cylinder, capsule or sphere; the enclosing box of an ellipsoid or of a mesh's convex hull.
+    ValueError names a shape it cannot enclose."""
+    origin = RigidTransform()
+    if isinstance(shape, Box):
+        return origin, np.array([shape.width(), shape.depth(), shape.height()]) / 2, 0.0, 0.0
+    if isinstance(shape, Cylinder):
+        return origin, np.array([0.0, 0.0, shape.length() / 2]), shape.radius(), 0.0
+    if isinstance(shape, Capsule):
+        return origin, np.array([0.0, 0.0, shape.length() / 2]), 0.0, shape.radius()
+    if isinstance(shape, Sphere):
+        return origin, np.zeros(3), 0.0, shape.radius()
+    if isinstance(shape, Ellipsoid):
+        return origin, np.array([shape.a(), shape.b(), shape.c()]), 0.0, 0.0
+    if isinstance(shape, Convex | Mesh):
+        hull = shape.GetConvexHull()
+        points = np.array([hull.vertex(i) for i in range(hull.num_vertices())])
+        low, high = points.min(axis=0), points.max(axis=0)
+        return RigidTransform((low + high) / 2), (high - low) / 2, 0.0, 0.0
+    raise ValueError(
+        f"the separation monitor cannot enclose the {type(shape).__name__} {name!r}: give the "
+        "robot or the part a box, cylinder, capsule, sphere, ellipsoid or mesh collision shape"
+    )
+
+
+def _swept(half: np.ndarray, disc: float, rounding: float, axis_C: np.ndarray, travel: float):
+    """Half extents of the box that holds a shape swept ±travel/2 along `axis_C`."""
+    return half + np.array([disc, disc, 0.0]) + rounding + np.abs(axis_C) * travel / 2
+
+
+class RobotEnvelope:
+    """The controller's own model of the robot: a MultibodyPlant of the cell (from the project's
+    models and the cell design), its scratch context, and the robot's collision shapes (and each
+    part's, as held) as `Primitives`.
+
+    `pose(q, opening)` runs forward kinematics; `shapes(carrying, measured_opening)` is the set to
+    measure against. Not thread-safe: one envelope per monitor."""
+
+    def __init__(self, design: CellDesign):
+        builder = DiagramBuilder()
+        plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
+        add_cell_models(plant, design)
+        plant.Finalize()
+        self._diagram = builder.Build()  # owns the plant and the SceneGraph
+        self.plant, self.context = plant, plant.CreateDefaultContext()
+        inspector = scene_graph.model_inspector()
+        arm, gripper = plant.GetModelInstanceByName(UR3), plant.GetModelInstanceByName(GRIPPER)
+        self._arm = arm
+        self._arm_v = np.array(
+            [plant.GetJointByName(name, arm).velocity_start() for name in UR3_JOINTS]
+        )
+        self.fingers = [plant.GetJointByName(name, gripper) for name in RG2_FINGER_JOINTS]
+        self._travel = [
+            (f.position_lower_limits()[0], f.position_upper_limits()[0]) for f in self.fingers
+        ]
+        robot = [
+            plant.get_body(index)
+            for model in (arm, gripper)
+            for index in plant.GetBodyIndices(model)
+            if plant.GetCollisionGeometriesForBody(plant.get_body(index))
+        ]
+        self.links = [plant.GetJointByName(name, arm).child_body() for name in UR3_JOINTS]
+        self.bodies = list({b.index(): b for b in [*robot, *self.links]}.values())
+        self._row = {b.index(): i for i, b in enumerate(self.bodies)}
+        self._link_rows = np.array([self._row[b.index()] for b in self.links])
+        self._tcp = plant.GetFrameByName(TCP, gripper)
+        self._robot = {
+            swept: Primitives.join([self._body_shapes(inspector, body, swept) for body in robot])
+            for swept in (False, True)
+        }
+        self._parts = {
+            part.name: self._part_shapes(inspector, plant.GetModelInstanceByName(part.name))
+            for part in design.parts
+        }
+        self._sets: dict[tuple[str | None, bool], Primitives] = {}
+        self._axes, self._points = self._chain()
+
+    def _link_of(self, body) -> int:
+        """Row in `links` of the arm link whose motion `body` shares; len(links): fixed."""
+        plant, names = self.plant, set(UR3_JOINTS)
+        while body.index() != plant.world_body().index():
+            joint = next(
+                plant.get_joint(j)
+                for j in plant.GetJointIndices()
+                if plant.get_joint(j).child_body().index() == body.index()
+            )
+            if joint.name() in names and joint.model_instance() == self._arm:
+                return [b.index() for b in self.links].index(body.index())
+            body = joint.parent_body()
+        return len(self.links)
+
+    def _body_shapes(self, inspector, body, swept: bool) -> Primitives:
+        """The collision shapes of `body`; with `swept`, a finger's over its whole travel."""
+        finger = next((f for f in self.fingers if f.child_body().index() == body.index()), None)
+        rows = []
+        for gid in self.plant.GetCollisionGeometriesForBody(body):
+            name = inspector.GetName(gid)
+            X_GC, half, disc, rounding = primitive(inspector.GetShape(gid), name)
+            X_BC = inspector.GetPoseInFrame(gid) @ X_GC
+            if swept and finger is not None:
+                low, high = self._travel[self.fingers.index(finger)]
+                # The axis is in the joint's parent-side frame, parallel to its child-side one.
+                R_BM = finger.frame_on_child().GetFixedPoseInBodyFrame().rotation()
+                axis_C = (X_BC.rotation().inverse() @ R_BM) @ np.asarray(finger.translation_axis())
+                half = _swept(half, disc, rounding, axis_C, high - low)
+                disc = rounding = 0.0
+            rows.append((name, X_BC, half, disc, rounding))
+        return self._primitives(rows, self._row[body.index()], self._link_of(body))
+
+    def _part_shapes(self, inspector, model) -> Primitives:
+        """A part's collision shapes as the gripper holds it: on the body of the `tcp` frame,
+        with the tcp at the part's `grasp` frame."""
+        plant = self.plant
+        (index,) = plant.GetBodyIndices(model)
+        X_part_grasp = plant.GetFrameByName(GRASP, model).GetFixedPoseInBodyFrame()
+        X_B_part = self._tcp.GetFixedPoseInBodyFrame() @ X_part_grasp.inverse()
+        rows = []
+        for gid in plant.GetCollisionGeometriesForBody(plant.get_body(index)):
+            name = inspector.GetName(gid)
+            X_GC, half, disc, rounding = primitive(inspector.GetShape(gid), name)
+            X_BC = X_B_part @ inspector.GetPoseInFrame(gid) @ X_GC
+            rows.append((name, X_BC, half, disc, rounding))
+        body = self._tcp.body()
+        return self._primitives(rows, self._row[body.index()], self._link_of(body))
+
+    @staticmethod
+    def _primitives(rows, body: int, link: int) -> Primitives:
+        m = len(rows)
+        return Primitives(
+            names=tuple(r[0] for r in rows),
+            body=np.full(m, body, dtype=int),
+            link=np.full(m, link, dtype=int),
+            R_BC=np.array([r[1].rotation().matrix() for r in rows]).reshape(m, 3, 3),
+            p_BC=np.array([r[1].translation() for r in rows]).reshape(m, 3),
+            half=np.array([r[2] for r in rows], dtype=float).reshape(m, 3),
+            disc=np.array([r[3] for r in rows], dtype=float),
+            round=np.array([r[4] for r in rows], dtype=float),
+        )
+
+    def shapes(self, carrying: str | None, measured_opening: bool) -> Primitives:
+        """The robot's shapes (fingers as measured, or swept over their travel) and the carried
+        part's. KeyError names the parts if `carrying` is not one."""
+        key = (carrying, not measured_opening)
+        if key not in self._sets:
+            parts = [self._robot[key[1]]]
+            if carrying is not None:
+                if carrying not in self._parts:
+                    raise KeyError(f"no part {carrying!r}; the parts are {sorted(self._parts)}")
+                parts.append(self._parts[carrying])
+            self._sets[key] = Primitives.join(parts)
+        return self._sets[key]
+
+    def pose(self, q: np.ndarray, opening: float | None) -> tuple[np.ndarray, np.ndarray]:
+        """Forward kinematics at arm positions `q` (UR3_JOINTS order) and the gripper `opening`
+        (None: mid-travel): (R_WB n×3×3, p_WB n×3) of `bodies`."""
+        plant, context = self.plant, self.context
+        plant.SetPositions(context, self._arm, q)
+        for finger, (low, high) in zip(self.fingers, self._travel, strict=True):
+            each = (low + high) / 2 if opening is None else min(max(opening / 2, low), high)
+            finger.set_translation(context, each)
+        X = np.array([plant.EvalBodyPoseInWorld(context, b).GetAsMatrix34() for b in self.bodies])
+        return X[:, :, :3], X[:, :, 3]
+
+    def _chain(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each arm joint's axis and a point on it in its link's frame (UR3_JOINTS order), after
+        checking that the joints make one serial chain (each moves the previous one's link)."""
+        axes, points = [], []
+        for row, name in enumerate(UR3_JOINTS):
+            joint = self.plant.GetJointByName(name, self._arm)
+            parent = self._link_of(joint.parent_body())
+            if parent != (row - 1 if row > 0 else len(self.links)):
+                raise ValueError(f"the arm's joints are not one serial chain at {name}")
+            X_BM = joint.frame_on_child().CalcPoseInBodyFrame(self.context)
+            axes.append(X_BM.rotation() @ np.asarray(joint.revolute_axis()))
+            points.append(X_BM.translation())
+        return np.array(axes), np.array(points)
+
+    def link_velocities(self, R_WB: np.ndarray, p_WB: np.ndarray, velocities) -> np.ndarray:
+        """(k, L+1, 2, 3): for each row of arm joint `velocities` (k×6), each link's angular
+        velocity ω and the velocity v₀ of the point at the world origin moving with it (a point
+        P of the link moves at v₀ + ω × P; last row: the fixed base). Each link's spatial
+        velocity Jacobian of the serial chain at the posed bodies: joint j turns about its
+        world axis a_j through o_j, adding (a_j, o_j × a_j) q̇_j to every link from j on."""
+        R, p = R_WB[self._link_rows], p_WB[self._link_rows]
+        axis = np.einsum("lij,lj->li", R, self._axes)
+        origin = np.einsum("lij,lj->li", R, self._points) + p
+        columns = np.concatenate([axis, _cross(origin, axis)], axis=1)  # (L, 6)
+        out = np.zeros((len(velocities), len(self.links) + 1, 2, 3))
+        out[:, :-1] = np.cumsum(columns[None] * velocities[:, :, None], axis=1).reshape(
+            len(velocities), len(self.links), 2, 3
+        )
+        return out
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a × b over the last axis (np.cross costs more than the rest of a step here)."""
+    return a[..., _YZX] * b[..., _ZXY] - a[..., _ZXY] * b[..., _YZX]
+
+
+@dataclass(frozen=True)
+class Pairs:
+    """Every (shape, body sphere) pair of one step: arrays m×n (×3).
+
+    Attributes:
+        distance: from the sphere's centre to the shape [m] (negative inside).
+        witness: the shape's point nearest the centre, in world [m].
+        direction: the unit vector from the shape toward the centre, in world (zero when the
+            centre is inside the shape's core).
+        link: the row of the shape's link (`RobotEnvelope.link_velocities`), per shape (m).
+    """
+
+    distance: np.ndarray
+    witness: np.ndarray
+    direction: np.ndarray
+    link: np.ndarray
+
+
+def _norm(x: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.einsum("...i,...i->...", x, x))
+
+
+def nearest_points(shapes: Primitives, R_WB: np.ndarray, p_WB: np.ndarray, points) -> Pairs:
+    """The distance from each of `points` (n×3, world) to each of `shapes` posed by the bodies'
+    poses (R_WB, p_WB), and the nearest point on the shape (see `Primitives`)."""
+    R = R_WB[shapes.body]
+    R_WC = R @ shapes.R_BC
+    p_WC = (R @ shapes.p_BC[..., None])[..., 0] + p_WB[shapes.body]
+    p = (points[None, :, :] - p_WC[:, None, :]) @ R_WC  # each point in each shape's frame
+    half, disc, rounding = shapes.half[:, None, :], shapes.disc[:, None], shapes.round[:, None]
+    # Nearest point of the core (box, then the disc across x–y), then of the rounded shape.
+    core = np.minimum(np.maximum(p, -half), half)
+    across = p[..., :2] - core[..., :2]
+    length = _norm(across)
+    core[..., :2] += across * np.minimum(1.0, disc / np.maximum(length, _TINY))[..., None]
+    offset = p - core
+    out = _norm(offset)
+    unit = offset / np.maximum(out, _TINY)[..., None]
+    local = core + unit * np.minimum(rounding, out)[..., None]
+    # Inside the core: the depth to its nearest face (negative). A shape with a disc has no
+    # box across x–y (`primitive`), so `length` is the radial distance there.
+    excess = np.abs(p) - half
+    lateral = np.where(disc > 0.0, length - disc, np.maximum(excess[..., 0], excess[..., 1]))
+    inside = np.minimum(np.maximum(lateral, excess[..., 2]), 0.0)
+    R_CW = R_WC.transpose(0, 2, 1)
+    witness = local @ R_CW + p_WC[:, None, :]
+    return Pairs(out + inside - rounding, witness, unit @ R_CW, shapes.link)
+
+
+def speeds_toward(links: np.ndarray, pairs: Pairs) -> np.ndarray:
+    """(k, m, n): the speed of each witness point along its pair's direction, for each row of
+    link velocities (`RobotEnvelope.link_velocities`): (v_o + ω × w)·d = v_o·d + ω·(w × d)."""
+    w, d = pairs.witness, pairs.direction
+    w_x_d = w[..., _YZX] * d[..., _ZXY] - w[..., _ZXY] * d[..., _YZX]
+    omega, origin = links[:, pairs.link, 0], links[:, pairs.link, 1]
+    return np.einsum("kmj,mnj->kmn", origin, d) + np.einsum("kmj,mnj->kmn", omega, w_x_d)
+
+
+__all__ = [
+    "Pairs",
+    "Primitives",
+    "RobotEnvelope",
+    "nearest_points",
+    "primitive",
+    "speeds_toward",
+]
