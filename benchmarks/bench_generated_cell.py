@@ -29,7 +29,7 @@ from hrc_drake.cell.scenario import LEAN, load_cell_scenario, motion_options
 from hrc_drake.cell.station import make_cell_station
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.motion import MotionPlanner, check_plan
-from hrc_drake.motion.planner import check_reach
+from hrc_drake.motion.reach_check import check_reach
 from hrc_drake.resources import models_dir
 from hrc_drake.scenario.schema import Scenario
 from hrc_drake.tasks.graph import generate_states

@@ -41,8 +41,9 @@ import numpy as np
 
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.motion import MotionOptions, MotionPlanner, Plan
-from hrc_drake.motion.planner import check_reach
-from hrc_drake.motion.service import PlanRequest, WorkerPlanService
+from hrc_drake.motion.plan_request import PlanRequest
+from hrc_drake.motion.reach_check import check_reach
+from hrc_drake.motion.service import WorkerPlanService
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.spec import load_spec
 

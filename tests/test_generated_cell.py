@@ -13,7 +13,8 @@ from hrc_drake.cell.run.run import shared_planner
 from hrc_drake.cell_models import CellDesign, CellModelError, add_cell_models, check_cell_models
 from hrc_drake.cli import main
 from hrc_drake.motion.options import MotionOptions
-from hrc_drake.motion.planner import MotionPlanner, check_reach
+from hrc_drake.motion.planner import MotionPlanner
+from hrc_drake.motion.reach_check import check_reach
 from hrc_drake.motion.scene import load_cell_frames
 from hrc_drake.resources import models_dir
 from hrc_drake.tasks.spec import load_spec

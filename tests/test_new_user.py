@@ -161,7 +161,8 @@ def _with_cell(spec_text: str, cell: dict, path: Path) -> Path:
 
 def _reaches(spec_path: Path) -> bool:
     from hrc_drake.cell_models import CellDesign, CellModelError
-    from hrc_drake.motion.planner import MotionPlanner, check_reach
+    from hrc_drake.motion.planner import MotionPlanner
+    from hrc_drake.motion.reach_check import check_reach
 
     try:
         check_reach(MotionPlanner(design=CellDesign.of(load_spec(spec_path))), suggest=False)
@@ -196,7 +197,8 @@ def test_an_unreachable_assembly_is_the_same_one_line_everywhere_with_a_checked_
 
 def test_a_plate_out_of_reach_gets_a_checked_plate_layout(tmp_path):
     from hrc_drake.cell_models import CellDesign, CellModelError
-    from hrc_drake.motion.planner import MotionPlanner, check_reach
+    from hrc_drake.motion.planner import MotionPlanner
+    from hrc_drake.motion.reach_check import check_reach
 
     flange = (REPO / "models" / "assemblies" / "flange.yaml").read_text()
     far = _with_cell(

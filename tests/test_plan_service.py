@@ -24,14 +24,13 @@ from hrc_drake.motion.plan_io import (
     plan_to_data,
     trajectory_to_data,
 )
+from hrc_drake.motion.plan_request import PlanFailure, PlanRequest
+from hrc_drake.motion.plan_worker import FrameReader as _FrameReader
+from hrc_drake.motion.plan_worker import FrameWriter as _FrameWriter
 from hrc_drake.motion.service import (
     InlinePlanService,
-    PlanFailure,
-    PlanRequest,
     PlanServiceError,
     WorkerPlanService,
-    _FrameReader,
-    _FrameWriter,
     planner_function,
     shared_plan_service,
 )

@@ -20,11 +20,10 @@ from hrc_drake.motion import (
 )
 from hrc_drake.motion.ik import ORIENTATION_TOLERANCE
 from hrc_drake.motion.plan_io import plan_to_data
+from hrc_drake.motion.plan_request import PlanFailure, PlanRequest
 from hrc_drake.motion.poses import part_pose, pose_from_values, pose_values, tcp_pose
 from hrc_drake.motion.service import (
     InlinePlanService,
-    PlanFailure,
-    PlanRequest,
     planner_function,
     shared_plan_service,
 )

@@ -18,7 +18,7 @@ _HOMES = {
     "Segment": "plan",
     "Stage": "plan",
     "MotionPlanner": "planner",
-    "resolve_task": "planner",
+    "resolve_task": "task_move",
     "PlanningError": "trajectory",
     "InvalidPlanError": "validate",
     "ValidationReport": "validate",

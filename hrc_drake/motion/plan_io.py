@@ -2,7 +2,7 @@
 
 pydrake's trajectories do not all pickle (PiecewisePolynomial has no pickle support in pydrake
 1.51), so a plan is written as the exact parameters of each trajectory piece, as the planner
-built them (`_Timeline` in `planner.py`, `Retimed.trajectory()` in `trajectory.py`):
+built them (`Timeline` in `timeline.py`, `Retimed.trajectory()` in `trajectory.py`):
 
 - `PiecewisePolynomial`: the breaks and every segment's polynomial coefficients (local time,
   lowest power first), as `getPolynomial` holds them;

@@ -1,6 +1,6 @@
 """A layout the UR3 reaches, to suggest when it cannot reach the one given.
 
-`check_reach` (`hrc_drake.motion.planner`) fails on a layout whose tray or plate is too far.
+`check_reach` (`hrc_drake.motion.reach_check`) fails on a layout whose tray or plate is too far.
 Guessing the fix (a smaller `slot_pitch`, a tray position found by trial) is not a hint: here
 candidate layouts near the given one are generated, screened on plain geometry (every target
 within the UR3's reach of its base axis, the tray and the plate apart, on the table and clear of

@@ -14,220 +14,33 @@ part that did not seat.
 
 `WorkerPlanService` plans in a persistent worker process with its own `MotionPlanner` (a Python
 thread would take the interpreter lock from the control loop for tens of milliseconds at a
-time); the plans come back as plain data (`plan_io`) over a pipe the caller reads without ever
-blocking, and are rebuilt in the caller a few pieces per `poll`, within a time budget.
+time; the worker's side is `plan_worker`); the plans come back as plain data (`plan_io`) over a
+pipe the caller reads without ever blocking, and are rebuilt in the caller a few pieces per
+`poll`, within a time budget.
 `InlinePlanService` plans inside `request` with any planner function (tests use it with planners
 that misplace a part). Requests are planned in the order they were made; the planner reseeds its
 random IK seeds for each plan, so the same request gives the same plan in any process, in any
-order (same seed, same result).
+order (same seed, same result). The requests and results themselves are `plan_request`'s.
 """
 
 from __future__ import annotations
 
 import atexit
 import contextlib
-import fcntl
 import multiprocessing
-import os
-import pickle
 import select
-import signal
-import struct
-import sys
 import time
-import traceback
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator
 from typing import Protocol
 
 import numpy as np
-from pydrake.math import RigidTransform
 
 from hrc_drake.cell_models import CellDesign, CellModelError
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.plan import Plan
-from hrc_drake.motion.plan_io import plan_from_data_in_steps, plan_to_data
-from hrc_drake.motion.poses import (
-    pose_from_values,
-    pose_values,
-    quantize_joints,
-    quantize_opening,
-    quantize_pose,
-)
-from hrc_drake.tasks.tokens import UNDO
-
-PlanFunction = Callable[..., Plan]
-"""(configuration, task, last_token, layout) -> Plan: the Supervisor's planner signature. A
-request with a measured pick, start or obstacle, or a held part, calls it with the keywords of
-`PlanRequest.keywords` too (`instance`, `source_pose` as a RigidTransform, `q_start` as an array,
-`obstacle` as a RigidTransform, `held`, `start_opening`), as `MotionPlanner.plan_task` takes
-them; an ordinary request never does."""
-
-
-@dataclass(frozen=True)
-class PlanRequest:
-    """What a task plan depends on: build it with `PlanRequest.of`.
-
-    Attributes:
-        configuration: the tokens in place before the task.
-        task: the task token (`F1`, `undo`, ...).
-        last_token: the task done last (`undo` takes its part back).
-        layout: (instance, token) for each placed part, sorted, as the cell measured it; None:
-            the robot's own routine (`default_layout`).
-        instance: the part instance the task moves (None: the lowest-numbered free one);
-            required with `source_pose`.
-        source_pose: where that part lies, measured, not seated (it is not in `layout`):
-            (x, y, z, qw, qx, qy, qz) in the world, translation then
-            `RotationMatrix.ToQuaternion()`; None: its tray home.
-        start: the 6 UR3 joint positions the plan starts from; None: the planner's `q_home`.
-        obstacle: the world pose (7 values, as `source_pose`) of a temporary obstacle the cell
-            measures (`hrc_drake.obstacle_models`); None: no obstacle.
-        held: `instance` is in the gripper already, the arm at `start` (a re-target, or with
-            `undo` a swap: the part goes back to its tray home).
-        start_opening: the gripper's opening at `start` [m] (None: the pick's own opening). A
-            plan that starts with the fingers by a part keeps it until the arm is clear of the
-            cell: closing them there at once would close them on that part.
-    """
-
-    configuration: frozenset[str]
-    task: str
-    last_token: str | None = None
-    layout: tuple[tuple[str, str], ...] | None = None
-    instance: str | None = None
-    source_pose: tuple[float, ...] | None = None
-    start: tuple[float, ...] | None = None
-    obstacle: tuple[float, ...] | None = None
-    held: bool = False
-    start_opening: float | None = None
-
-    @staticmethod
-    def of(
-        configuration: Iterable[str],
-        task: str,
-        last_token: str | None = None,
-        layout: Mapping[str, str] | None = None,
-        *,
-        instance: str | None = None,
-        source_pose: Sequence[float] | RigidTransform | None = None,
-        start: Sequence[float] | None = None,
-        obstacle: Sequence[float] | RigidTransform | None = None,
-        held: bool = False,
-        start_opening: float | None = None,
-    ) -> PlanRequest:
-        """From the planner's arguments (`layout`: instance -> token, e.g. measured;
-        `source_pose` and `obstacle`: 7 values or a RigidTransform, the latter empty for none;
-        `start`: 6 joint positions; `held`: the instance is in the gripper at `start`;
-        `start_opening`: the gripper's opening there, with `start` only).
-        ValueError for a source pose without its instance, a held part without its instance
-        and start, or values of the wrong count."""
-        placed = None if layout is None else tuple(sorted(layout.items()))
-        if source_pose is not None:
-            if instance is None:
-                raise ValueError(
-                    f"task {task}: a source pose needs the part lying there (instance=)"
-                )
-            if isinstance(source_pose, RigidTransform):
-                source_pose = pose_values(source_pose)
-            source_pose = tuple(float(v) for v in source_pose)
-            quantize_pose(source_pose)  # checks the values
-        if start is not None:
-            start = tuple(float(v) for v in np.asarray(start, dtype=float).ravel())
-            quantize_joints(start)
-        if held and (instance is None or start is None):
-            raise ValueError(f"task {task}: a held part needs its instance and start")
-        if start_opening is not None:
-            # Home's opening is the plan's own; a held part's grip sets it.
-            held_or_home = start is None or held
-            start_opening = None if held_or_home else quantize_opening(start_opening)
-        if isinstance(obstacle, RigidTransform):
-            obstacle = pose_values(obstacle)
-        if obstacle is not None and len(obstacle) == 0:
-            obstacle = None
-        if obstacle is not None:
-            obstacle = tuple(float(v) for v in obstacle)
-            quantize_pose(obstacle)  # checks the values
-        return PlanRequest(
-            frozenset(configuration),
-            task,
-            last_token,
-            placed,
-            instance,
-            source_pose,
-            start,
-            obstacle,
-            bool(held),
-            start_opening,
-        )
-
-    def layout_map(self) -> dict[str, str] | None:
-        """The layout as instance -> token (the planner's argument)."""
-        return None if self.layout is None else dict(self.layout)
-
-    def keywords(self) -> dict:
-        """The planner's keyword arguments for a measured pick, start or obstacle (`instance`,
-        `source_pose` and `obstacle` as RigidTransforms, `q_start` as an array); {} for an
-        ordinary request."""
-        if self._ordinary():
-            return {}
-        keywords = {
-            "instance": self.instance,
-            "source_pose": None if self.source_pose is None else pose_from_values(self.source_pose),
-            "q_start": None if self.start is None else np.array(self.start),
-        }
-        if self.obstacle is not None:
-            keywords["obstacle"] = pose_from_values(self.obstacle)
-        if self.held:
-            keywords["held"] = True
-        if self.start_opening is not None:
-            keywords["start_opening"] = self.start_opening
-        return keywords
-
-    def _ordinary(self) -> bool:
-        return (
-            self.instance is None
-            and self.source_pose is None
-            and self.start is None
-            and self.obstacle is None
-            and not self.held
-        )
-
-    def key(self) -> tuple:
-        """Requests with equal keys get the same plan: with a measured layout, the last task
-        matters only to `undo` (as in `MotionPlanner`'s own cache key); a measured pose and
-        start count to 0.1 mm and 1e-4 (`poses.KEY_DIGITS`), as the planner rounds them."""
-        last = self.last_token if self.layout is None or self.task == UNDO else None
-        key = (self.configuration, self.task, last, self.layout)
-        if self._ordinary():
-            return key
-        source = None if self.source_pose is None else quantize_pose(self.source_pose)
-        start = None if self.start is None else quantize_joints(self.start)
-        obstacle = None if self.obstacle is None else quantize_pose(self.obstacle)
-        return (*key, self.instance, source, start, obstacle, self.held, self.start_opening)
-
-
-@dataclass(frozen=True)
-class PlanFailure:
-    """No plan for a request: `kind` is the error's class (UnreachableError, PlanningError,
-    ValueError, ...), `reason` its message (it names the task, the pose and the constraint)."""
-
-    request: PlanRequest
-    kind: str
-    reason: str
-
-    @property
-    def task(self) -> str:
-        """The task that has no plan."""
-        return self.request.task
-
-    def __str__(self) -> str:
-        request = self.request
-        if request.held and request.task == UNDO:
-            # A swap's return: the part in the gripper goes back to its tray, not an undo of
-            # the last task (which, from an empty base, there is none).
-            what = f"putting {request.instance} back in its tray"
-        else:
-            what = request.task
-        return f"no plan for {what} from {sorted(request.configuration)}: {self.reason}"
+from hrc_drake.motion.plan_io import plan_from_data_in_steps
+from hrc_drake.motion.plan_request import PlanFailure, PlanFunction, PlanRequest
+from hrc_drake.motion.plan_worker import FrameReader, main_script_hidden, serve
 
 
 class PlanServiceError(RuntimeError):
@@ -338,149 +151,6 @@ class _Rebuild:
         raise AssertionError("plan_from_data_in_steps ends with the plan")
 
 
-# Worker process: messages in (parent -> worker, `Connection.send` over a pipe):
-#   ("plan", id, PlanRequest) | ("reach",) | ("stop",)
-# and out (worker -> parent, length-prefixed pickles over a second pipe, `_FrameWriter` and
-# `_FrameReader`):
-#   ("ready", q_home, monotonic time) | ("error", kind, message) at start;
-#   ("started", id); ("plan", id, data, seconds) | ("failure", id, kind, message, seconds) |
-#   ("crash", id, traceback); ("reach", message | None).
-#
-# Why not a multiprocessing.Queue out: its feeder thread in the worker writes a message's length
-# and its body in two writes, and between them waits for the interpreter lock, which the
-# planner holds for the length of a solver call (hundreds of ms). A parent reading that message
-# blocks until then (measured: single polls of 270–380 ms). Here the worker writes each frame
-# from its one thread in one go, and the parent reads whatever bytes are there, never blocking.
-
-_HEADER = struct.Struct("<Q")
-# The results pipe's capacity (Linux F_SETPIPE_SZ; the default is 64 KiB, a plan is about
-# 30 KB): the worker blocks only when this much is unread.
-_PIPE_BYTES = 1 << 20
-
-
-class _FrameWriter:
-    """The worker's end of the results pipe: one write of length + pickle per message."""
-
-    def __init__(self, connection):
-        self._connection = connection  # keeps the descriptor open
-        self._fd = connection.fileno()
-        with contextlib.suppress(AttributeError, OSError):  # not Linux, or a lower limit
-            fcntl.fcntl(self._fd, fcntl.F_SETPIPE_SZ, _PIPE_BYTES)
-
-    def put(self, message: tuple) -> None:
-        payload = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
-        view = memoryview(_HEADER.pack(len(payload)) + payload)
-        while view:
-            view = view[os.write(self._fd, view) :]
-
-
-class _FrameReader:
-    """The parent's end of the results pipe, read without blocking."""
-
-    def __init__(self, connection):
-        self._connection = connection
-        self.fd = connection.fileno()
-        os.set_blocking(self.fd, False)
-        self._buffer = bytearray()
-        self.eof = False
-
-    def messages(self) -> list[tuple]:
-        """Every whole message that has arrived (a partial one stays for the next call)."""
-        while not self.eof:
-            try:
-                chunk = os.read(self.fd, _PIPE_BYTES)
-            except BlockingIOError:
-                break
-            if not chunk:
-                self.eof = True  # the worker has exited
-            self._buffer += chunk
-        out = []
-        while len(self._buffer) >= _HEADER.size:
-            (size,) = _HEADER.unpack_from(self._buffer)
-            end = _HEADER.size + size
-            if len(self._buffer) < end:
-                break
-            out.append(pickle.loads(self._buffer[_HEADER.size : end]))
-            del self._buffer[:end]
-        return out
-
-    def close(self) -> None:
-        self._connection.close()
-
-
-@contextlib.contextmanager
-def _main_script_hidden():
-    """While a worker is spawned, hide the caller's main script from multiprocessing: a spawned
-    child otherwise runs it again (as `__mp_main__`), and a script without an
-    `if __name__ == "__main__":` guard would start its whole run in the worker. The worker
-    needs nothing from it (its target lives in this module)."""
-    main = sys.modules.get("__main__")
-    if main is None:
-        yield
-        return
-    saved = {
-        name: main.__dict__[name] for name in ("__file__", "__spec__") if name in main.__dict__
-    }
-    main.__dict__.pop("__file__", None)
-    main.__spec__ = None
-    try:
-        yield
-    finally:
-        main.__dict__.pop("__spec__", None)
-        main.__dict__.update(saved)
-
-
-def _serve(requests, results, options: MotionOptions, design: CellDesign, nice: int) -> None:
-    """The worker's loop: one MotionPlanner (and its plan cache), requests in order."""
-    # Ctrl-C goes to the whole process group; the parent decides when the worker ends.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    if nice:
-        os.nice(nice)
-    results = _FrameWriter(results)
-    from hrc_drake.motion.planner import MotionPlanner
-
-    try:
-        planner = MotionPlanner(options, design=design)
-    except (CellModelError, RuntimeError, ValueError) as err:
-        results.put(("error", type(err).__name__, str(err)))
-        return
-    results.put(("ready", planner.q_home.tolist(), time.monotonic()))
-    # EOFError on reading or BrokenPipeError on writing: the parent is gone, and so the worker.
-    with contextlib.suppress(EOFError, BrokenPipeError):
-        while (message := requests.recv())[0] != "stop":
-            if message[0] == "plan":
-                results.put(("started", message[1]))  # the parent times each plan from here
-            results.put(_answer(planner, message))
-
-
-def _answer(planner, message: tuple) -> tuple:
-    """The worker's answer to a "reach" or "plan" message."""
-    from hrc_drake.motion.planner import check_reach
-
-    if message[0] == "reach":
-        try:
-            check_reach(planner)
-        except CellModelError as err:
-            return ("reach", str(err))
-        return ("reach", None)
-    _, ident, request = message
-    start = time.perf_counter()
-    try:
-        plan = planner.plan_task(
-            request.configuration,
-            request.task,
-            last_token=request.last_token,
-            layout=request.layout_map(),
-            **request.keywords(),
-        )
-        seconds = time.perf_counter() - start  # planning only, not the encoding
-        return ("plan", ident, plan_to_data(plan), seconds)
-    except (RuntimeError, ValueError) as err:  # UnreachableError, PlanningError, bad input
-        return ("failure", ident, type(err).__name__, str(err), time.perf_counter() - start)
-    except Exception:
-        return ("crash", ident, traceback.format_exc())
-
-
 class WorkerPlanService:
     """Plans in a persistent worker process holding its own `MotionPlanner` and plan cache.
 
@@ -520,18 +190,18 @@ class WorkerPlanService:
         receiver, self._sender = context.Pipe(duplex=False)
         results_in, results_out = context.Pipe(duplex=False)
         self._process = context.Process(
-            target=_serve,
+            target=serve,
             args=(receiver, results_out, self.options, design, nice),
             name="hrc-drake planner",
             daemon=True,
         )
         self._started_at = time.monotonic()
-        with _main_script_hidden():
+        with main_script_hidden():
             self._process.start()
         # The worker's ends: a dead worker then breaks the request pipe and ends the results.
         receiver.close()
         results_out.close()
-        self._results = _FrameReader(results_in)
+        self._results = FrameReader(results_in)
         self._closed = False
         self._q_home: np.ndarray | None = None
         self._start_error: tuple[str, str] | None = None
@@ -795,9 +465,6 @@ def _close_all() -> None:
 
 __all__ = [
     "InlinePlanService",
-    "PlanFailure",
-    "PlanFunction",
-    "PlanRequest",
     "PlanService",
     "PlanServiceError",
     "WorkerPlanService",

@@ -89,7 +89,6 @@ def free_path(
     way back starts almost at the pre-place above the tray). Where KTO fails without collision
     constraints, the straight line is taken too if it keeps the clearance.
     """
-    n = len(q_start)
     order = 4
     base_duration = float(np.max(np.abs(q_end - q_start) / limits.velocity)) * 2.0 + 0.5
     line = _joint_line(q_start, q_end, base_duration, order, options.kto_control_points)
@@ -98,8 +97,34 @@ def free_path(
         line_clear = _keeps_clearance(scene, line, options)
         if line_clear:
             return line, False
+    trajopt = _kto(q_start, q_end, limits, options, order)
+    solver = SnoptSolver()
+    result = _solve_from_line(trajopt, solver, line, base_duration, order, options)
+    if not result.is_success():
+        if line_clear is None:
+            line_clear = _keeps_clearance(scene, line, options)
+        if line_clear:
+            return line, False
+        raise PlanningError(f"KTO without collisions failed: {result.get_solution_result()}")
+    path = trajopt.ReconstructTrajectory(result)
+    target = options.clearance + options.clearance_margin
+    worst, pair = path_clearance(scene, path, options.check_samples)
+    if worst >= target:
+        return path, False
+    return _solve_with_collisions(scene, trajopt, solver, path, (worst, pair), options), True
+
+
+def _kto(
+    q_start: np.ndarray,
+    q_end: np.ndarray,
+    limits: JointLimits,
+    options: MotionOptions,
+    order: int,
+) -> KinematicTrajectoryOptimization:
+    """KTO from `q_start` to `q_end`, at rest at both, within the joint limits: shortest in
+    time and path length, no collision constraints yet."""
+    n = len(q_start)
     trajopt = KinematicTrajectoryOptimization(n, options.kto_control_points, spline_order=order)
-    prog = trajopt.get_mutable_prog()
     trajopt.AddDurationCost(1.0)
     trajopt.AddPathLengthCost(1.0)
     trajopt.AddPositionBounds(limits.lower, limits.upper)
@@ -111,7 +136,20 @@ def free_path(
     zero = np.zeros(n)
     trajopt.AddPathVelocityConstraint(zero, zero, 0.0)
     trajopt.AddPathVelocityConstraint(zero, zero, 1.0)
-    solver = SnoptSolver()
+    return trajopt
+
+
+def _solve_from_line(
+    trajopt: KinematicTrajectoryOptimization,
+    solver: SnoptSolver,
+    line: BsplineTrajectory,
+    base_duration: float,
+    order: int,
+    options: MotionOptions,
+):
+    """SNOPT's result on `trajopt` from the straight line `line` as the guess, over
+    `base_duration` and then slower or faster: the first success, else the last failure."""
+    prog = trajopt.get_mutable_prog()
     # KTO is nonconvex (duration × velocity and acceleration bounds); when SNOPT stalls from one
     # guess, a slower or faster one usually converges.
     for scale in (1.0, 2.0, 0.5, 4.0):
@@ -126,17 +164,23 @@ def free_path(
         result = solver.Solve(prog)
         if result.is_success():
             break
-    else:
-        if line_clear is None:
-            line_clear = _keeps_clearance(scene, line, options)
-        if line_clear:
-            return line, False
-        raise PlanningError(f"KTO without collisions failed: {result.get_solution_result()}")
-    path = trajopt.ReconstructTrajectory(result)
+    return result
+
+
+def _solve_with_collisions(
+    scene: PlanningScene,
+    trajopt: KinematicTrajectoryOptimization,
+    solver: SnoptSolver,
+    path: BsplineTrajectory,
+    closest: tuple[float, str],
+    options: MotionOptions,
+) -> BsplineTrajectory:
+    """`trajopt` solved again from `path` (whose `closest` distance and pair fall short of the
+    clearance plus margin) with minimum-distance constraints at `collision_samples` points,
+    then twice as many: the first path keeping the clearance. PlanningError when neither does."""
+    prog = trajopt.get_mutable_prog()
     target = options.clearance + options.clearance_margin
-    worst, pair = path_clearance(scene, path, options.check_samples)
-    if worst >= target:
-        return path, False
+    worst, pair = closest
     samples = options.collision_samples
     for _ in range(2):
         constraint = MinimumDistanceLowerBoundConstraint(
@@ -150,7 +194,7 @@ def free_path(
             path = trajopt.ReconstructTrajectory(result)
             worst, pair = path_clearance(scene, path, options.check_samples)
             if worst >= options.clearance:
-                return path, True
+                return path
         samples *= 2
     raise PlanningError(
         f"KTO with collision constraints failed ({result.get_solution_result()}); "

@@ -31,7 +31,7 @@ from hrc_drake.cell.controller.planning import PlanAsker
 from hrc_drake.cell.controller.supervisor_state import Mode, SupervisorError, SupervisorStatus
 from hrc_drake.cell.ports import CellConfiguration
 from hrc_drake.motion.plan import HOME_LEG, LIFT, Plan, Stage
-from hrc_drake.motion.service import PlanRequest
+from hrc_drake.motion.plan_request import PlanRequest
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.policy import Policy
 from hrc_drake.tasks.protocols import Commits, PredictsTasks

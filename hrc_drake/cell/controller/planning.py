@@ -9,7 +9,8 @@ from dataclasses import replace
 
 from hrc_drake.cell.controller.supervisor_state import Mode, SupervisorStatus
 from hrc_drake.cell.ports import CellConfiguration
-from hrc_drake.motion.service import PlanRequest, PlanService
+from hrc_drake.motion.plan_request import PlanRequest
+from hrc_drake.motion.service import PlanService
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.policy import Policy
 from hrc_drake.tasks.protocols import PredictsTasks

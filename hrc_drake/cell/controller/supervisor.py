@@ -89,7 +89,8 @@ from hrc_drake.cell.controller.supervisor_state import (
 from hrc_drake.cell.ports import CellConfiguration, PartStatus
 from hrc_drake.hri.messages import Prompt, PromptKind
 from hrc_drake.motion.plan import Plan
-from hrc_drake.motion.service import PlanFailure, PlanService
+from hrc_drake.motion.plan_request import PlanFailure
+from hrc_drake.motion.service import PlanService
 from hrc_drake.robot_models import UR3_JOINTS
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.policy import Policy

@@ -28,8 +28,9 @@ from pathlib import Path
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.motion import MotionOptions, MotionPlanner, Plan, PlanningError, UnreachableError
 from hrc_drake.motion.plan import LIFT
-from hrc_drake.motion.planner import check_reach, resolve_task
+from hrc_drake.motion.reach_check import check_reach
 from hrc_drake.motion.scene import Layout
+from hrc_drake.motion.task_move import resolve_task
 from hrc_drake.motion.trajectory import free_path, retime
 from hrc_drake.resources import models_dir
 from hrc_drake.tasks.bets import Bet, bet_kind

@@ -21,7 +21,8 @@ from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_opti
 from hrc_drake.cell.station.build import make_cell_station, station_scenario
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.motion.options import MotionOptions
-from hrc_drake.motion.planner import MotionPlanner, check_reach
+from hrc_drake.motion.planner import MotionPlanner
+from hrc_drake.motion.reach_check import check_reach
 from hrc_drake.motion.service import (
     InlinePlanService,
     PlanService,
