@@ -20,9 +20,9 @@ from pydrake.systems.framework import Diagram, DiagramBuilder
 from hrc_drake.cell.controller.forecast import OperatorForecast
 from hrc_drake.cell.controller.intent import MotionIntent
 from hrc_drake.cell.controller.keep_clear import KeepClearSettings
+from hrc_drake.cell.controller.robot_envelope import RobotEnvelope
 from hrc_drake.cell.controller.separation import (
     ControllerSeparationMonitor,
-    RobotEnvelope,
     SafetyLog,
     assess,
 )

@@ -306,7 +306,6 @@ class ControllerSeparationMonitor(LeafSystem):
 
 __all__ = [
     "ControllerSeparationMonitor",
-    "RobotEnvelope",  # the monitor's `envelope` (robot_envelope), imported from here by callers
     "SafetyLog",
     "SeparationReading",
     "allowed_scale",
