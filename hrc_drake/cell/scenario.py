@@ -1,9 +1,11 @@
-"""Scenarios in the cell layer: Drake's typed YAML loader, and what a scenario builds.
+"""Scenarios in the cell layer: what a scenario builds (the plant and scene graph configs, the
+motion options, the cell design).
 
-The schema is `hrc_drake.scenario.schema.Scenario` (Drake-free, shared with the task layer). Here it
-is loaded as Drake's `hardware_sim` loads its scenarios: `yaml_load_typed` on the file, then on
-the command line's `--scenario-text` with the file's values as defaults, so a misspelt key or a
-value of the wrong type fails loudly either way.
+The schema is `hrc_drake.scenario.schema.Scenario` (Drake-free, shared with the task layer). It
+is loaded as Drake's `hardware_sim` loads its scenarios: the file, then the command line's
+`--scenario-text` layered on the result, so a misspelt key or a value of the wrong type fails
+loudly either way; the loader is `hrc_drake.scenario.load`, held to Drake's `yaml_load_typed`
+by a test.
 """
 
 from __future__ import annotations
@@ -12,15 +14,13 @@ import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
 
-from pydrake.common.yaml import yaml_load_typed
 from pydrake.geometry import DefaultProximityProperties, SceneGraphConfig
 from pydrake.multibody.plant import MultibodyPlantConfig
 
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.motion.options import MotionOptions
-from hrc_drake.scenario.check import check_scenario
-from hrc_drake.scenario.load import load_scenario, scenario_file
-from hrc_drake.scenario.schema import Scenario, ScenarioError
+from hrc_drake.scenario.load import load_scenario
+from hrc_drake.scenario.schema import Scenario
 from hrc_drake.tasks.spec import AssemblySpec
 
 # `--lean`: the same models, physics and limits, with 0.5 s bolting holds (tests, previews).
@@ -32,35 +32,15 @@ def load_cell_scenario(
     name_or_path: str | Path | None = None, scenario_text: str | Sequence[str] | None = None
 ) -> Scenario:
     """A scenario file (a path, or a name under scenarios/) with YAML overrides on top (one text,
-    or several applied in turn).
+    or several applied in turn); with no file, the overrides apply to the defaults.
 
-    With no file, the overrides apply to the defaults. The text is checked first by the strict
-    loader of the task layer (`hrc_drake.scenario.load.load_scenario`), whose ScenarioError names
-    the file (or `--scenario-text`), the key and the type it expects, or the line and column of a
-    YAML syntax error; Drake's own errors are several lines of traceback about its conversion.
-    Then Drake's `yaml_load_typed` loads it, as `hardware_sim` does."""
-    checked = load_scenario(name_or_path, scenario_text)
-    scenario, source = Scenario(), "<defaults>"
-    if name_or_path is not None:
-        path = scenario_file(name_or_path)
-        source = str(path)
-        scenario = _drake_load(f"scenario {path}", filename=str(path), defaults=Scenario())
-        scenario.name = checked.name
-    texts = [scenario_text] if isinstance(scenario_text, str) else list(scenario_text or ())
-    if texts:
-        source = f"{source} with --scenario-text"
-    for text in texts:
-        scenario = _drake_load("--scenario-text", data=text, defaults=scenario)
-    return check_scenario(scenario, source)
-
-
-def _drake_load(source: str, **kwargs) -> Scenario:
-    try:
-        return yaml_load_typed(schema=Scenario, **kwargs)
-    except (RuntimeError, ValueError, TypeError) as err:
-        # Not expected after the strict check; still one line, not the converter's traceback.
-        last = str(err).strip().splitlines()[-1] if str(err).strip() else type(err).__name__
-        raise ScenarioError(f"{source}: {last}") from None
+    Loaded once and checked once, by the project's one loader
+    (`hrc_drake.scenario.load.load_scenario`): strict in the way of Drake's `yaml_load_typed`
+    (which `tests/test_scenario_loader.py` holds it to, scenario by scenario), Drake-free so
+    that the task layer reads the same files, and with errors of one line that name the file
+    (or `--scenario-text`), the key and the type it expects, or the line and column of a YAML
+    syntax error."""
+    return load_scenario(name_or_path, scenario_text)
 
 
 def plant_config(scenario: Scenario) -> MultibodyPlantConfig:

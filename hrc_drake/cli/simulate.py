@@ -8,6 +8,7 @@ import signal
 import socket
 import sys
 import threading
+from dataclasses import dataclass
 
 from hrc_drake.cell.run.run import run_scenario, scenario_policy
 from hrc_drake.cli.scenario_args import scenario_from_args, scenario_options
@@ -17,7 +18,8 @@ from hrc_drake.paths import MESHCAT_RECORDING, PNG_FILE, UsageError, check_outpu
 from hrc_drake.robot_models import UR3_JOINTS
 from hrc_drake.scenario.schema import Scenario
 from hrc_drake.tasks.decide import check_script_within_run, run_decisions
-from hrc_drake.tasks.graph import generate_states
+from hrc_drake.tasks.graph import StateSpace, generate_states
+from hrc_drake.tasks.policy import Policy
 from hrc_drake.tasks.protocols import ObservesTasks
 from hrc_drake.tasks.spec import load_spec
 from hrc_drake.tasks.tokens import UNDO
@@ -105,16 +107,27 @@ def simulate_command(args) -> int:
         return EXIT_INTERRUPTED
 
 
-def _run(args, scenario, policy, record, still, live: bool, port):
+@dataclass(frozen=True)
+class CheckedRun:
+    """What `simulate` checked before anything is simulated, handed on to the run: the
+    scenario (loaded once), the state space of its spec (built once) and the policy."""
+
+    scenario: Scenario
+    space: StateSpace
+    policy: Policy
+
+
+def _run(args, checked: CheckedRun, record, still, live: bool, port):
     """The run: in this process, or (`--station-lcm URL`) the controller here against the
     station another process serves (`hrc-drake station`)."""
+    scenario, space, policy = checked.scenario, checked.space, checked.policy
     url = getattr(args, "station_lcm", None)
     # A scenario's decider learns from every task as the cell observed it (`DeciderPolicy`).
     on_task = policy.observe if isinstance(policy, ObservesTasks) else None
     if url is None:
         return run_scenario(
             scenario, policy, record=record, progress=not live, still=still, live=live,
-            port=port, on_task=on_task,
+            port=port, on_task=on_task, space=space,
         )  # fmt: skip
     if record is not None or still is not None or live:
         raise UsageError(
@@ -127,7 +140,9 @@ def _run(args, scenario, policy, record, still, live: bool, port):
     # What the station must serve: this scenario, shown with the options that made it.
     identity = ScenarioIdentity.of(scenario, scenario_options(args))
     url = check_lcm_url(url, "--station-lcm")
-    return run_over_lcm(scenario, url, policy, progress=True, identity=identity, on_task=on_task)
+    return run_over_lcm(
+        scenario, url, policy, progress=True, identity=identity, on_task=on_task, space=space
+    )
 
 
 def _outputs(args):
@@ -191,8 +206,9 @@ def _policy(scenario: Scenario, space):
 
 
 def _checked_run(args, live: bool, still):
-    """The scenario and its policy, with the operator's script checked against the decision
-    loop before anything is simulated (an infeasible task, or steps past the end of the run)."""
+    """The scenario, its state space and its policy, with the operator's script checked
+    against the decision loop before anything is simulated (an infeasible task, or steps past
+    the end of the run)."""
     check_assembly_matches(args)
     scenario = scenario_from_args(args)
     space = generate_states(load_spec(scenario.assembly_path))
@@ -208,10 +224,10 @@ def _checked_run(args, live: bool, still):
     _check_faults_within_run(scenario, decisions)
     if still is not None:
         _check_still_time(args.still_time, scenario, decisions)
-    return scenario, policy
+    return CheckedRun(scenario, space, policy)
 
 
-def _profile(args, scenario: Scenario):
+def _profile(args, space: StateSpace):
     """`--operator-profile FILE`: the profile in FILE, or a new one when FILE does not exist
     (None without the flag); a one-line error for an unusable file or one made for another
     assembly, before anything is simulated."""
@@ -222,7 +238,7 @@ def _profile(args, scenario: Scenario):
 
     check_output_path(path, "--operator-profile", (".json",))
     try:
-        return load_or_new_profile(path, generate_states(load_spec(scenario.assembly_path)))
+        return load_or_new_profile(path, space)
     except ProfileError as err:
         raise UsageError(f"--operator-profile: {err}") from None
 
@@ -252,12 +268,13 @@ def _simulate(args) -> int:
         )
     if live and args.operator is not None:
         raise UsageError("--live with --operator: in a live run you are the operator; drop one")
-    scenario, policy = _checked_run(args, live, still)
-    profile = _profile(args, scenario)
+    checked = _checked_run(args, live, still)
+    scenario = checked.scenario
+    profile = _profile(args, checked.space)
     port = getattr(args, "port", None)
     if port is not None:
         _check_port(port)
-    result = _run(args, scenario, policy, record, still, live, port)
+    result = _run(args, checked, record, still, live, port)
     if profile is not None:
         _save_profile(args, profile, result)
     problems = []

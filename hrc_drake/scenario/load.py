@@ -1,6 +1,8 @@
-"""Scenarios read without Drake (the task layer: `react`, `table2`, evaluations): a file by
-name or path, `--scenario-text` layered on it, checked (`hrc_drake.scenario.check`). The cell
-loads the same schema with Drake's `yaml_load_typed` (`hrc_drake.cell.scenario`)."""
+"""The one loader of scenarios, without Drake (the task layer and the cell alike): a file by
+name or path, `--scenario-text` layered on the result as Drake's `hardware_sim` layers it, then
+checked once (`hrc_drake.scenario.check`). It reads a file as Drake's `yaml_load_typed` would
+(`tests/test_scenario_loader.py` compares them on every catalogue scenario), with one-line
+errors where Drake's are a converter's traceback."""
 
 import dataclasses
 import os

@@ -28,17 +28,18 @@ from hrc_drake.cell.link.lockstep import (
 from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
 from hrc_drake.cell.link.station_server import serve_cell_station
 from hrc_drake.cell.run.loop import ClosedLoop, RunResult
-from hrc_drake.cell.run.run import controller_of, prepare_run
+from hrc_drake.cell.run.run import controller_of, prepare_run, station_of_run
 from hrc_drake.cell.scenario import (
     LEAN,
     cell_design,
     load_cell_scenario,
     motion_options,
 )
-from hrc_drake.cell.station.build import CellStation, make_cell_station
+from hrc_drake.cell.station.cell_station import CellStation
 from hrc_drake.motion.planner import MotionPlanner
 from hrc_drake.paths import UsageError
 from hrc_drake.scenario.schema import Scenario
+from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.policy import Policy
 from hrc_drake.tasks.spec import load_spec
 
@@ -60,14 +61,12 @@ def check_lcm_url(url: str, flag: str) -> str:
     return url
 
 
-def station_of(scenario: Scenario) -> tuple[CellStation, Scenario]:
-    """The station a run of `scenario` simulates, and the scenario it is built from (the
-    run's: the arm starts at the motion planner's home, which a planner in this process
-    computes as the controller's does)."""
+def station_of(scenario: Scenario) -> CellStation:
+    """The station a run of `scenario` simulates: the arm starts at the motion planner's home,
+    which a planner in this process computes as the controller's does."""
     design = cell_design(scenario, load_spec(scenario.assembly_path))
     planner = MotionPlanner(motion_options(scenario), design=design)
-    setup = prepare_run(scenario, motion_planner=planner)
-    return make_cell_station(setup.scenario), setup.scenario
+    return station_of_run(prepare_run(scenario, motion_planner=planner))
 
 
 def serve_scenario(
@@ -81,8 +80,8 @@ def serve_scenario(
     than `identity` (default: `scenario`'s) is refused with `ScenarioMismatch`."""
     if identity is None:
         identity = ScenarioIdentity.of(scenario)
-    station, built = station_of(scenario)
-    period = exchange_period(built)
+    station = station_of(scenario)
+    period = exchange_period(scenario)
     return serve_cell_station(station, DrakeLcm(url), period, timeouts, identity)
 
 
@@ -139,9 +138,11 @@ def run_over_lcm(
     timeouts: LockstepTimeouts | None = None,
     on_task=None,
     identity: ScenarioIdentity | None = None,
+    space: StateSpace | None = None,
 ) -> RunResult:
     """Run the controller of `scenario` against the station served on the LCM `url` (by
-    `hrc-drake station` or `serve_scenario`), as `run_scenario` runs both in one process.
+    `hrc-drake station` or `serve_scenario`), as `run_scenario` runs both in one process
+    (`space`: the state space of its spec, when the caller built it already).
     StationLinkError if the station is not there, stops answering, or fails;
     ScenarioMismatch, before the first step, if it serves another scenario than `identity`
     (default: `scenario`'s, shown with `scenario_text`)."""
@@ -150,7 +151,7 @@ def run_over_lcm(
     if identity is None:
         shown = [] if not scenario_text else ["--scenario-text", scenario_text]
         identity = ScenarioIdentity.of(scenario, ["--lean"] if scenario_text == LEAN else shown)
-    setup = prepare_run(scenario, policy)
+    setup = prepare_run(scenario, policy, space=space)
     interface = make_cell_station_interface(
         setup.scenario, DrakeLcm(url), timeouts=timeouts, sim_contacts=True, identity=identity
     )

@@ -38,7 +38,7 @@ from hrc_drake.cell.controller.supervisor import Mode, SupervisorStatus, TaskRec
 from hrc_drake.cell.ports import CellConfiguration
 from hrc_drake.cell.run.fault_report import fault_records
 from hrc_drake.cell.run.view import frame_cell
-from hrc_drake.cell.station.build import CellStation
+from hrc_drake.cell.station.cell_station import CellStation
 from hrc_drake.cell.station.contacts import Owner, geometry_owners, owner_pairs
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.hri.faults import FaultRecord
@@ -186,6 +186,7 @@ class Setup:
     plans: PlanService
     home: np.ndarray
     wait_for_planner: bool
+    camera: bool = False  # the still camera is built (a still is asked for)
 
 
 class CellSide(Protocol):

@@ -8,7 +8,6 @@ simulates until the Supervisor is done or stops.
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 from pathlib import Path
 
@@ -18,7 +17,8 @@ from pydrake.geometry import Meshcat, MeshcatParams
 from hrc_drake.cell.controller.build import make_controller
 from hrc_drake.cell.run.loop import ClosedLoop, LocalCell, RunResult, Setup
 from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
-from hrc_drake.cell.station.build import make_cell_station, station_scenario
+from hrc_drake.cell.station.build import make_cell_station
+from hrc_drake.cell.station.cell_station import CellStation
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.planner import MotionPlanner
@@ -74,23 +74,43 @@ def _plan_service(options, design, planner, motion_planner) -> tuple[PlanService
 
 
 def prepare_run(
-    scenario: Scenario, policy=None, planner=None, motion_planner=None, live=False, still=None
+    scenario: Scenario,
+    policy=None,
+    planner=None,
+    motion_planner=None,
+    live=False,
+    still=None,
+    space: StateSpace | None = None,
 ) -> Setup:
-    """What a run of `scenario` is built from: the state space, the policy (the scenario's,
-    unless given), the cell design, the planner beside the controller and the home posture its
-    plans start from (the station's arm starts there), and whether simulated time waits for the
-    planner (not in live runs). CellModelError if the UR3 cannot reach the spec's grasps."""
-    space = generate_states(load_spec(scenario.assembly_path))
+    """What a run of `scenario` is built from: the state space (`space`, if the caller built
+    it already), the policy (the scenario's, unless given), the cell design, the planner beside
+    the controller and the home posture its plans start from (the station's arm starts there),
+    whether the still camera is built, and whether simulated time waits for the planner (not
+    in live runs). CellModelError if the UR3 cannot reach the spec's grasps."""
+    if space is None:
+        space = generate_states(load_spec(scenario.assembly_path))
     policy = policy or scenario_policy(scenario, space)
     policy.matches(space.spec)
     design = cell_design(scenario, space.spec)
     options = motion_options(scenario)
     plans, home = _plan_service(options, design, planner, motion_planner)
-    arm = dataclasses.replace(scenario.station.ur3, initial_positions=[float(x) for x in home])
-    camera = dataclasses.replace(scenario.station.camera, enabled=still is not None)
-    scenario = station_scenario(scenario, ur3=arm, camera=camera)
     wait = scenario.run.wait_for_planner and not live
-    return Setup(scenario, space, policy, design, options, plans, home, wait)
+    return Setup(scenario, space, policy, design, options, plans, home, wait, still is not None)
+
+
+def station_of_run(setup: Setup, meshcat=None, operator=None, body_script=None) -> CellStation:
+    """The simulated station of a prepared run: its design and state space handed on, the arm
+    starting at the planner's home."""
+    return make_cell_station(
+        setup.scenario,
+        meshcat,
+        design=setup.design,
+        space=setup.space,
+        arm_start=setup.home,
+        camera=setup.camera,
+        operator=operator,
+        body_script=body_script,
+    )
 
 
 def controller_of(setup: Setup, on_task=None):
@@ -120,13 +140,14 @@ def build_closed_loop(
     live: bool = False,
     on_prompt=None,
     still: tuple[float, str | Path] | None = None,
+    space: StateSpace | None = None,
 ) -> ClosedLoop:
     """The closed loop of `scenario` in this process (the arguments are `run_scenario`'s)."""
-    setup = prepare_run(scenario, policy, planner, motion_planner, live, still)
+    setup = prepare_run(scenario, policy, planner, motion_planner, live, still, space)
     bound: list[ClosedLoop] = []
     if live:
         operator = _live_operator(meshcat, setup.space, on_prompt, bound)
-    station = make_cell_station(setup.scenario, meshcat, operator=operator, body_script=body_script)
+    station = station_of_run(setup, meshcat, operator, body_script)
     bound.append(ClosedLoop(setup, LocalCell(station), controller_of(setup, on_task), still))
     return bound[0]
 
@@ -146,6 +167,7 @@ def run_scenario(
     on_task=None,
     motion_planner: MotionPlanner | None = None,
     port: int | None = None,
+    space: StateSpace | None = None,
 ) -> RunResult:
     """Run one scenario through the station and its controller until a terminal state (or a
     stop, or Ctrl-C).
@@ -161,7 +183,8 @@ def run_scenario(
     `port`; the run paces itself to the wall clock; `on_prompt` is handed to the `LiveOperator`
     (tests inject clicks from it). `on_task(record)` hears every task as the cell observed it.
     While the operator bolts, the controller plans the tasks the policy predicts next (its
-    `predicted_tasks(state)` if it has one, else its `next_task(state)`).
+    `predicted_tasks(state)` if it has one, else its `next_task(state)`). `space`: the state
+    space of the scenario's spec, when the caller built it already (it is built once).
     CellModelError (before any simulation) if the spec does not fit the cell."""
     if not isinstance(scenario, Scenario):
         scenario = load_cell_scenario(scenario, scenario_text)
@@ -177,6 +200,7 @@ def run_scenario(
         live=live,
         on_prompt=on_prompt,
         still=still,
+        space=space,
     )
     return loop.run(record, live, progress)
 
@@ -234,4 +258,5 @@ __all__ = [
     "run_scenario",
     "scenario_policy",
     "shared_planner",
+    "station_of_run",
 ]

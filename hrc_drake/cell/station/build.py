@@ -25,8 +25,7 @@ switched through the station's `Simulator` monitor (`CellStation.welds_changed`,
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -51,15 +50,16 @@ from pydrake.multibody.plant import (
 )
 from pydrake.multibody.tree import BodyIndex, PdControllerGains
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import Context, Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.framework import Context, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantValueSource, Multiplexer
 from pydrake.systems.sensors import CameraConfig, RgbdSensor
 
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.person import desk_of
-from hrc_drake.cell.ports import BodySpheres, CellConfiguration, PartStatus, placement_transform
+from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.scenario import cell_design, plant_config, scene_graph_config
 from hrc_drake.cell.station.arm_servo import GravityCompensation, servo_actuators
+from hrc_drake.cell.station.cell_station import CellStation
 from hrc_drake.cell.station.contacts import geometry_owners, owner_pairs
 from hrc_drake.cell.station.desk import DeskScript, add_bins
 from hrc_drake.cell.station.faults import FaultInjector, SilentOperator
@@ -73,237 +73,19 @@ from hrc_drake.cell.station.obstacle import (
 from hrc_drake.cell.station.operator_body import BodyScript, KnowsWhenFree, OperatorBody
 from hrc_drake.cell.station.sim_operator import SimulatedOperator
 from hrc_drake.cell.station.slot_monitor import SlotMonitor
-from hrc_drake.cell.station.welds import Bolts, Weld
+from hrc_drake.cell.station.welds import Bolts
 from hrc_drake.cell_models import CellDesign, add_cell_models
 from hrc_drake.hri.faults import check_faults
-from hrc_drake.hri.messages import Prompt
-from hrc_drake.motion.poses import IN_TRAY, CellFrames, layout_poses, part_pose
+from hrc_drake.motion.poses import IN_TRAY, CellFrames, layout_poses
 from hrc_drake.motion.scene import read_cell_frames
-from hrc_drake.obstacle_models import DEBRIS, DEBRIS_PARK, OBSTACLE
+from hrc_drake.obstacle_models import DEBRIS, OBSTACLE
 from hrc_drake.robot_models import GRIPPER, UR3, UR3_JOINTS
 from hrc_drake.scenario.schema import CameraSettings, Scenario
 from hrc_drake.tasks.decide import Operator
-from hrc_drake.tasks.graph import generate_states
+from hrc_drake.tasks.graph import StateSpace, generate_states
 from hrc_drake.tasks.spec import SpecError, load_spec
-from hrc_drake.tasks.tokens import UNDO
 
 _SAP_FAMILY = ("sap", "similar", "lagged")
-
-
-@dataclass(frozen=True)
-class CellStation:
-    """The built station (see the module docstring for its ports)."""
-
-    diagram: Diagram
-    plant: MultibodyPlant
-    scene_graph: object
-    scenario: Scenario
-    design: CellDesign
-    frames: CellFrames
-    instances: Mapping[str, object]
-    bolts: Bolts
-    meshcat: Meshcat | None = None
-    visualizer: MeshcatVisualizer | None = None
-    injector: FaultInjector | None = None  # with the robot
-    operator: SimulatedOperator | None = None
-
-    @property
-    def has_robot(self) -> bool:
-        """True if the UR3 and the gripper are in the cell."""
-        return UR3 in self.instances
-
-    def part_body(self, part: str):
-        """The body of the part instance `part` (e.g. ``oval_flange_1``)."""
-        if part not in self.design.instance_names:
-            raise KeyError(
-                f"unknown part {part!r}; the parts are {', '.join(self.design.instance_names)}"
-            )
-        return self.plant.get_body(self.plant.GetBodyIndices(self.instances[part])[0])
-
-    def configuration(self, context: Context) -> CellConfiguration:
-        """The configuration sensor's reading in the root `context`."""
-        station_context = self.diagram.GetMyContextFromRoot(context)
-        return self.diagram.GetOutputPort("configuration").Eval(station_context)
-
-    def placement_poses(self, placements: Mapping[str, str]) -> dict[str, RigidTransform]:
-        """World poses of parts seated as `placements` says (part instance -> token or tray)."""
-        return layout_poses(self.frames, placements)
-
-    def wanted_welds(self, context: Context) -> frozenset[Weld]:
-        """The bolts the simulated operator has put in (those that take), in the root
-        `context`."""
-        station_context = self.diagram.GetMyContextFromRoot(context)
-        return frozenset(self.diagram.GetOutputPort("sim.welds").Eval(station_context))
-
-    def welds_changed(self, context: Context, applied: frozenset[Weld]) -> bool:
-        """Whether the wanted welds differ from `applied` (what `apply_welds` returned last),
-        or a fault wants a part moved: a `Simulator` monitor returns ReachedTermination then,
-        and the runner applies them."""
-        return (
-            self.wanted_welds(context) != applied
-            or bool(self._pending_shifts(context))
-            or bool(self._hand_placements(context))
-        )
-
-    def apply_welds(self, context: Context) -> frozenset[Weld]:
-        """Make the wanted bolts the ones that hold in the root `context` (a new one fixes its
-        part where it sits now), and move the parts the no-seat faults slide in the fingers;
-        returns the bolts."""
-        plant_context = self.plant.GetMyMutableContextFromRoot(context)
-        self._place_by_hand(context, plant_context)
-        wanted = self.wanted_welds(context)
-        filters = self.scene_graph.collision_filter_manager(
-            self.scene_graph.GetMyMutableContextFromRoot(context)
-        )
-        self.bolts.apply(plant_context, wanted, filters)
-        for index, fault in self._pending_shifts(context):
-            self._slide_in_fingers(plant_context, fault.offset)
-            self.injector.mark_shifted(self.injector.GetMyMutableContextFromRoot(context), index)
-        return wanted
-
-    def _hand_placements(self, context: Context) -> tuple:
-        if self.operator is None:
-            return ()
-        return self.operator.placements(self.operator.GetMyContextFromRoot(context))
-
-    def _place_by_hand(self, context: Context, plant_context) -> None:
-        """Put the parts of the tasks the operator did by hand where the task puts them, at
-        rest (a placement: its seat, on the plate or where the host part measured under it
-        sits; an undo: its tray home), and tell the operator, whose bolt then takes. The
-        operator also puts back in their tray homes the other loose parts (neither seated nor
-        held nor home: what a falling part knocked out of the tray), so that the robot finds
-        them where it picks them."""
-        operator_context = (
-            self.operator.GetMyMutableContextFromRoot(context) if self.operator else None
-        )
-        for task, part, state in self._hand_placements(context):
-            self._clear_debris(context, plant_context)
-            config = self.configuration(context)
-            part = part or self._part_for(config, task, state)
-            if part:
-                body = self.part_body(part)
-                X = self.frames.homes[part] if task == UNDO else self._seat_by_hand(config, task)
-                self.plant.SetFreeBodyPose(plant_context, body, X)
-                self.plant.SetFreeBodySpatialVelocity(plant_context, body, SpatialVelocity.Zero())
-            for other, placement in config.placements:
-                if other != part and placement.status in (
-                    PartStatus.TRANSIT,
-                    PartStatus.MISPLACED,
-                ):
-                    body = self.part_body(other)
-                    self.plant.SetFreeBodyPose(plant_context, body, self.frames.homes[other])
-                    self.plant.SetFreeBodySpatialVelocity(
-                        plant_context, body, SpatialVelocity.Zero()
-                    )
-            self.operator.placed(operator_context, part)
-
-    def _clear_debris(self, context: Context, plant_context) -> None:
-        """The operator, doing a task by hand, takes any debris out of the pocket first (its
-        carriage parks at once, out of the part's way)."""
-        if self.injector is None or DEBRIS not in self.instances:
-            return
-        if self.injector.clear_debris(self.injector.GetMyMutableContextFromRoot(context)):
-            model = self.instances[DEBRIS]
-            self.plant.SetPositions(plant_context, model, list(DEBRIS_PARK))
-            self.plant.SetVelocities(plant_context, model, [0.0] * len(DEBRIS_PARK))
-
-    def _part_for(self, config: CellConfiguration, task: str, state: tuple[str, ...]) -> str:
-        """The part the operator takes for `task` when the robot chose none: for an undo the
-        one at the last token; else the lowest-numbered of the task's kind in the tray (""
-        if none)."""
-        if task == UNDO:
-            at = state[-1] if state else None
-            return next((i for i, t in config.layout().items() if t == at), "")
-        symbol = self.design.spec.placement(task).part
-        free = [
-            i
-            for i in self.design.instance_names
-            if self.design.symbol_of(i) == symbol and config.placement(i).status == PartStatus.TRAY
-        ]
-        return min(free, default="")
-
-    def _seat_by_hand(self, config: CellConfiguration, task: str) -> RigidTransform:
-        """Where a part put in place by hand for `task` sits: its seat on the plate, or its
-        row on the host part as the host measurably sits (bolted where it came to rest, not at
-        its nominal seat)."""
-        tokens = sorted(config.tokens())
-        X_nominal = part_pose(self.frames, task, tokens)
-        host = self.design.spec.placement(task).host
-        if host is None:
-            return X_nominal
-        for instance, token in config.layout().items():
-            placement = self.design.spec.placement(token)
-            if (
-                placement.part == host
-                and placement.host is None
-                and config.placement(instance).pose
-            ):
-                X_host = part_pose(self.frames, token, tokens)
-                if set(self.design.spec.placement(task).slots) <= set(placement.slots):
-                    X_measured = placement_transform(config.placement(instance))
-                    return X_measured @ X_host.inverse() @ X_nominal
-        return X_nominal
-
-    def _pending_shifts(self, context: Context) -> list:
-        if not self.scenario.faults or self.injector is None:
-            return []
-        return self.injector.pending_shifts(self.injector.GetMyContextFromRoot(context))
-
-    def _slide_in_fingers(self, plant_context, offset: float) -> None:
-        """Move the part between the fingers `offset` along the pads (across the fingers'
-        closing axis and the approach axis), as a part that slid as the fingers closed."""
-        plant, rg2 = self.plant, self.instances[GRIPPER]
-        tcp = plant.GetFrameByName("tcp", rg2).CalcPoseInWorld(plant_context)
-        fingers = [
-            plant.EvalBodyPoseInWorld(plant_context, plant.get_body(index)).translation()
-            for index in plant.GetBodyIndices(rg2)
-            if plant.get_body(index).name().endswith("finger")
-        ]
-        closing = (fingers[1] - fingers[0]) / np.linalg.norm(fingers[1] - fingers[0])
-        along = np.cross(tcp.rotation().col(2), closing)
-        held = min(
-            self.design.instance_names,
-            key=lambda name: np.linalg.norm(
-                (
-                    plant.EvalBodyPoseInWorld(plant_context, self.part_body(name))
-                    @ self.frames.grasps[name]
-                ).translation()
-                - tcp.translation()
-            ),
-        )
-        body = self.part_body(held)
-        X = plant.EvalBodyPoseInWorld(plant_context, body)
-        plant.SetFreeBodyPose(
-            plant_context, body, RigidTransform(X.rotation(), X.translation() + offset * along)
-        )
-
-    def create_default_context(self) -> Context:
-        """A root context with the bolts as wanted (none at the start), nothing on the
-        operator's interface and, with the robot, its command inputs holding the initial posture
-        and opening at the scenario's grip force (so it can be simulated alone)."""
-        context = self.diagram.CreateDefaultContext()
-        if self.has_robot:
-            self.hold_robot(context)
-        self.diagram.GetInputPort("hri.prompt").FixValue(context, Prompt())
-        self.apply_welds(context)
-        return context
-
-    def hold_robot(
-        self, context: Context, opening: float | None = None, force: float | None = None
-    ) -> None:
-        """Fix the robot command inputs of the root `context` to hold the arm where it is,
-        fingers at `opening` (default: as they are) with the grip `force` (default: the
-        scenario's `station.rg2.grip_force`)."""
-        plant_context = self.plant.GetMyContextFromRoot(context)
-        q = self.plant.GetPositions(plant_context, self.instances[UR3])
-        self.diagram.GetInputPort("ur3.position").FixValue(context, q)
-        self.diagram.GetInputPort("ur3.velocity").FixValue(context, np.zeros_like(q))
-        if opening is None:
-            opening = float(np.sum(self.plant.GetPositions(plant_context, self.instances[GRIPPER])))
-        self.diagram.GetInputPort("rg2.opening").FixValue(context, [opening])
-        if force is None:
-            force = self.scenario.station.rg2.grip_force
-        self.diagram.GetInputPort("rg2.force").FixValue(context, [force])
 
 
 def check_station_scenario(scenario: Scenario, design: CellDesign) -> None:
@@ -374,9 +156,15 @@ def _apply_friction(plant: MultibodyPlant, scene_graph, scenario: Scenario) -> N
             scene_graph.AssignRole(plant.get_source_id(), gid, props, RoleAssign.kReplace)
 
 
-def _add_plant(builder: DiagramBuilder, scenario: Scenario, design: CellDesign):
+def _add_plant(
+    builder: DiagramBuilder,
+    scenario: Scenario,
+    design: CellDesign,
+    arm_start: Sequence[float] | None = None,
+):
     """The plant with the cell's models and servos; (plant, scene graph, instances, bolts,
-    frames), parts at their initial placements."""
+    frames), parts at their initial placements and the arm at `arm_start` (default: the
+    scenario's initial positions, else the ready posture)."""
     plant, scene_graph = AddMultibodyPlant(
         plant_config(scenario), scene_graph_config(scenario), builder
     )
@@ -401,7 +189,9 @@ def _add_plant(builder: DiagramBuilder, scenario: Scenario, design: CellDesign):
         )
     if robot:
         arm = scenario.station.ur3
-        plant.SetDefaultPositions(instances[UR3], arm.initial_positions or arm.ready)
+        if arm_start is None:
+            arm_start = arm.initial_positions or arm.ready
+        plant.SetDefaultPositions(instances[UR3], [float(x) for x in arm_start])
         plant.SetDefaultPositions(
             instances[GRIPPER], [scenario.station.rg2.initial_opening / 2] * 2
         )
@@ -602,28 +392,33 @@ def make_cell_station(
     scenario: Scenario,
     meshcat: Meshcat | None = None,
     *,
+    design: CellDesign | None = None,
+    space: StateSpace | None = None,
+    arm_start: Sequence[float] | None = None,
+    camera: bool | None = None,
     operator: Operator | None = None,
     body_script: BodyScript | None = None,
 ) -> CellStation:
     """Build the station of `scenario` (see the module docstring).
 
-    `operator` answers the interface's prompts (default: the scenario's operator); `body_script`
-    moves the operator's body (default: `BoltingScript`). With `meshcat` a visualizer draws the
-    cell there (and records, if asked). CellModelError (before anything is simulated) if the
-    spec does not fit the cell; ValueError naming the scenario key for a bad station value."""
-    design = cell_design(scenario, load_spec(scenario.assembly_path))
+    What a run has already built is handed in, not built again: the cell `design` and the
+    state `space` of its spec (default: from `scenario.assembly`). `arm_start` is where the
+    arm starts [rad] (default: `station.ur3.initial_positions`, else the ready posture; a run
+    starts it at the planner's home); `camera` whether the still camera is built (default:
+    `station.camera.enabled`). `operator` answers the interface's prompts (default: the
+    scenario's operator); `body_script` moves the operator's body (default: `BoltingScript`).
+    With `meshcat` a visualizer draws the cell there (and records, if asked). CellModelError
+    (before anything is simulated) if the spec does not fit the cell; ValueError naming the
+    scenario key for a bad station value."""
+    if design is None:
+        design = cell_design(scenario, load_spec(scenario.assembly_path))
     check_station_scenario(scenario, design)
-    space = generate_states(design.spec)
+    if space is None:
+        space = generate_states(design.spec)
     operator = _station_operator(scenario, space, operator)
     builder = DiagramBuilder()
-    plant, scene_graph, instances, bolts, frames = _add_plant(builder, scenario, design)
-    injector = None
-    if scenario.station.robot:
-        _add_arm(builder, plant, instances[UR3])
-        injector = _add_faults(builder, plant, scenario, SeatPositions(frames, space))
-        add_gripper_ports(builder, plant, instances[GRIPPER], scenario.station.rg2.kp, injector)
-    else:
-        _export_disturbance(builder, plant)
+    plant, scene_graph, instances, bolts, frames = _add_plant(builder, scenario, design, arm_start)
+    injector = _add_robot(builder, plant, instances, scenario, frames, space)
     parts = {name: instances[name] for name in design.instance_names}
     if scenario.body.enabled:
         add_bins(scene_graph, design.layout)
@@ -634,12 +429,7 @@ def make_cell_station(
     _add_part_sensors(builder, plant, scene_graph, frames, parts, person)
     builder.ExportOutput(person.GetOutputPort("bolts"), "sim.welds")
     _export_sim_ports(builder, plant, scene_graph)
-    if scenario.station.camera.enabled:
-        _add_camera(builder, scene_graph, scenario.station.camera)
-    visualizer = None
-    if meshcat is not None:
-        params = MeshcatVisualizerParams(delete_on_initialization_event=False)
-        visualizer = MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat, params)
+    visualizer = _add_viewers(builder, scene_graph, scenario, camera, meshcat)
     diagram = builder.Build()
     diagram.set_name("cell_station")
     return CellStation(
@@ -656,6 +446,30 @@ def make_cell_station(
         injector,
         person,
     )
+
+
+def _add_robot(builder, plant, instances, scenario: Scenario, frames, space: StateSpace):
+    """The arm's servo and the gripper's ports, with the scenario's fault injector between
+    them and the plant (returned; None without faults); without a robot, the plant's
+    disturbance input exported instead."""
+    if not scenario.station.robot:
+        _export_disturbance(builder, plant)
+        return None
+    _add_arm(builder, plant, instances[UR3])
+    injector = _add_faults(builder, plant, scenario, SeatPositions(frames, space))
+    add_gripper_ports(builder, plant, instances[GRIPPER], scenario.station.rg2.kp, injector)
+    return injector
+
+
+def _add_viewers(builder, scene_graph, scenario: Scenario, camera: bool | None, meshcat):
+    """The still camera (when `camera`, default the scenario's `station.camera.enabled`) and,
+    with `meshcat`, a visualizer drawing the cell there (returned; else None)."""
+    if scenario.station.camera.enabled if camera is None else camera:
+        _add_camera(builder, scene_graph, scenario.station.camera)
+    if meshcat is None:
+        return None
+    params = MeshcatVisualizerParams(delete_on_initialization_event=False)
+    return MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat, params)
 
 
 def _station_operator(scenario: Scenario, space, operator: Operator | None) -> Operator:
@@ -698,7 +512,6 @@ def station_scenario(scenario: Scenario, **station) -> Scenario:
 
 
 __all__ = [
-    "CellStation",
     "check_station_scenario",
     "make_cell_station",
     "simulate_station",
