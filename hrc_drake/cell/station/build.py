@@ -82,9 +82,10 @@ from hrc_drake.motion.scene import read_cell_frames
 from hrc_drake.obstacle_models import DEBRIS, DEBRIS_PARK, OBSTACLE
 from hrc_drake.robot_models import GRIPPER, UR3, UR3_JOINTS
 from hrc_drake.scenario.schema import CameraSettings, Scenario
+from hrc_drake.tasks.assembly import SpecError
 from hrc_drake.tasks.decide import Operator
 from hrc_drake.tasks.graph import generate_states
-from hrc_drake.tasks.spec import SpecError, load_spec
+from hrc_drake.tasks.spec import load_spec
 from hrc_drake.tasks.tokens import UNDO
 
 _SAP_FAMILY = ("sap", "similar", "lagged")
