@@ -32,7 +32,9 @@ from bench_interaction import MISTAKE_P, expected_seconds, oracle_decider, play
 from generated import generated_spec
 
 from hrc_drake.atomic import atomic_write_text
-from hrc_drake.evaluate import Setup, evaluate, plot_decider_means, simulate_run
+from hrc_drake.evaluate import evaluate, simulate_run
+from hrc_drake.evaluation_report import plot_decider_means
+from hrc_drake.evaluation_runs import Setup
 from hrc_drake.hri.populations import make_operator_model
 from hrc_drake.resources import models_dir
 from hrc_drake.tasks.costs import (
@@ -41,9 +43,10 @@ from hrc_drake.tasks.costs import (
     task_edges,
     uniform_bets,
 )
-from hrc_drake.tasks.deciders import DECIDERS, MpcDecider, make_decider
+from hrc_drake.tasks.deciders import DECIDERS, make_decider
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.interaction import make_interaction
+from hrc_drake.tasks.mpc import MpcDecider
 from hrc_drake.tasks.spec import load_spec
 from hrc_drake.tasks.tokens import UNDO
 
@@ -55,7 +58,7 @@ PLOT = Path(__file__).parent.parent / "docs" / "evaluation.png"
 def plot_means(table: dict, path: Path) -> None:
     """Mean and p95 simulated seconds per population, every decider (the paper's agent, the
     exact unit-cost policy and ours), on linear axes fitted to each population
-    (`hrc_drake.evaluate.plot_decider_means`)."""
+    (`hrc_drake.evaluation_report.plot_decider_means`)."""
     plot_decider_means(
         table,
         list(DECIDERS),

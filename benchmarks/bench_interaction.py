@@ -30,7 +30,9 @@ from pathlib import Path
 import numpy as np
 
 from hrc_drake.atomic import atomic_write_text
-from hrc_drake.evaluate import Setup, evaluate, run_seed, simulate_run, summarise
+from hrc_drake.evaluate import evaluate, simulate_run
+from hrc_drake.evaluation_report import summarise
+from hrc_drake.evaluation_runs import Setup, run_seed
 from hrc_drake.hri.populations import default_habit, make_operator_model
 from hrc_drake.resources import models_dir
 from hrc_drake.tasks.deciders import TimeDecider, make_decider, outcome_probabilities

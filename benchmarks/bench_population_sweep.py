@@ -26,7 +26,8 @@ from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.run.costs import default_cost_table
 from hrc_drake.cell.run.evaluate import CellOptions
 from hrc_drake.cell.scenario import LEAN
-from hrc_drake.evaluate import Setup, evaluate
+from hrc_drake.evaluate import evaluate
+from hrc_drake.evaluation_runs import Setup
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.interaction import make_interaction
 from hrc_drake.tasks.spec import load_spec

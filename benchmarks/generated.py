@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from hrc_drake.tasks.spec import AssemblySpec, parse_spec
+from hrc_drake.tasks.assembly import AssemblySpec
+from hrc_drake.tasks.spec import parse_spec
 
 
 def generated_spec(slots: int, ovals: int, squares: int = 1) -> AssemblySpec:

@@ -37,6 +37,10 @@ Runs spread over local processes (``workers``) or, with ``ray``, over a Ray clus
 extra ``hrc_drake[ray]``): each worker builds its own decider (and, at cell level, its own
 diagram per run), and results are gathered by run index, so the report is the same whichever
 way it runs (but for the ``wall_*`` figures).
+
+Here are the run loop (`simulate_run`) and the workers that play the runs; what they pass on
+(`Setup`, `CellRuns`, `RunResult`, `run_seed`) is `hrc_drake.evaluation_runs`, and the report
+of the runs (`summarise`) and its plots are `hrc_drake.evaluation_report`.
 """
 
 from __future__ import annotations
@@ -44,12 +48,13 @@ from __future__ import annotations
 import signal
 import threading
 import time
-from dataclasses import dataclass, field, replace
-from pathlib import Path
-from typing import Any, Protocol
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
+from hrc_drake.evaluation_report import summarise
+from hrc_drake.evaluation_runs import RunResult, Setup, run_seed
 from hrc_drake.hri.populations import make_operator_model
 from hrc_drake.paths import UsageError
 from hrc_drake.tasks.costs import CostTable, operator_seconds
@@ -60,7 +65,6 @@ from hrc_drake.tasks.interaction import (
     InteractionCosts,
     delay_generator,
 )
-from hrc_drake.tasks.operator_model import OnlineOperatorModel
 from hrc_drake.tasks.protocols import Commits, HasOperatorModel, TiresAlongTheRun
 from hrc_drake.tasks.tokens import UNDO
 
@@ -72,47 +76,6 @@ PLANNING_SECONDS = 0.21
 # likely first, at most this many per boundary (each plan takes ~0.2 s of the ~5 s of bolting).
 PREDICT_PROBABILITY = 0.1
 PREDICT_AT_MOST = 3
-
-
-@dataclass(frozen=True)
-class RunResult:
-    """One run: whether it finished, its simulated seconds, tasks, undos and deviations, the
-    robot's idle seconds and whether the plan was ready, per boundary; at cell level also the
-    run's error and its robot collisions. The interaction: boundaries where the robot started on
-    its prediction (`commits`), re-targeted and swapped; the indication delays drawn
-    (`indication_delay`, summed) and the seconds the robot stood waiting for an indication
-    (`indication_wait`: the whole delay when it waited, the rest of it when a right bet reached
-    the seat first)."""
-
-    completed: bool
-    seconds: float
-    tasks: int
-    undos: int
-    deviations: int
-    idle: tuple[float, ...] = ()
-    plan_ready: tuple[bool, ...] = ()
-    error: str | None = None
-    collisions: int = 0
-    commits: int = 0
-    retargets: int = 0
-    swaps: int = 0
-    indication_delay: float = 0.0
-    indication_wait: float = 0.0
-    wall_idle: tuple[float, ...] = ()  # cell level: the idle waits in wall-clock seconds
-    states: tuple[str, ...] = ()
-    """Cell only: the states the run went through (their names)."""
-    violations: int = 0
-    """Cell only: separation violations (ISO/TS 15066 S_p; 0 without the operator's body)."""
-    handovers: int = 0
-    """Cell only: tasks the robot handed over and the operator did by hand."""
-    capped: bool = False
-    """Ended by the run's own task cap (not terminal, no failure: an operator who keeps undoing
-    can outlast any cap)."""
-
-
-def run_seed(seed: int, run: int) -> int:
-    """The operator's seed of run `run` of an evaluation seeded `seed`."""
-    return int(np.random.SeedSequence([seed, run]).generate_state(1)[0])
 
 
 def predicted_tasks(decider, state: tuple[str, ...], proposal: str) -> list[str]:
@@ -223,48 +186,6 @@ def _interaction(tally: _Tally, timeline, state, committed, performed, delays) -
         tally.wait += step.delay
     elif not (step.retargeted or step.swapped):
         tally.wait += step.seconds  # a right bet waits only for the rest of the delay
-
-
-class CellRuns(Protocol):
-    """What plays runs through the physical cell (picklable: it travels to every worker)."""
-
-    def prepare(self, space: StateSpace) -> Any:
-        """What every run of a worker shares (the scenario); errors here are the user's input."""
-
-    def check(self, operator, model_name: str) -> None:
-        """UsageError for an operator model the cell cannot play."""
-
-    def play(self, prepared: Any, setup: Setup, decider, run: int) -> RunResult:
-        """Run `run` of the evaluation `setup`; the decider is not reset."""
-
-    def replay(self, setup: Setup, run: int) -> str | None:
-        """The command that plays run `run` alone (None: it cannot be played alone)."""
-
-    def playing(self, mode: str) -> CellRuns:
-        """The same cell playing the interaction `mode` (`anticipate`, `wait`)."""
-
-    def describe(self, space: StateSpace) -> dict[str, Any]:
-        """The report's keys naming what ran (the scenario, its overrides)."""
-
-
-@dataclass(frozen=True)
-class Setup:
-    """What every worker needs to play runs (picklable)."""
-
-    space: StateSpace
-    costs: CostTable
-    decider: str
-    operator_model: str
-    params: dict[str, Any]
-    seed: int
-    interaction: Interaction = field(default_factory=Interaction)
-    keep_model: bool = False
-    """One operator, many assemblies: the decider keeps its operator model across the runs
-    (`start_run` instead of `reset`), so the runs follow each other in one process."""
-    model: OnlineOperatorModel | None = None
-    """An operator profile's model for `mpc` to start from (None: a fresh one)."""
-    cell: CellRuns | None = None
-    """None: task level; else runs through the cell (`hrc_drake.cell.run.evaluate.CellOptions`)."""
 
 
 _WORKER: dict[str, Any] = {}
@@ -443,6 +364,35 @@ def evaluate(
     """Play `runs` runs and summarise them (see `summarise`): in this process (`workers` 1),
     over `workers` local processes, or with `ray` on a Ray cluster (`ray_address`; None: a
     local one) over `workers` actors (None: one per CPU of the cluster)."""
+    setup = _checked_setup(setup, runs, workers, ray)
+    start = time.perf_counter()
+    results: list[RunResult | None] = [None] * runs
+    if ray:
+        results, workers, interrupted = _run_ray(setup, runs, workers, ray_address, progress)
+        backend = "ray"
+    elif workers in (None, 1):
+        workers, backend = 1, "serial"
+        interrupted = _run_serial(setup, runs, results, progress)
+    else:
+        backend = "processes"
+        interrupted = _run_pool(setup, runs, workers, results, progress)
+    wall = time.perf_counter() - start
+    indices = [i for i, r in enumerate(results) if r is not None]
+    report = summarise(setup, [results[i] for i in indices], indices)
+    # Ctrl-C: the report is of the runs done (`runs`), out of those asked for.
+    report["interrupted"] = interrupted
+    report["runs_requested"] = runs
+    report["wall_seconds"] = round(wall, 3)
+    report["wall_runs_per_second"] = round(len(indices) / wall, 3) if wall > 0 else None
+    report["workers"] = workers
+    report["backend"] = backend
+    return report
+
+
+def _checked_setup(setup: Setup, runs: int, workers: int | None, ray: bool) -> Setup:
+    """The setup the runs play (at cell level, the cell playing the evaluation's interaction),
+    once checked in this process: UsageError for the runs and workers asked for, and whatever
+    a bad decider, operator model, parameter, cost table or cell raises, before any run."""
     if runs < 1:
         raise UsageError(f"--runs {runs}: give at least 1 run")
     if workers is not None and workers < 1:
@@ -463,39 +413,25 @@ def evaluate(
     if setup.cell is not None:
         setup.cell.check(operator, setup.operator_model)
         setup.cell.prepare(setup.space)
-    start = time.perf_counter()
-    results: list[RunResult | None] = [None] * runs
+    return setup
+
+
+def _run_serial(setup: Setup, runs: int, results: list, progress) -> bool:
+    """Play the runs one after the other in this process into `results` (by run index); True
+    if Ctrl-C stopped them first."""
+    _prepare(setup)
     interrupted = False
-    if ray:
-        results, workers, interrupted = _run_ray(setup, runs, workers, ray_address, progress)
-        backend = "ray"
-    elif workers in (None, 1):
-        workers, backend = 1, "serial"
-        _prepare(setup)
-        with _CtrlC() as ctrl_c:
-            try:
-                for i in range(runs):
-                    results[i] = _play(i)
-                    if progress is not None:
-                        progress(i + 1, runs)
-                    if ctrl_c.pressed:
-                        raise KeyboardInterrupt
-            except KeyboardInterrupt:
-                interrupted = True
-    else:
-        backend = "processes"
-        interrupted = _run_pool(setup, runs, workers, results, progress)
-    wall = time.perf_counter() - start
-    indices = [i for i, r in enumerate(results) if r is not None]
-    report = summarise(setup, [results[i] for i in indices], indices)
-    # Ctrl-C: the report is of the runs done (`runs`), out of those asked for.
-    report["interrupted"] = interrupted
-    report["runs_requested"] = runs
-    report["wall_seconds"] = round(wall, 3)
-    report["wall_runs_per_second"] = round(len(indices) / wall, 3) if wall > 0 else None
-    report["workers"] = workers
-    report["backend"] = backend
-    return report
+    with _CtrlC() as ctrl_c:
+        try:
+            for i in range(runs):
+                results[i] = _play(i)
+                if progress is not None:
+                    progress(i + 1, runs)
+                if ctrl_c.pressed:
+                    raise KeyboardInterrupt
+        except KeyboardInterrupt:
+            interrupted = True
+    return interrupted
 
 
 def _run_pool(setup: Setup, runs: int, workers: int, results: list, progress) -> bool:
@@ -526,185 +462,3 @@ def _run_pool(setup: Setup, runs: int, workers: int, results: list, progress) ->
         pool.terminate()
         pool.join()
     return False
-
-
-def summarise(
-    setup: Setup, results: list[RunResult], runs: list[int] | None = None
-) -> dict[str, Any]:
-    """The JSON report of a list of runs; `runs` are their indices in the evaluation (default
-    0, 1, ...: every run, in order), which name the failing ones at cell level."""
-    runs = list(range(len(results))) if runs is None else runs
-    done = [r for r in results if r.completed]
-    times = np.array([r.seconds for r in done])
-    idle = [x for r in results for x in r.idle]
-    ready = [x for r in results for x in r.plan_ready]
-
-    def fig(x):
-        return None if x is None else round(float(x), 3)
-
-    def mean(values):
-        # None, not NaN, when Ctrl-C came before any run finished.
-        return fig(np.mean(values)) if values else None
-
-    boundaries = sum(r.tasks for r in results)
-    interaction = setup.interaction
-    report = {
-        "decider": setup.decider,
-        "operator_model": setup.operator_model,
-        "params": dict(setup.params),
-        "assembly": setup.space.spec.name,
-        "runs": len(results),
-        "completed": len(done),
-        "completion_rate": len(done) / len(results) if results else None,
-        # Not terminal, ended by the run's own task cap with that reason (not a failure).
-        "capped": sum(r.capped for r in results),
-        "mean_time": fig(times.mean() if len(done) else None),
-        "p95_time": fig(np.percentile(times, 95) if len(done) else None),
-        "worst_time": fig(times.max() if len(done) else None),
-        "mean_tasks": mean([r.tasks for r in results]),
-        "mean_undos": mean([r.undos for r in results]),
-        "mean_deviations": mean([r.deviations for r in results]),
-        "mean_idle": round(float(np.mean(idle)), 4) if idle else 0.0,
-        "p95_idle": round(float(np.percentile(idle, 95)), 4) if idle else 0.0,
-        "plan_ready_rate": round(float(np.mean(ready)), 4) if ready else None,
-        "interaction": interaction.mode,
-        "interface": interaction.interface,
-        "indication_delay": interaction.delay.to_json(),
-        "commit_rate": round(sum(r.commits for r in results) / boundaries, 4)
-        if boundaries
-        else 0.0,
-        "mean_retargets": mean([r.retargets for r in results]),
-        "mean_swaps": mean([r.swaps for r in results]),
-        "mean_indication_delay": mean([r.indication_delay for r in results]),
-        "mean_indication_wait": mean([r.indication_wait for r in results]),
-        "keep_model": setup.keep_model,
-        "seed": setup.seed,
-        "level": "task" if setup.cell is None else "cell",
-        "times": [round(r.seconds, 3) for r in done],
-    }
-    if setup.cell is not None:
-        errors = sorted({r.error for r in results if r.error and not (r.completed or r.capped)})
-        wall_idle = [x for r in results for x in r.wall_idle]
-        report.update(
-            {
-                # How long the arm stood still for an indication the cell does not measure.
-                "mean_indication_wait": None,
-                "collisions": int(sum(r.collisions for r in results)),
-                # Tasks the robot could not do and the operator did by hand (the runs went on).
-                "handovers": int(sum(r.handovers for r in results)),
-                "runs_with_handovers": int(sum(r.handovers > 0 for r in results)),
-                "wall_mean_idle": round(float(np.mean(wall_idle)), 4) if wall_idle else 0.0,
-                **setup.cell.describe(setup.space),
-                "errors": errors[:5],
-                "failures": failures(setup, results, runs),
-            }
-        )
-    return report
-
-
-def stop_reason(result: RunResult) -> str:
-    """Why a cell run failed, in one line: its error, else what kept it from passing."""
-    if result.error:
-        return result.error
-    if not result.completed:
-        last = result.states[-1] if result.states else "?"
-        return f"ended in state {last}, not terminal"
-    problems = []
-    if result.collisions:
-        problems.append(f"{result.collisions} robot collision(s)")
-    if result.violations:
-        problems.append(f"{result.violations} separation violation(s)")
-    return ", ".join(problems)
-
-
-def failures(setup: Setup, results: list[RunResult], runs: list[int]) -> list[dict[str, Any]]:
-    """The cell runs that did not complete or had robot collisions or separation violations,
-    each with what replays it alone (`CellRuns.replay`): its index, the operator's seed, model
-    and parameters, the stop reason, the states it went through and the command."""
-    out = []
-    for run, r in zip(runs, results, strict=True):
-        if (r.completed or r.capped) and not r.collisions and not r.violations:
-            continue
-        out.append(
-            {
-                "run": run,
-                "seed": run_seed(setup.seed, run),
-                "operator_model": setup.operator_model,
-                "params": dict(setup.params),
-                "completed": r.completed,
-                "stop": stop_reason(r),
-                "states": list(r.states),
-                "collisions": r.collisions,
-                "separation_violations": r.violations,
-                "replay": setup.cell.replay(setup, run),
-            }
-        )
-    return out
-
-
-def plot_times(report: dict[str, Any], path: Path) -> None:
-    """Histogram of the completed runs' assembly times (``report["times"]``)."""
-    from hrc_drake.tasks.plots import plt, save_figure
-
-    fig, ax = plt.subplots(figsize=(6, 3.5))
-    ax.hist(report["times"], bins=30, color="tab:blue")
-    ax.set_xlabel("assembly time [s] (simulated)")
-    ax.set_ylabel("runs")
-    ax.set_title(
-        f"{report['decider']} vs {report['operator_model']}: {report['completed']}/"
-        f"{report['runs']} completed"
-    )
-    save_figure(fig, path)
-
-
-def plot_decider_means(
-    reports: dict[tuple[str, str], dict[str, Any]],
-    deciders: list[str],
-    models: list[str],
-    path: Path,
-    title: str,
-) -> None:
-    """Mean and p95 assembly time of each decider, one panel per operator model (columns) and
-    figure (rows: mean, p95), on linear axes fitted to each panel: the deciders differ by
-    fractions of a second within a population and by tens of seconds across populations, so a
-    shared axis (or a log one) would hide the differences that matter. Every value is printed
-    beside its dot. `reports[decider, model]` is a `summarise` report."""
-    from matplotlib.ticker import MaxNLocator
-
-    from hrc_drake.tasks.plots import plt, save_figure
-
-    rows = (("mean_time", "mean [s]"), ("p95_time", "p95 [s]"))
-    fig, axes = plt.subplots(
-        len(rows), len(models), figsize=(2.3 * len(models), 1.2 + 0.5 * len(deciders) * 2)
-    )
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    y = np.arange(len(deciders))[::-1]
-    for r, (key, label) in enumerate(rows):
-        for c, model in enumerate(models):
-            ax = axes[r][c]
-            values = [reports[d, model][key] for d in deciders]
-            ax.scatter(values, y, c=[colours[k % len(colours)] for k in range(len(deciders))])
-            low, high = min(values), max(values)
-            pad = max(0.15 * (high - low), 0.02 * high, 0.05)
-            ax.set_xlim(low - pad, high + 3 * pad)
-            for value, yy in zip(values, y, strict=True):
-                ax.annotate(
-                    f"{value:.2f}",
-                    (value, yy),
-                    xytext=(4, 0),
-                    textcoords="offset points",
-                    va="center",
-                    fontsize=7,
-                )
-            ax.set_ylim(-0.6, len(deciders) - 0.4)
-            ax.set_yticks(y, deciders if c == 0 else [""] * len(deciders))
-            ax.xaxis.set_major_locator(MaxNLocator(4))
-            ax.tick_params(axis="x", labelsize=7)
-            ax.grid(axis="x", alpha=0.3)
-            if r == 0:
-                ax.set_title(model, fontsize=9)
-            if c == 0:
-                ax.set_ylabel(label)
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    save_figure(fig, path, dpi=110)

@@ -19,7 +19,7 @@ from hrc_drake.cell.scenario import load_cell_scenario, plant_config, scene_grap
 from hrc_drake.cell.station import make_cell_station, simulate_station, station_scenario
 from hrc_drake.cell.station.sim_operator import bolt_weld
 from hrc_drake.cell.station.welds import Weld
-from hrc_drake.cell_models import PLATE, CellDesign, CellModelError, add_cell_models
+from hrc_drake.cell_models import CellDesign, CellModelError, add_cell_models
 from hrc_drake.hri.messages import Indication
 from hrc_drake.motion.poses import default_layout
 from hrc_drake.resources import models_dir
@@ -27,6 +27,7 @@ from hrc_drake.robot_models import add_robot, make_parser
 from hrc_drake.scenario.schema import Scenario, ScenarioError
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.spec import load_spec
+from hrc_drake.workpiece_sdf import PLATE
 
 PARTS = ("oval_flange_1", "oval_flange_2", "square_flange")
 SETTLE = 0.5

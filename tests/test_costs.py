@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hrc_drake.tasks.assembly import DEFAULT_BOLT_TIME, SpecError
 from hrc_drake.tasks.costs import (
     CostTable,
     CostTableError,
@@ -22,7 +23,7 @@ from hrc_drake.tasks.learn import FullSchedule, train
 from hrc_drake.tasks.mdp import MdpConfig, Rewards, build_mdp
 from hrc_drake.tasks.policy import policy_from_choices
 from hrc_drake.tasks.solve import exact_policy, timed_config
-from hrc_drake.tasks.spec import DEFAULT_BOLT_TIME, SpecError, parse_spec
+from hrc_drake.tasks.spec import parse_spec
 
 # Robot time of every task edge of the flange case [s], home to home without a bolting hold:
 # benchmarks/reports/motion.md ("motion" column plus 1 s of gripper), by Table 1 state number.

@@ -11,8 +11,8 @@ from hrc_drake.evaluate import simulate_run
 from hrc_drake.hri.populations import make_operator_model
 from hrc_drake.resources import models_dir
 from hrc_drake.tasks.costs import operator_seconds, table_from_seconds, task_edges, uniform_bets
-from hrc_drake.tasks.deciders import MpcDecider, subtree_levels
 from hrc_drake.tasks.graph import StateKind, generate_states
+from hrc_drake.tasks.mpc import MpcDecider, subtree_levels
 from hrc_drake.tasks.spec import load_spec, parse_spec
 from hrc_drake.tasks.tokens import UNDO
 

@@ -10,7 +10,8 @@ import json
 import pytest
 
 from hrc_drake.cli import main
-from hrc_drake.evaluate import PLANNING_SECONDS, Setup, evaluate, simulate_run
+from hrc_drake.evaluate import PLANNING_SECONDS, evaluate, simulate_run
+from hrc_drake.evaluation_runs import Setup
 from hrc_drake.hri.populations import (
     OPERATOR_MODELS,
     OperatorModel,
@@ -20,7 +21,8 @@ from hrc_drake.hri.populations import (
 from hrc_drake.paths import UsageError
 from hrc_drake.resources import models_dir
 from hrc_drake.tasks.costs import save_cost_table
-from hrc_drake.tasks.deciders import MpcDecider, make_decider
+from hrc_drake.tasks.deciders import make_decider
+from hrc_drake.tasks.mpc import MpcDecider
 from hrc_drake.tasks.operator_model import OnlineOperatorModel
 from hrc_drake.tasks.tokens import UNDO
 

@@ -17,7 +17,9 @@ import pytest
 from hrc_drake.cell.run.evaluate import CellOptions, DeciderPolicy
 from hrc_drake.cell.scenario import LEAN
 from hrc_drake.cli import main
-from hrc_drake.evaluate import Setup, _play, _prepare, evaluate, summarise
+from hrc_drake.evaluate import _play, _prepare, evaluate
+from hrc_drake.evaluation_report import summarise
+from hrc_drake.evaluation_runs import Setup
 from hrc_drake.paths import UsageError
 from hrc_drake.resources import models_dir
 from hrc_drake.tasks.deciders import make_decider
@@ -174,7 +176,7 @@ def test_a_failing_cell_run_is_listed_and_replays_alone(tmp_path, toy_costs, cap
     from simulate_process import hrc_drake_command
 
     from hrc_drake.cli.evaluate import print_report
-    from hrc_drake.evaluate import run_seed
+    from hrc_drake.evaluation_runs import run_seed
     from hrc_drake.tasks.costs import save_cost_table
 
     costs = tmp_path / "toy-costs.json"

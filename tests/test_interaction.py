@@ -14,7 +14,8 @@ import pytest
 from conftest import TOY_CARRY
 
 from hrc_drake.cli import main
-from hrc_drake.evaluate import Setup, evaluate, simulate_run
+from hrc_drake.evaluate import evaluate, simulate_run
+from hrc_drake.evaluation_runs import Setup
 from hrc_drake.hri.operator import ScriptedOperator
 from hrc_drake.hri.populations import make_operator_model
 from hrc_drake.paths import UsageError
@@ -27,7 +28,7 @@ from hrc_drake.tasks.costs import (
     table_from_seconds,
 )
 from hrc_drake.tasks.decide import run_decisions
-from hrc_drake.tasks.deciders import MpcDecider, make_decider
+from hrc_drake.tasks.deciders import make_decider
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.interaction import (
     DEFAULT_DELAYS,
@@ -41,6 +42,7 @@ from hrc_drake.tasks.interaction import (
     extra_seconds,
     make_interaction,
 )
+from hrc_drake.tasks.mpc import MpcDecider
 from hrc_drake.tasks.profile import (
     ProfileError,
     learn,

@@ -21,7 +21,9 @@ import yaml
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cli import build_parser, main
 from hrc_drake.cli import tasks as task_commands
-from hrc_drake.evaluate import RunResult, Setup, evaluate, summarise
+from hrc_drake.evaluate import evaluate
+from hrc_drake.evaluation_report import summarise
+from hrc_drake.evaluation_runs import RunResult, Setup
 from hrc_drake.paths import UsageError, check_output_path
 from hrc_drake.progress import ProgressLine
 from hrc_drake.scenario.load import load_scenario
@@ -382,7 +384,8 @@ def test_the_progress_line_always_shows_the_last_update():
 
 @dataclasses.dataclass(frozen=True)
 class InstantCell:
-    """A stand-in for the cell (`hrc_drake.evaluate.CellRuns`): a run of `tasks` tasks at once."""
+    """A stand-in for the cell (`hrc_drake.evaluation_runs.CellRuns`): a run of `tasks` tasks at
+    once."""
 
     seconds: float = 30.0
 

@@ -8,8 +8,9 @@ import yaml
 from flange_data import TABLE1
 
 from hrc_drake.resources import default_assembly
+from hrc_drake.tasks.assembly import SpecError
 from hrc_drake.tasks.graph import StateKind, generate_states
-from hrc_drake.tasks.spec import SpecError, load_spec, parse_spec
+from hrc_drake.tasks.spec import load_spec, parse_spec
 
 
 @pytest.fixture

@@ -21,7 +21,7 @@ from hrc_drake.cell_models import CellDesign
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.scenario.load import load_scenario
 from hrc_drake.scenario.schema import Scenario
-from hrc_drake.tasks.spec import AssemblySpec
+from hrc_drake.tasks.assembly import AssemblySpec
 
 # `--lean`: the same models, physics and limits, with 0.5 s bolting holds (tests, previews).
 LEAN = "{motion: {hold_time: 0.5}, run: {settle_time: 0.2}}"

@@ -30,6 +30,7 @@ from hrc_drake.cli.tasks import (
 from hrc_drake.hri.operator import OperatorScriptError
 from hrc_drake.paths import UsageError
 from hrc_drake.scenario.schema import ScenarioError
+from hrc_drake.tasks.assembly import SpecError
 from hrc_drake.tasks.costs import CostTableError
 from hrc_drake.tasks.decide import (
     DecisionError,
@@ -40,7 +41,6 @@ from hrc_drake.tasks.policy import (
     PolicyFileError,
 )
 from hrc_drake.tasks.profile import ProfileError
-from hrc_drake.tasks.spec import SpecError
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130  # the shell's status for a command ended by SIGINT (128 + 2)

@@ -15,7 +15,9 @@ import os
 import sys
 from pathlib import Path
 
-from hrc_drake.evaluate import Setup, evaluate, plot_times
+from hrc_drake.evaluate import evaluate
+from hrc_drake.evaluation_report import plot_times
+from hrc_drake.evaluation_runs import Setup
 from hrc_drake.hri.populations import make_operator_model
 from hrc_drake.paths import UsageError, check_output_path, image_kind
 from hrc_drake.progress import ProgressLine, duration
@@ -319,15 +321,22 @@ def cmd_evaluate(args) -> int:
         space, costs, args.decider, args.operator_model, params, args.seed,
         interaction=interaction, keep_model=args.keep_model, cell=cell,
     )  # fmt: skip
+    report = _run_evaluation(args, setup, runs, workers)
+    return _report(args, report, plot)
+
+
+def _run_evaluation(args, setup: Setup, runs: int, workers: int | None) -> dict:
+    """The runs, with a progress line; at cell level a CellModelError (the cell cannot be built
+    for a run's scenario) is a one-line UsageError."""
     misfits: tuple[type[Exception], ...] = ()  # none at task level (which needs no Drake)
-    if cell is not None:
+    if setup.cell is not None:
         from hrc_drake.cell_models import CellModelError
 
         misfits = (CellModelError,)
-    level = "cell" if cell else "evaluate"
+    level = "cell" if setup.cell else "evaluate"
     with ProgressLine(f"{level} {args.decider} vs {args.operator_model}", unit="run") as line:
         try:
-            report = evaluate(
+            return evaluate(
                 setup,
                 runs,
                 workers,
@@ -337,6 +346,11 @@ def cmd_evaluate(args) -> int:
             )
         except misfits as err:
             raise UsageError(str(err)) from None
+
+
+def _report(args, report: dict, plot: Path | None) -> int:
+    """Plot the times (`--plot`), print the report (as JSON with `--json`) and return the exit
+    status: EXIT_INTERRUPTED, with one line on stderr, when Ctrl-C cut the runs short."""
     if plot is not None and report["completed"]:
         plot_times(report, plot)
     report.pop("times")
@@ -380,6 +394,30 @@ def add_evaluate_parser(add) -> None:
         required=True,
         help="follows, random, habitual, mistake-prone, change-of-mind, slow",
     )
+    _add_run_flags(p)
+    _add_cell_flags(p)
+    p.add_argument("--plot", type=Path, default=None, help="histogram of assembly times")
+    p.add_argument("--costs", type=Path, default=None, help="cost table (default: the cell's)")
+    p.add_argument(
+        "--param", action="append", default=None, help="operator model parameter KEY=VALUE"
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing --plot file that is not an image of its kind",
+    )
+    add_interaction_flags(p, "; with --cell, over the scenario's `interaction.mode`")
+    add_separation_flag(p, " (with --cell)")
+    p.add_argument(
+        "--keep-model",
+        action="store_true",
+        help="one operator, many assemblies: the decider keeps its operator model across the "
+        "runs (serial)",
+    )
+
+
+def _add_run_flags(p) -> None:
+    """Register how many runs `evaluate` plays and where: `--runs`, `--workers`, `--ray`."""
     p.add_argument(
         "--runs",
         type=int,
@@ -403,6 +441,11 @@ def add_evaluate_parser(add) -> None:
         help="spread the runs on a Ray cluster at ADDRESS (no address: a local one); needs the "
         "extra hrc_drake[ray]",
     )
+
+
+def _add_cell_flags(p) -> None:
+    """Register the runs through the cell: `--cell`, and the scenario they play (`--scenario`,
+    `--lean`, `--scenario-text`)."""
     p.add_argument(
         "--cell",
         action="store_true",
@@ -419,22 +462,4 @@ def add_evaluate_parser(add) -> None:
         action="append",
         default=None,
         help="with --cell: YAML overrides of the base scenario",
-    )
-    p.add_argument("--plot", type=Path, default=None, help="histogram of assembly times")
-    p.add_argument("--costs", type=Path, default=None, help="cost table (default: the cell's)")
-    p.add_argument(
-        "--param", action="append", default=None, help="operator model parameter KEY=VALUE"
-    )
-    p.add_argument(
-        "--force",
-        action="store_true",
-        help="replace an existing --plot file that is not an image of its kind",
-    )
-    add_interaction_flags(p, "; with --cell, over the scenario's `interaction.mode`")
-    add_separation_flag(p, " (with --cell)")
-    p.add_argument(
-        "--keep-model",
-        action="store_true",
-        help="one operator, many assemblies: the decider keeps its operator model across the "
-        "runs (serial)",
     )

@@ -21,7 +21,7 @@ from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RigidTransform
 
 from hrc_drake.cell_models import CellDesign
-from hrc_drake.tasks.spec import AssemblySpec
+from hrc_drake.tasks.assembly import AssemblySpec
 from hrc_drake.tasks.tokens import UNDO, Placement
 
 

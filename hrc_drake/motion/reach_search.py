@@ -20,8 +20,9 @@ from collections.abc import Callable, Iterable
 
 import numpy as np
 
-from hrc_drake.cell_models import PLATE_END, PLATE_WIDTH, TABLE_POSITION, CellDesign, slot_offsets
+from hrc_drake.cell_models import TABLE_POSITION, CellDesign
 from hrc_drake.layout import CellLayout
+from hrc_drake.workpiece_sdf import PLATE_END, PLATE_WIDTH, slot_offsets
 
 # Horizontal distance from the UR3's base axis within which a grasp with the tool pointing down
 # passed the reach check in a scan of tray positions (0.494 m passed, 0.511 m failed; the UR3's

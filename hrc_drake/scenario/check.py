@@ -232,7 +232,8 @@ def _check_body(scenario: Scenario, fail) -> None:
     layout = scenario.cell
     if layout is None:
         from hrc_drake.layout import layout_from
-        from hrc_drake.tasks.spec import SpecError, load_spec
+        from hrc_drake.tasks.assembly import SpecError
+        from hrc_drake.tasks.spec import load_spec
 
         try:
             layout = layout_from(load_spec(scenario.assembly_path).cell)

@@ -50,6 +50,7 @@ import numpy as np
 
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.paths import OutputKind, fresh_name
+from hrc_drake.tasks.assembly import DEFAULT_BOLT_TIME, AssemblySpec
 from hrc_drake.tasks.bets import Bet, bet_kind
 from hrc_drake.tasks.datafile import (
     check_made_for,
@@ -60,7 +61,6 @@ from hrc_drake.tasks.datafile import (
 )
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.mdp import MdpConfig, build_mdp
-from hrc_drake.tasks.spec import DEFAULT_BOLT_TIME, AssemblySpec
 from hrc_drake.tasks.tokens import UNDO
 
 FORMAT = "hrc_drake.costs"

@@ -17,7 +17,7 @@ from functools import cached_property
 import networkx as nx
 import numpy as np
 
-from hrc_drake.tasks.spec import BASE, AssemblySpec, SpecError
+from hrc_drake.tasks.assembly import BASE, AssemblySpec, SpecError
 from hrc_drake.tasks.tokens import UNDO
 
 MAX_TOKENS = 64

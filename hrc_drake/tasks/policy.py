@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from hrc_drake.paths import OutputKind, fresh_name
+from hrc_drake.tasks.assembly import AssemblySpec
 from hrc_drake.tasks.datafile import (
     check_made_for,
     first_infeasible,
@@ -28,7 +29,6 @@ from hrc_drake.tasks.datafile import (
 )
 from hrc_drake.tasks.graph import StateSpace, UnknownStateError
 from hrc_drake.tasks.mdp import SequenceMDP
-from hrc_drake.tasks.spec import AssemblySpec
 
 FORMAT = "hrc_drake.policy"
 VERSION = 1

@@ -1,4 +1,4 @@
-"""Declarative assembly specs: parse, validate, and describe where parts may go.
+"""Declarative assembly specs: read and validate a YAML file into an `AssemblySpec`.
 
 An assembly spec is a YAML file (see `models/assemblies/flange.yaml`) with these keys:
 
@@ -28,16 +28,18 @@ An assembly spec is a YAML file (see `models/assemblies/flange.yaml`) with these
 - ``cell`` (optional): the physical cell's layout (plate and tray poses, slot pitch, part model
   files; see `hrc_drake/layout.py`). The task layer keeps it as is; it is not in `spec_hash`.
 
+Each section has its own reader, called in the order above (then every ``correct`` entry is
+checked against the whole spec), so the first problem in that order is the one reported. The
+values themselves (with the defaults `DEFAULT_BOLT_TIME` and `DEFAULT_BOLTS`) and the placement
+tokens they allow are `hrc_drake.tasks.assembly`.
+
 Nothing here is specific to the flange case: another base or product is another file.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -45,206 +47,20 @@ import yaml
 
 from hrc_drake.paths import not_a_file
 from hrc_drake.resources import default_assembly
-from hrc_drake.tasks.tokens import UNDO, Placement, placement_token
+from hrc_drake.tasks.assembly import (
+    BASE,
+    DEFAULT_BOLTS,
+    AssemblySpec,
+    GapRule,
+    Goal,
+    Mount,
+    PartType,
+    SpecError,
+)
+from hrc_drake.tasks.tokens import Placement
 from hrc_drake.typed_yaml import safe_load_unique, yaml_error_line
 
-BASE = "base"
-# Seconds the operator takes to bolt a part when its spec gives no `bolt_time`: the robot's
-# bolting hold in the cell (MotionOptions.hold_time).
-DEFAULT_BOLT_TIME = 5.0
-# Bolts per part when the spec does not say (our assumption: the paper says its flanges are
-# bolted, with bolts and nuts on the desk, but not how many).
-DEFAULT_BOLTS = 4
 _SYMBOL = re.compile(r"^[A-Z][A-Za-z]*$")
-
-
-class SpecError(ValueError):
-    """An assembly spec that cannot be used; the message names the key and the fix."""
-
-
-@dataclass(frozen=True)
-class PartType:
-    """A kind of part: its symbol, how many there are, how many slots it covers."""
-
-    symbol: str
-    name: str
-    count: int
-    footprint: int
-    host_tag: str | None = None
-    bolt_time: float | None = None
-    """Seconds the operator takes to bolt one part (None: `DEFAULT_BOLT_TIME`)."""
-    bolts: int = 0
-    """Bolts (each with its nut) the operator fetches for one part (0: `DEFAULT_BOLTS`). Not
-    part of the hash: it moves the operator's hands, not the states or rewards."""
-
-    @property
-    def bolt_count(self) -> int:
-        """The bolts one part takes (`bolts`, or `DEFAULT_BOLTS`)."""
-        return self.bolts or DEFAULT_BOLTS
-
-    @property
-    def is_host(self) -> bool:
-        """Whether other parts can be mounted on this one."""
-        return self.host_tag is not None
-
-
-@dataclass(frozen=True)
-class Mount:
-    """`count` parts of type `part` go on `on` (the base, or a host part's symbol)."""
-
-    part: str
-    on: str
-    count: int
-
-
-@dataclass(frozen=True)
-class GapRule:
-    """Correctness rule: any two parts of types `parts` sit at least `slots` slots apart."""
-
-    parts: tuple[str, str]
-    slots: int
-
-
-@dataclass(frozen=True)
-class Goal:
-    """Which complete configurations are correct."""
-
-    min_gap: tuple[GapRule, ...] = ()
-    correct: tuple[frozenset[str], ...] | None = None
-
-
-@dataclass(frozen=True)
-class AssemblySpec:
-    """A validated assembly spec."""
-
-    name: str
-    base_symbol: str
-    slots: int
-    parts: tuple[PartType, ...]
-    mounts: tuple[Mount, ...]
-    complete_first: tuple[str, ...]
-    before: tuple[tuple[str, str], ...]
-    goal: Goal
-    mistakes: tuple[tuple[str, str], ...]
-    state_names: Mapping[str, str]
-    source: str = "<memory>"
-    cell: Mapping[str, Any] | None = None
-    """The `cell:` section as parsed YAML: the physical cell's layout (read by the cell layer,
-    not part of the MDP, so not in `spec_hash`)."""
-
-    def part(self, symbol: str) -> PartType:
-        """The part type with this symbol; SpecError if there is none."""
-        for part in self.parts:
-            if part.symbol == symbol:
-                return part
-        raise SpecError(f"{self.source}: unknown part {symbol!r}; parts are {self._symbols()}")
-
-    def _symbols(self) -> list[str]:
-        return [p.symbol for p in self.parts]
-
-    @property
-    def total_parts(self) -> int:
-        """How many parts a complete assembly holds."""
-        return sum(p.count for p in self.parts)
-
-    def semantic_dict(self) -> dict[str, Any]:
-        """The content that determines states and rewards (no labels, no file name)."""
-        return {
-            "base": {"symbol": self.base_symbol, "slots": self.slots},
-            # bolt_time only when set, so that specs without it keep their hash (and policies).
-            "parts": [
-                [p.symbol, p.count, p.footprint, p.host_tag]
-                + ([] if p.bolt_time is None else [p.bolt_time])
-                for p in self.parts
-            ],
-            "mounts": [[m.part, m.on, m.count] for m in self.mounts],
-            "complete_first": list(self.complete_first),
-            "before": [list(pair) for pair in self.before],
-            "goal": {
-                "min_gap": [[list(r.parts), r.slots] for r in self.goal.min_gap],
-                "correct": None
-                if self.goal.correct is None
-                else sorted(sorted(c) for c in self.goal.correct),
-            },
-            "mistakes": [list(m) for m in self.mistakes],
-        }
-
-    @property
-    def spec_hash(self) -> str:
-        """A hash of the semantic content: policies record it to refuse a mismatched spec."""
-        text = json.dumps(self.semantic_dict(), sort_keys=True, separators=(",", ":"))
-        return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-    def placement(self, token: str) -> Placement:
-        """What a task token places: part symbol, base slots under it, host symbol and tag.
-
-        The one reading of tokens in the project; SpecError naming the valid tokens if `token`
-        is not a placement of this spec (``undo`` is not a placement).
-        """
-        table = self._placement_table()
-        if token not in table:
-            raise SpecError(
-                f"{self.source}: {token!r} is not a placement of assembly {self.name!r}; "
-                f"placements are {', '.join(table)}"
-            )
-        return table[token]
-
-    def placement_of(self, part: str, slots: tuple[int, ...], host: str | None = None) -> Placement:
-        """The placement of `part` over base `slots` (on the base, or on host part `host`)."""
-        for placement in self._placement_table().values():
-            if (placement.part, placement.slots, placement.host) == (part, tuple(slots), host):
-                return placement
-        where = "the base" if host is None else host
-        raise SpecError(
-            f"{self.source}: no placement of {part!r} on {where} over slots {list(slots)}"
-        )
-
-    def _placement_table(self) -> dict[str, Placement]:
-        cached = self.__dict__.get("_placements_cache")
-        if cached is None:
-            cached = {
-                token: Placement(
-                    part=mount.part,
-                    slots=slots,
-                    host=None if mount.on == BASE else mount.on,
-                    host_tag=None if mount.on == BASE else self.part(mount.on).host_tag,
-                )
-                for token, mount, slots in self.placements()
-            }
-            object.__setattr__(self, "_placements_cache", cached)
-        return cached
-
-    def placements(self) -> list[tuple[str, Mount, tuple[int, ...]]]:
-        """Every placement token the spec allows, in canonical order, with its mount and slots.
-
-        Canonical order: parts in spec order, then mounts in spec order, then slots ascending.
-        Ties between equally good tasks are broken in this order.
-        """
-        out: list[tuple[str, Mount, tuple[int, ...]]] = []
-        seen: set[str] = set()
-        for part in self.parts:
-            for mount in self.mounts:
-                if mount.part != part.symbol:
-                    continue
-                if mount.on == BASE:
-                    windows = [
-                        tuple(range(s, s + part.footprint))
-                        for s in range(1, self.slots - part.footprint + 2)
-                    ]
-                    tag = None
-                else:
-                    windows = [(k,) for k in range(1, self.slots + 1)]
-                    tag = self.part(mount.on).host_tag
-                for slots in windows:
-                    token = placement_token(part.symbol, slots, tag)
-                    if token in seen or token == UNDO:
-                        raise SpecError(
-                            f"{self.source}: token {token!r} is produced twice; give the hosts "
-                            "distinct `host.tag` values and parts distinct symbols"
-                        )
-                    seen.add(token)
-                    out.append((token, mount, slots))
-        return out
 
 
 def _fail(source: str, key: str, problem: str) -> SpecError:
@@ -296,80 +112,140 @@ def parse_spec(data: Any, source: str = "<memory>") -> AssemblySpec:
     name = _require(data, "name", source, "")
     if not isinstance(name, str) or not name:
         raise _fail(source, "name", "must be a non-empty string")
+    base_symbol, slots = _parse_base(data, source)
+    parts = _parse_parts(data, source, base_symbol, slots)
+    by_symbol = {p.symbol: p for p in parts}
+    mounts = _parse_mounts(data, source, by_symbol)
+    _check_mount_counts(parts, mounts, source)
+    complete_first, before = _parse_precedence(data, source, by_symbol, mounts)
+    rules, correct = _parse_goal(data, source, by_symbol, slots)
+    mistakes = _parse_mistakes(data, source, mounts)
+    names = data.get("state_names") or {}
+    if not isinstance(names, Mapping):
+        raise _fail(source, "state_names", "must map 'T1 T2 ...' sequences to labels")
+    spec = AssemblySpec(
+        name=name,
+        base_symbol=base_symbol,
+        slots=slots,
+        parts=tuple(parts),
+        mounts=tuple(mounts),
+        complete_first=tuple(complete_first),
+        before=tuple(before),
+        goal=Goal(tuple(rules), correct),
+        mistakes=tuple(mistakes),
+        state_names={" ".join(str(k or "").split()): str(v) for k, v in names.items()},
+        source=source,
+        cell=_cell_section(data.get("cell"), source),
+    )
+    for i, config in enumerate(correct or ()):
+        _check_correct_entry(spec, config, f"goal.correct[{i}]")
+    return spec
 
+
+def _parse_base(data: Mapping[str, Any], source: str) -> tuple[str, int]:
+    """`base`: the fixture's symbol (default ``B``) and its number of slots."""
     base = _require(data, "base", source, "")
     _check_keys(base, {"symbol", "slots"}, source, "base.")
     base_symbol = str(base.get("symbol", "B"))
     slots = _positive_int(_require(base, "slots", source, "base."), source, "base.slots")
+    return base_symbol, slots
 
+
+def _parse_parts(
+    data: Mapping[str, Any], source: str, base_symbol: str, slots: int
+) -> list[PartType]:
+    """`parts`: one part type per symbol, in the file's order."""
     raw_parts = _require(data, "parts", source, "")
     if not isinstance(raw_parts, Mapping) or not raw_parts:
         raise _fail(source, "parts", "must be a non-empty mapping of part symbol -> description")
-    parts: list[PartType] = []
-    for symbol, desc in raw_parts.items():
-        key = f"parts.{symbol}"
-        if not isinstance(symbol, str) or not _SYMBOL.match(symbol) or symbol == base_symbol:
-            raise _fail(
-                source, key, "a part symbol is a capital letter and letters, not the base's"
-            )
-        _check_keys(
-            desc, {"name", "count", "footprint", "host", "bolt_time", "bolts"}, source, key + "."
-        )
-        count = _positive_int(_require(desc, "count", source, key + "."), source, key + ".count")
-        footprint = _positive_int(desc.get("footprint", 1), source, key + ".footprint")
-        if footprint > slots:
-            raise _fail(
-                source,
-                key + ".footprint",
-                f"slot out of range: covers {footprint} slots but the base has {slots}",
-            )
-        host_tag = None
-        if "host" in desc:
-            _check_keys(desc["host"], {"tag"}, source, key + ".host.")
-            host_tag = str(desc["host"].get("tag", symbol))
-            if not host_tag or not re.fullmatch(r"[0-9A-Za-z]+", host_tag):
-                raise _fail(source, key + ".host.tag", "must be letters or digits")
-        bolt_time = None
-        if "bolt_time" in desc:
-            bolt_time = desc["bolt_time"]
-            number = isinstance(bolt_time, int | float) and not isinstance(bolt_time, bool)
-            if not number or not 0 < bolt_time < float("inf"):
-                raise _fail(
-                    source,
-                    key + ".bolt_time",
-                    f"must be a positive number of seconds, got {bolt_time!r}",
-                )
-            bolt_time = float(bolt_time)
-        bolts = _positive_int(desc.get("bolts", DEFAULT_BOLTS), source, key + ".bolts")
-        name_ = str(desc.get("name", symbol))
-        parts.append(PartType(symbol, name_, count, footprint, host_tag, bolt_time, bolts))
-    by_symbol = {p.symbol: p for p in parts}
+    return [
+        _parse_part(symbol, desc, source, base_symbol, slots) for symbol, desc in raw_parts.items()
+    ]
 
+
+def _parse_part(symbol: Any, desc: Any, source: str, base_symbol: str, slots: int) -> PartType:
+    """One entry of `parts`: its symbol, count, footprint (within the base), host tag and
+    bolting."""
+    key = f"parts.{symbol}"
+    if not isinstance(symbol, str) or not _SYMBOL.match(symbol) or symbol == base_symbol:
+        raise _fail(source, key, "a part symbol is a capital letter and letters, not the base's")
+    _check_keys(
+        desc, {"name", "count", "footprint", "host", "bolt_time", "bolts"}, source, key + "."
+    )
+    count = _positive_int(_require(desc, "count", source, key + "."), source, key + ".count")
+    footprint = _positive_int(desc.get("footprint", 1), source, key + ".footprint")
+    if footprint > slots:
+        raise _fail(
+            source,
+            key + ".footprint",
+            f"slot out of range: covers {footprint} slots but the base has {slots}",
+        )
+    host_tag = None
+    if "host" in desc:
+        _check_keys(desc["host"], {"tag"}, source, key + ".host.")
+        host_tag = str(desc["host"].get("tag", symbol))
+        if not host_tag or not re.fullmatch(r"[0-9A-Za-z]+", host_tag):
+            raise _fail(source, key + ".host.tag", "must be letters or digits")
+    bolt_time = _bolt_time(desc, source, key)
+    bolts = _positive_int(desc.get("bolts", DEFAULT_BOLTS), source, key + ".bolts")
+    name = str(desc.get("name", symbol))
+    return PartType(symbol, name, count, footprint, host_tag, bolt_time, bolts)
+
+
+def _bolt_time(desc: Mapping[str, Any], source: str, key: str) -> float | None:
+    """A part's `bolt_time` in seconds (None when not given: the default applies)."""
+    if "bolt_time" not in desc:
+        return None
+    bolt_time = desc["bolt_time"]
+    number = isinstance(bolt_time, int | float) and not isinstance(bolt_time, bool)
+    if not number or not 0 < bolt_time < float("inf"):
+        raise _fail(
+            source,
+            key + ".bolt_time",
+            f"must be a positive number of seconds, got {bolt_time!r}",
+        )
+    return float(bolt_time)
+
+
+def _parse_mounts(
+    data: Mapping[str, Any], source: str, by_symbol: Mapping[str, PartType]
+) -> list[Mount]:
+    """`mounts`: where the parts go, each (part, place) pair once."""
     raw_mounts = _require(data, "mounts", source, "")
     if not isinstance(raw_mounts, list) or not raw_mounts:
         raise _fail(source, "mounts", "must be a non-empty list of {part, to, count}")
     mounts: list[Mount] = []
     for i, m in enumerate(raw_mounts):
-        key = f"mounts[{i}]"
-        _check_keys(m, {"part", "to", "count"}, source, key + ".")
-        part = _require(m, "part", source, key + ".")
-        on = str(m.get("to", BASE))
-        if part not in by_symbol:
-            raise _fail(
-                source, key + ".part", f"unknown part {part!r}; parts are {list(by_symbol)}"
-            )
-        if on != BASE:
-            if on not in by_symbol:
-                raise _fail(source, key + ".to", f"unknown part {on!r}; use 'base' or a part")
-            if not by_symbol[on].is_host:
-                raise _fail(source, key + ".to", f"part {on!r} has no `host` entry to mount on")
-            if on == part:
-                raise _fail(source, key + ".to", f"part {part!r} cannot be mounted on itself")
-            if by_symbol[part].footprint != 1:
-                raise _fail(source, key + ".part", "a part on a host must have footprint 1")
-        if any(x.part == part and x.on == on for x in mounts):
-            raise _fail(source, key, f"{part} on {on} is listed twice; merge the counts")
-        mounts.append(Mount(part, on, _positive_int(m.get("count"), source, key + ".count")))
+        mounts.append(_parse_mount(m, f"mounts[{i}]", source, by_symbol, mounts))
+    return mounts
+
+
+def _parse_mount(
+    m: Any, key: str, source: str, by_symbol: Mapping[str, PartType], earlier: list[Mount]
+) -> Mount:
+    """One entry of `mounts`: a known part on the base or on a host (not itself, footprint 1),
+    not already listed in `earlier`."""
+    _check_keys(m, {"part", "to", "count"}, source, key + ".")
+    part = _require(m, "part", source, key + ".")
+    on = str(m.get("to", BASE))
+    if part not in by_symbol:
+        raise _fail(source, key + ".part", f"unknown part {part!r}; parts are {list(by_symbol)}")
+    if on != BASE:
+        if on not in by_symbol:
+            raise _fail(source, key + ".to", f"unknown part {on!r}; use 'base' or a part")
+        if not by_symbol[on].is_host:
+            raise _fail(source, key + ".to", f"part {on!r} has no `host` entry to mount on")
+        if on == part:
+            raise _fail(source, key + ".to", f"part {part!r} cannot be mounted on itself")
+        if by_symbol[part].footprint != 1:
+            raise _fail(source, key + ".part", "a part on a host must have footprint 1")
+    if any(x.part == part and x.on == on for x in earlier):
+        raise _fail(source, key, f"{part} on {on} is listed twice; merge the counts")
+    return Mount(part, on, _positive_int(m.get("count"), source, key + ".count"))
+
+
+def _check_mount_counts(parts: list[PartType], mounts: list[Mount], source: str) -> None:
+    """The mounts place every part's count, and no host carries more parts than its seats."""
     for p in parts:
         placed = sum(m.count for m in mounts if m.part == p.symbol)
         if placed != p.count:
@@ -387,11 +263,13 @@ def parse_spec(data: Any, source: str = "<memory>") -> AssemblySpec:
                     f"mounts (on {p.symbol})",
                     f"{hosted} parts go on {p.symbol} but it offers {p.count * p.footprint} seats",
                 )
-    hosts_below: dict[str, set[str]] = {p.symbol: set() for p in parts}
-    for m in mounts:
-        if m.on != BASE:
-            hosts_below[m.part].add(m.on)
 
+
+def _parse_precedence(
+    data: Mapping[str, Any], source: str, by_symbol: Mapping[str, PartType], mounts: list[Mount]
+) -> tuple[list[str], list[tuple[str, str]]]:
+    """`precedence`: the hosts to complete first and the `before` pairs, none contradicting
+    the mounts or each other."""
     precedence = data.get("precedence") or {}
     _check_keys(precedence, {"complete_first", "before"}, source, "precedence.")
     complete_first = []
@@ -407,8 +285,21 @@ def parse_spec(data: Any, source: str = "<memory>") -> AssemblySpec:
                 source, key, f"{hosted} parts on {by_symbol[h].count} {h!r} do not split evenly"
             )
         complete_first.append(h)
+    before = _parse_before(precedence.get("before") or [], source, by_symbol, mounts)
+    _check_precedence_cycles(before, source)
+    return complete_first, before
+
+
+def _parse_before(
+    pairs: list[Any], source: str, by_symbol: Mapping[str, PartType], mounts: list[Mount]
+) -> list[tuple[str, str]]:
+    """`precedence.before`: pairs [A, B] of known parts, A not B and A not only on a B."""
+    hosts_below: dict[str, set[str]] = {symbol: set() for symbol in by_symbol}
+    for m in mounts:
+        if m.on != BASE:
+            hosts_below[m.part].add(m.on)
     before = []
-    for i, pair in enumerate(precedence.get("before") or []):
+    for i, pair in enumerate(pairs):
         key = f"precedence.before[{i}]"
         if not isinstance(pair, list) or len(pair) != 2:
             raise _fail(source, key, "must be a pair [A, B]: every A before any B")
@@ -421,8 +312,14 @@ def parse_spec(data: Any, source: str = "<memory>") -> AssemblySpec:
         if b in hosts_below[a] and not any(m.part == a and m.on == BASE for m in mounts):
             raise _fail(source, key, f"contradictory precedence: {a!r} sits on {b!r}")
         before.append((a, b))
-    _check_precedence_cycles(before, source)
+    return before
 
+
+def _parse_goal(
+    data: Mapping[str, Any], source: str, by_symbol: Mapping[str, PartType], slots: int
+) -> tuple[list[GapRule], tuple[frozenset[str], ...] | None]:
+    """`goal`: its `min_gap` rules and `correct` configurations (their form only: each entry is
+    checked against the whole spec once it is built); at least one of the two."""
     goal_data = _require(data, "goal", source, "")
     _check_keys(goal_data, {"min_gap", "correct"}, source, "goal.")
     rules = []
@@ -441,7 +338,13 @@ def parse_spec(data: Any, source: str = "<memory>") -> AssemblySpec:
         correct = _correct_shape(goal_data["correct"], source)
     if not rules and not correct:
         raise _fail(source, "goal", "no goal: give `min_gap` rules and/or `correct` configurations")
+    return rules, correct
 
+
+def _parse_mistakes(
+    data: Mapping[str, Any], source: str, mounts: list[Mount]
+) -> list[tuple[str, str]]:
+    """`mistakes`: (part, place) pairs, each one a mount places."""
     mistakes = []
     for i, m in enumerate(data.get("mistakes") or []):
         key = f"mistakes[{i}]"
@@ -450,28 +353,7 @@ def parse_spec(data: Any, source: str = "<memory>") -> AssemblySpec:
         if not any(x.part == pair[0] and x.on == pair[1] for x in mounts):
             raise _fail(source, key, f"no mount places {pair[0]!r} on {pair[1]!r}")
         mistakes.append(pair)
-
-    names = data.get("state_names") or {}
-    if not isinstance(names, Mapping):
-        raise _fail(source, "state_names", "must map 'T1 T2 ...' sequences to labels")
-
-    spec = AssemblySpec(
-        name=name,
-        base_symbol=base_symbol,
-        slots=slots,
-        parts=tuple(parts),
-        mounts=tuple(mounts),
-        complete_first=tuple(complete_first),
-        before=tuple(before),
-        goal=Goal(tuple(rules), correct),
-        mistakes=tuple(mistakes),
-        state_names={" ".join(str(k or "").split()): str(v) for k, v in names.items()},
-        source=source,
-        cell=_cell_section(data.get("cell"), source),
-    )
-    for i, config in enumerate(correct or ()):
-        _check_correct_entry(spec, config, f"goal.correct[{i}]")
-    return spec
+    return mistakes
 
 
 _CORRECT_FORM = (
@@ -502,6 +384,14 @@ def _correct_shape(raw: Any, source: str) -> tuple[frozenset[str], ...]:
 def _check_correct_entry(spec: AssemblySpec, config: frozenset[str], key: str) -> None:
     """SpecError naming `key` if the configuration cannot be built or breaks a min_gap rule."""
     listed = sorted(config)
+    _check_entry_tokens(spec, listed, key)
+    where = {t: spec.placement(t) for t in listed}
+    _check_entry_seats(spec, listed, where, key)
+    _check_entry_gaps(spec, listed, where, key)
+
+
+def _check_entry_tokens(spec: AssemblySpec, listed: list[str], key: str) -> None:
+    """The entry's tokens are known tasks, one per part, as many on each mount as it takes."""
     mounts = {token: mount for token, mount, _ in spec.placements()}
     for token in listed:
         if token not in mounts:
@@ -511,11 +401,11 @@ def _check_correct_entry(spec: AssemblySpec, config: frozenset[str], key: str) -
                 f"{listed}: unknown task {token!r} (slot out of range or part unknown); "
                 f"tasks are {sorted(mounts)}",
             )
-    if len(config) != spec.total_parts:
+    if len(listed) != spec.total_parts:
         raise _fail(
             spec.source,
             key,
-            f"{listed} has {len(config)} parts but a complete assembly has {spec.total_parts}",
+            f"{listed} has {len(listed)} parts but a complete assembly has {spec.total_parts}",
         )
     for mount in spec.mounts:
         placed = [t for t in listed if mounts[t] == mount]
@@ -526,7 +416,13 @@ def _check_correct_entry(spec: AssemblySpec, config: frozenset[str], key: str) -
                 f"{listed} puts {len(placed)} {mount.part!r} on {mount.on} but the mounts put "
                 f"{mount.count} there; it can never be built",
             )
-    where = {t: spec.placement(t) for t in listed}
+
+
+def _check_entry_seats(
+    spec: AssemblySpec, listed: list[str], where: Mapping[str, Placement], key: str
+) -> None:
+    """No two of the entry's parts share a base slot, and each part on a host has that host
+    under it."""
     on_base = [t for t in listed if where[t].host is None]
     for a in on_base:
         for b in on_base:
@@ -549,6 +445,12 @@ def _check_correct_entry(spec: AssemblySpec, config: frozenset[str], key: str) -
                 f"{listed}: {t} sits on {host!r} over slot {where[t].slots[0]} but no {host!r} "
                 "covers that slot; it can never be built",
             )
+
+
+def _check_entry_gaps(
+    spec: AssemblySpec, listed: list[str], where: Mapping[str, Placement], key: str
+) -> None:
+    """The entry keeps every `min_gap` rule (the two goals combine with AND)."""
     for r, rule in enumerate(spec.goal.min_gap):
         for a in listed:
             for b in listed:

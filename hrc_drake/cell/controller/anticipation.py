@@ -32,10 +32,10 @@ from hrc_drake.cell.controller.supervisor_state import Mode, SupervisorError, Su
 from hrc_drake.cell.ports import CellConfiguration
 from hrc_drake.motion.plan import HOME_LEG, LIFT, Plan, Stage
 from hrc_drake.motion.plan_request import PlanRequest
+from hrc_drake.tasks.assembly import AssemblySpec
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.policy import Policy
 from hrc_drake.tasks.protocols import Commits, PredictsTasks
-from hrc_drake.tasks.spec import AssemblySpec
 from hrc_drake.tasks.tokens import UNDO
 
 

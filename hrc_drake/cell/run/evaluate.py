@@ -22,8 +22,8 @@ the evaluation's overrides, the interaction, the run's operator with its seeds a
 exactly what `hrc-drake simulate --scenario BASE --scenario-text TEXT` loads, so a run that failed
 replays alone with the same result (`CellOptions.replay`).
 
-`CellOptions` is what `hrc_drake.evaluate.Setup.cell` holds: the task-level evaluation calls its
-methods and never imports this module; this module imports it (one way).
+`CellOptions` is what `hrc_drake.evaluation_runs.Setup.cell` holds: the task-level evaluation
+calls its methods and never imports this module; this module imports it (one way).
 """
 
 from __future__ import annotations
@@ -38,13 +38,14 @@ from typing import Any
 
 import yaml
 
-from hrc_drake.evaluate import RunResult, predicted_tasks, run_seed, simulate_run
+from hrc_drake.evaluate import predicted_tasks, simulate_run
+from hrc_drake.evaluation_runs import RunResult, run_seed
 from hrc_drake.paths import UsageError
+from hrc_drake.tasks.assembly import AssemblySpec
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.interaction import MODES, InteractionCosts, operator_delays
 from hrc_drake.tasks.policy import PolicyFileError
 from hrc_drake.tasks.protocols import TiresAlongTheRun, TotalDelay
-from hrc_drake.tasks.spec import AssemblySpec
 from hrc_drake.tasks.tokens import UNDO
 
 DEFAULT_BASE_SCENARIO = "row1-optimal"
@@ -89,7 +90,7 @@ class DeciderPolicy:
 @dataclass(frozen=True)
 class CellOptions:
     """Which cell runs an evaluation: a base scenario, YAML overrides and the interaction mode
-    the cell plays (None: the scenario's) (picklable); the `hrc_drake.evaluate.CellRuns` of
+    the cell plays (None: the scenario's) (picklable); the `hrc_drake.evaluation_runs.CellRuns` of
     `Setup.cell`."""
 
     scenario: str = DEFAULT_BASE_SCENARIO
@@ -112,7 +113,7 @@ class CellOptions:
         check_cell_operator(operator, model_name)
 
     def play(self, scenario, setup, decider, run: int) -> RunResult:
-        """Run `run` of the evaluation `setup` (`hrc_drake.evaluate.Setup`) through the cell:
+        """Run `run` of the evaluation `setup` (`hrc_drake.evaluation_runs.Setup`) through the cell:
         the scenario of `run_text`, its operator as the scenario builds it, and `decider`
         (reset by the caller) proposing (`play_cell_run`)."""
         scenario = self.run_scenario(setup, run)
@@ -326,7 +327,7 @@ def check_cell_operator(operator, model_name: str) -> None:
 
 def play_cell_run(scenario, space: StateSpace, decider, operator):
     """One run of `decider` against `operator` through the cell; the decider is not reset.
-    Returns an `hrc_drake.evaluate.RunResult` with the cell's idle times and interaction (the
+    Returns an `hrc_drake.evaluation_runs.RunResult` with the cell's idle times and interaction (the
     delays the operator drew, when it draws them: `DelayedIndications`)."""
     from hrc_drake.cell.run.run import run_scenario
     from hrc_drake.cell.scenario import cell_design, motion_options

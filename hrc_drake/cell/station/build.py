@@ -81,9 +81,10 @@ from hrc_drake.motion.scene import read_cell_frames
 from hrc_drake.obstacle_models import DEBRIS, OBSTACLE
 from hrc_drake.robot_models import GRIPPER, UR3, UR3_JOINTS
 from hrc_drake.scenario.schema import CameraSettings, Scenario
+from hrc_drake.tasks.assembly import SpecError
 from hrc_drake.tasks.decide import Operator
 from hrc_drake.tasks.graph import StateSpace, generate_states
-from hrc_drake.tasks.spec import SpecError, load_spec
+from hrc_drake.tasks.spec import load_spec
 
 _SAP_FAMILY = ("sap", "similar", "lagged")
 

@@ -20,7 +20,7 @@ from pydrake.multibody.tree import PdControllerGains
 
 from hrc_drake.cell.station.arm_servo import servo_actuators
 from hrc_drake.cell.station.contacts import geometry_owners
-from hrc_drake.cell_models import PLATE, POCKET_DEPTH, SEAT_GAP, TABLE, TRAY
+from hrc_drake.cell_models import TABLE
 from hrc_drake.hri.faults import FaultKind
 from hrc_drake.hri.messages import Prompt
 from hrc_drake.motion.poses import CellFrames, part_pose
@@ -28,6 +28,7 @@ from hrc_drake.obstacle_models import DEBRIS, DEBRIS_SIZE, OBSTACLE, add_mounted
 from hrc_drake.robot_models import GRIPPER, UR3
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.tokens import UNDO
+from hrc_drake.workpiece_sdf import PLATE, POCKET_DEPTH, SEAT_GAP, TRAY
 
 # The carriage's servo: stiff enough that the box stands where it is put (it settles in about
 # 0.1 s), critically damped for the carriage's 0.6 kg.

@@ -31,11 +31,11 @@ from hrc_drake.cell.ports import (
     pose_tuple,
 )
 from hrc_drake.cell.station.contacts import contact_pairs, geometry_owners
-from hrc_drake.cell_models import BOSS, PLATE, POCKET_CLEARANCE, POCKET_DEPTH
 from hrc_drake.motion.poses import CellFrames, seat_pose
 from hrc_drake.obstacle_models import OBSTACLE, OBSTACLE_SEEN_ABOVE, OBSTACLE_SIZE
 from hrc_drake.robot_models import GRIPPER
-from hrc_drake.tasks.spec import SpecError
+from hrc_drake.tasks.assembly import SpecError
+from hrc_drake.workpiece_sdf import BOSS, PLATE, POCKET_CLEARANCE, POCKET_DEPTH
 
 # A seated part is in its pocket: its boss(es) can stand off the seat by the pocket's clearance
 # along each side (cell_models: POCKET_CLEARANCE), no more; the little above that allows for the

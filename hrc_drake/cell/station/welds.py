@@ -34,7 +34,8 @@ from pydrake.geometry import CollisionFilterDeclaration, CollisionFilterManager,
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import JointIndex
 
-from hrc_drake.cell_models import PLATE, CellDesign
+from hrc_drake.cell_models import CellDesign
+from hrc_drake.workpiece_sdf import PLATE
 
 
 @dataclass(frozen=True)
