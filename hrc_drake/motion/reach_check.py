@@ -18,7 +18,7 @@ from hrc_drake.motion.planner import MotionPlanner
 from hrc_drake.motion.poses import CellFrames, offset_along_approach, part_pose, tcp_pose
 from hrc_drake.motion.postures import toward
 from hrc_drake.motion.scene import GRIPPER, MAX_OPENING, PLATE, TRAY, Layout
-from hrc_drake.tasks.spec import AssemblySpec
+from hrc_drake.tasks.assembly import AssemblySpec
 
 # A reach target: (part instance, what it is in the error, X_W_part, the layout value to change).
 _Target = tuple[str, str, RigidTransform, str]

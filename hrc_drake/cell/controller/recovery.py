@@ -34,7 +34,7 @@ from hrc_drake.cell.ports import CellConfiguration, PartStatus
 from hrc_drake.hri.messages import Prompt, PromptKind
 from hrc_drake.motion.plan import Stage
 from hrc_drake.motion.plan_request import PlanFailure, PlanRequest
-from hrc_drake.tasks.spec import AssemblySpec
+from hrc_drake.tasks.assembly import AssemblySpec
 
 
 class FaultRecovery:
