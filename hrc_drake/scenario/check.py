@@ -8,11 +8,13 @@ import math
 from hrc_drake.hri.faults import FaultError, check_faults
 from hrc_drake.scenario.schema import (
     TEXT_SOURCE,
+    Activity,
     DeciderConfig,
     InteractionConfig,
     SafetyConfig,
     Scenario,
     ScenarioError,
+    Separation,
 )
 from hrc_drake.tasks.interaction import (
     INTERFACES,
@@ -188,8 +190,8 @@ def _check_decider(decider: DeciderConfig, fail) -> None:
         raise fail("decider.name", f"unknown decider {decider.name!r}; use one of {known}")
 
 
-SEPARATION_MODES = ("predictive", "reactive")
-ACTIVITIES = ("bolting", "desk")
+SEPARATION_MODES = tuple(m.value for m in Separation)
+ACTIVITIES = tuple(a.value for a in Activity)
 
 
 def _check_separation(safety: SafetyConfig, fail) -> None:
@@ -227,7 +229,7 @@ def _check_body(scenario: Scenario, fail) -> None:
         raise fail("body.handful", f"a hand takes at least 1 bolt per grab, got {body.handful}")
     if not 0 <= body.spread <= 0.5:
         raise fail("body.spread", f"give a fraction in [0, 0.5], got {body.spread}")
-    if body.activity != "desk" or not body.enabled:
+    if body.activity != Activity.DESK or not body.enabled:
         return
     layout = scenario.cell
     if layout is None:

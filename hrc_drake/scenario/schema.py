@@ -23,6 +23,7 @@ are more YAML merged on top (`--scenario-text "{motion: {hold_time: 0.5}}"`).
 
 import os
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 
 from hrc_drake.hri.activity import Person, vary_person
@@ -233,6 +234,20 @@ class RunConfig:
     path_timeout: float = 10.0
 
 
+class Separation(StrEnum):
+    """`safety.separation`: how the robot keeps clear of the operator."""
+
+    PREDICTIVE = "predictive"  # times its moves around the forecast body; monitoring underneath
+    REACTIVE = "reactive"  # the separation monitor alone
+
+
+class Activity(StrEnum):
+    """`body.activity`: what the operator's body does."""
+
+    BOLTING = "bolting"  # reaches in only to bolt the held part
+    DESK = "desk"  # also points at the seat and fetches bolts and nuts from the bins
+
+
 @dataclass
 class SafetyConfig:
     """Speed and separation monitoring (ISO/TS 15066 5.5.4): S_p = v_h (T_r + T_s) + v_r T_r +
@@ -271,7 +286,7 @@ class SafetyConfig:
     robot_uncertainty: float = 0.0
     slow_band: float = 0.05
     moving_speed: float = 0.01
-    separation: str = "predictive"
+    separation: str = Separation.PREDICTIVE.value
     departure: float = 0.15
     max_wait: float = 6.0
     forecast_spread: float = 1.0
@@ -307,7 +322,7 @@ class BodyConfig:
     """
 
     enabled: bool = True
-    activity: str = "bolting"
+    activity: str = Activity.BOLTING.value
     stance: list[float] = field(default_factory=lambda: list(_PERSON.stance))
     rest_hand: list[float] = field(default_factory=lambda: list(_PERSON.rest_hand))
     reach_offset: list[float] = field(default_factory=lambda: list(_PERSON.reach_offset))

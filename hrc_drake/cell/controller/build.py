@@ -38,7 +38,7 @@ from hrc_drake.cell_models import CellDesign
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.scene import load_cell_frames
 from hrc_drake.motion.service import PlanService
-from hrc_drake.scenario.schema import Scenario
+from hrc_drake.scenario.schema import Activity, Scenario, Separation
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.policy import Policy
 
@@ -104,7 +104,8 @@ def keep_clear_settings(
     otherwise none (reactive: the monitor alone). The forecast assumes the scenario's person,
     not the one each operator seed draws: the controller does not know who stands there."""
     safety, body = scenario.safety, scenario.body
-    if safety.separation != "predictive" or envelope is None or body.activity != "desk":
+    predictive = safety.separation == Separation.PREDICTIVE
+    if not predictive or envelope is None or body.activity != Activity.DESK:
         return KeepClearSettings(max_wait=safety.max_wait, departure=safety.departure)
     desk = desk_of(load_cell_frames(design), design.layout)
     delay = scenario.interaction_model().delay

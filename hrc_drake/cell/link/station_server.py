@@ -11,6 +11,7 @@ different processes and share only the protocol and the messages.
 
 from __future__ import annotations
 
+import enum
 import shlex
 import time
 from collections.abc import Callable
@@ -57,6 +58,13 @@ def _default_commands() -> dict[str, object]:
         for c in COMMANDS
         for p in c.ports
     }
+
+
+class _Awaiting(enum.Enum):
+    """Which of a lockstep step's two command sets the station waits for."""
+
+    PRE = "pre"  # the commands as they stood before the controller's updates at t (`_PRE`)
+    POST = "post"  # the commands as the controller's updates at t left them
 
 
 class CommandHold(LeafSystem):
@@ -165,7 +173,7 @@ class CellStationServer:
         commands = {c.channel + s: c for c in COMMANDS for s in (PRE_SUFFIX, "")}
         self._inbox = Inbox(lcm, commands, END_CHANNEL)
         self._inbox.on_message = self._on_message
-        self._k, self._awaiting, self._started = 0, "pre", False
+        self._k, self._awaiting, self._started = 0, _Awaiting.PRE, False
         self._sent: list[tuple[str, bytes]] = []
         self._pre_counts: list[int] = []
         self._last_progress = time.monotonic()
@@ -219,7 +227,7 @@ class CellStationServer:
             if not self._greeted:
                 return
             stamp = utime(self._k * self._period)
-            if self._awaiting == "pre":
+            if self._awaiting == _Awaiting.PRE:
                 if self._inbox.missing(self._pre, stamp):
                     return
                 self._take_pre()
@@ -229,7 +237,7 @@ class CellStationServer:
                     return
                 self._hold.switch_to(self._hold_context, self._commands(""))
                 self._advance()
-                self._k, self._awaiting = self._k + 1, "pre"
+                self._k, self._awaiting = self._k + 1, _Awaiting.PRE
             self._last_progress = time.monotonic()
 
     def _answer_hellos(self) -> None:
@@ -271,7 +279,7 @@ class CellStationServer:
             self._started = True
         self._publish_measurements()
         self._pre_counts = [self._inbox.count[n] for n in self._pre]
-        self._awaiting = "post"
+        self._awaiting = _Awaiting.POST
 
     def _answer_repeat(self) -> None:
         """The controller sent all its commands before its update again (a datagram was
@@ -316,7 +324,7 @@ class CellStationServer:
         controller comes or it stops answering; the station's own errors are raised (after
         being sent to the controller)."""
         while not self.finished:
-            first = self._k == 0 and self._awaiting == "pre"
+            first = self._k == 0 and self._awaiting == _Awaiting.PRE
             limit = self._timeouts.start if first else self._timeouts.step
             if time.monotonic() - self._last_progress > limit:
                 self._fail(StationLinkError(self._silence(limit, first)))

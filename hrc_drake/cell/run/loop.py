@@ -46,7 +46,7 @@ from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.service import PlanService
 from hrc_drake.progress import ProgressLine
 from hrc_drake.robot_models import GRIPPER, UR3
-from hrc_drake.scenario.schema import Scenario
+from hrc_drake.scenario.schema import Scenario, Separation
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.policy import Policy
 
@@ -288,7 +288,7 @@ class ClosedLoop:
             _StackLight(cell.meshcat) if setup.scenario.body.enabled else None,
             (still[0], Path(still[1])) if still is not None else None,
         )
-        if cell.meshcat is not None and setup.scenario.safety.separation == "predictive":
+        if cell.meshcat is not None and setup.scenario.safety.separation == Separation.PREDICTIVE:
             self.watch.forecast = _ForecastView(cell.meshcat, len(VIEW_TIMES))
         self.simulator.set_monitor(_monitor(self))
         self._started = False

@@ -80,7 +80,7 @@ from hrc_drake.motion.poses import IN_TRAY, CellFrames, layout_poses
 from hrc_drake.motion.scene import read_cell_frames
 from hrc_drake.obstacle_models import DEBRIS, OBSTACLE
 from hrc_drake.robot_models import GRIPPER, UR3, UR3_JOINTS
-from hrc_drake.scenario.schema import CameraSettings, Scenario
+from hrc_drake.scenario.schema import Activity, CameraSettings, Scenario
 from hrc_drake.tasks.assembly import SpecError
 from hrc_drake.tasks.decide import Operator
 from hrc_drake.tasks.graph import StateSpace, generate_states
@@ -216,7 +216,7 @@ def body_script_of(scenario: Scenario, frames: CellFrames, body_script=None):
     """The operator body's script: the one given, else the scenario's activity (`desk`: this
     operator seed's person on the layout's desk, a `DeskScript`; `bolting`: `BoltingScript`,
     as None)."""
-    if body_script is not None or scenario.body.activity != "desk":
+    if body_script is not None or scenario.body.activity != Activity.DESK:
         return body_script
     person = scenario.body.person(seed=scenario.operator.seed)
     return DeskScript(person, desk_of(frames, frames.design.layout))
