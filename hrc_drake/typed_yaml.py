@@ -1,9 +1,10 @@
 """Strict, typed YAML loading into dataclasses, without Drake.
 
-The cell layer loads scenarios with Drake's `yaml_load_typed`; the task layer (which imports no
-Drake) reads the same files with `load_typed` here. Both are strict in the same way: an unknown
-key or a value of the wrong type is an error naming the key, and keys left out keep the schema's
-defaults (or those of `defaults`, for command-line overrides on top of a file).
+Scenarios are read with `load_typed` here (`hrc_drake.scenario.load`), as Drake's
+`yaml_load_typed` reads them (a test holds the two together), without importing Drake, so that
+the task layer can read them too. Both are strict in the same way: an unknown key or a value
+of the wrong type is an error naming the key, and keys left out keep the schema's defaults (or
+those of `defaults`, for command-line overrides on top of a file).
 
 Supported field types: `str`, `int`, `float` (an int is accepted), `bool`, `X | None`, `X | Y`
 (the first that fits), `list[X]`, `dict[str, X]` and nested dataclasses.

@@ -2,10 +2,10 @@
 and run settings, and what the run should show.
 
 A scenario file (`scenarios/*.yaml`) is loaded strictly: a misspelt key or a value of the wrong
-type is an error naming it, and keys left out take the defaults below. The cell layer loads the
-same schema with Drake's `yaml_load_typed` (`hrc_drake.cell.scenario`); `hrc_drake.scenario.load`
-reads it without Drake for the task layer (`react`, `table2`, evaluations). Command-line overrides
-are more YAML merged on top (`--scenario-text "{motion: {hold_time: 0.5}}"`).
+type is an error naming it, and keys left out take the defaults below. `hrc_drake.scenario.load`
+reads it, without Drake, for the task layer and the cell alike, as Drake's `yaml_load_typed`
+would. Command-line overrides are more YAML merged on top
+(`--scenario-text "{motion: {hold_time: 0.5}}"`).
 
     name: row8-forces-4-then-8
     description: the operator mounts F3, then S12
