@@ -336,7 +336,12 @@ def play_cell_run(scenario, space: StateSpace, decider, operator):
     policy = DeciderPolicy(decider, space)
     planner = MotionPlanner(motion_options(scenario), design=cell_design(scenario, space.spec))
     result = run_scenario(
-        scenario, policy, operator=operator, on_task=policy.observe, motion_planner=planner
+        scenario,
+        policy,
+        operator=operator,
+        on_task=policy.observe,
+        motion_planner=planner,
+        space=space,
     )
     if result.interrupted:
         # Ctrl-C in the middle of a run: the evaluation reports the runs done, not this one.
