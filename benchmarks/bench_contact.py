@@ -373,7 +373,7 @@ def rim_pinch(modulus: float) -> list[dict]:
     for offset in PINCH_OFFSETS:
         texts = [
             "{assembly: four-slot, name: four-slot}",
-            f"{{faults: [{{kind: no-seat, task: 2, offset: {offset}}}]}}",
+            f"{{faults: [!NoSeat {{task: 2, offset: {offset}}}]}}",
             f"{{physics: {{contact: {{hydroelastic_modulus: {modulus:g}}}}}}}",
         ]
         loop = build_closed_loop(load_cell_scenario(None, texts))

@@ -26,7 +26,7 @@ import numpy as np
 from cell_pool import pooled_loop, run_pool
 
 from hrc_drake.atomic import atomic_write_text
-from hrc_drake.hri.faults import SIMULATED, FaultKind
+from hrc_drake.hri.faults import FAULT_CLASSES, SIMULATED, FaultKind
 
 CELLS = {"flange": "row1-optimal", "four-slot": None}
 # What the cell should do with each kind: recover and go on, or hand the task over.
@@ -59,7 +59,7 @@ REPORT = Path(__file__).parent / "reports" / "faults.md"
 
 
 def fault_entry(case: str, seed: int, tasks: int) -> str:
-    """The `faults:` entry of one seeded run (YAML flow text)."""
+    """The `faults:` entry of one seeded run (YAML flow text, tagged: `!GripLost {...}`)."""
     kind = case_kind(case)
     rng = np.random.default_rng([seed, CASES.index(case)])
     task = int(rng.integers(1, tasks + 1))
@@ -75,7 +75,7 @@ def fault_entry(case: str, seed: int, tasks: int) -> str:
     }[kind]
     if case == NO_SEAT_DEBRIS:
         extra = "obstacle: true"
-    return f"{{kind: {kind.value}, task: {task}, {extra}}}"
+    return f"!{FAULT_CLASSES[kind].__name__} {{task: {task}, {extra}}}"
 
 
 def _texts(cell: str, lean: bool) -> list[str]:

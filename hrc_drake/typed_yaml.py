@@ -7,12 +7,17 @@ of the wrong type is an error naming the key, and keys left out keep the schema'
 those of `defaults`, for command-line overrides on top of a file).
 
 Supported field types: `str`, `int`, `float` (an int is accepted), `bool`, `X | None`, `X | Y`
-(the first that fits), `list[X]`, `dict[str, X]` and nested dataclasses.
+(the first that fits), `list[X]`, `dict[str, X]` and nested dataclasses. A union of dataclasses
+(`GripLost | NoSeat | ...`) holds tagged variants, as Drake's loader reads them: the YAML tag
+`!Name` chooses the member whose class is named Name (`!GripLost {task: 2}`). Stricter than
+Drake, which reads an untagged mapping as the first member: here it is an error naming the key
+and the tags to choose from.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import re
 import types
 import typing
@@ -67,6 +72,65 @@ def safe_load_unique(text: str) -> Any:
     return yaml.load(text, Loader=_UniqueKeyLoader)  # a SafeLoader subclass: as safe
 
 
+@dataclasses.dataclass(frozen=True)
+class _Tagged:
+    """A YAML node with a local tag, `!Name {...}`: the tag's name (without the `!`) and the
+    node's value (a mapping, for a variant). Only a union of dataclasses takes one."""
+
+    name: str
+    value: Any
+
+
+class _TaggedLoader(_UniqueKeyLoader):
+    """`_UniqueKeyLoader` reading a node with a local tag (`!GripLost {task: 2}`) as a `_Tagged`
+    value, for a union of dataclasses to choose its member by (as Drake's loader does). Still
+    a SafeLoader: a tag builds no object but that small value; YAML's own `!!` tags are
+    unchanged."""
+
+
+def _construct_tagged(loader: _TaggedLoader, name: str, node: yaml.Node) -> _Tagged:
+    if isinstance(node, yaml.MappingNode):
+        return _Tagged(name, loader.construct_mapping(node, deep=True))
+    if isinstance(node, yaml.SequenceNode):
+        return _Tagged(name, loader.construct_sequence(node, deep=True))
+    return _Tagged(name, loader.construct_scalar(node))
+
+
+_TaggedLoader.add_multi_constructor("!", _construct_tagged)
+
+
+class _TaggedDumper(yaml.SafeDumper):
+    """PyYAML's safe dumper, writing a `_Tagged` value back as the tagged node it was read
+    from."""
+
+
+def _represent_tagged(dumper: _TaggedDumper, tagged: _Tagged) -> yaml.Node:
+    tag = f"!{tagged.name}"
+    if isinstance(tagged.value, dict):
+        return dumper.represent_mapping(tag, tagged.value)
+    if isinstance(tagged.value, list):
+        return dumper.represent_sequence(tag, tagged.value)
+    return dumper.represent_scalar(tag, str(tagged.value))
+
+
+_TaggedDumper.add_representer(_Tagged, _represent_tagged)
+
+
+def load_tagged(text: str) -> Any:
+    """`safe_load_unique(text)` that keeps local tags (`!GripLost {task: 2}`), for a typed
+    schema's variants (`load_typed`) or to write the text out again (`dump_flow`); any other
+    tag is still a yaml.YAMLError."""
+    return yaml.load(text, Loader=_TaggedLoader)  # a SafeLoader subclass: as safe
+
+
+def dump_flow(data: Any) -> str:
+    """`data` (as `load_tagged` reads it) as one line of YAML flow text, keys in their order and
+    tags kept: `{faults: [!GripLost {task: 2}]}`."""
+    return yaml.dump(
+        data, Dumper=_TaggedDumper, default_flow_style=True, width=10**6, sort_keys=False
+    ).strip()
+
+
 def _short(value: Any, limit: int = 60) -> str:
     """`repr(value)`, cut to `limit` characters: a whole text file read as one YAML string
     (`--scenario README.md`) must not fill the terminal with a one-line error."""
@@ -93,9 +157,72 @@ def yaml_error_line(err: yaml.YAMLError, source: str) -> str:
     return f"{where}: bad YAML: {problem}{extra}"
 
 
+def _variants(tp: Any) -> list[type]:
+    """The members of `tp` when it is a union of two or more dataclasses (tagged variants),
+    else []. `X | None` with one dataclass X is an optional section, not a variant."""
+    if typing.get_origin(tp) not in (typing.Union, types.UnionType):
+        return []
+    inner = [a for a in typing.get_args(tp) if a is not type(None)]
+    return inner if len(inner) > 1 and all(map(dataclasses.is_dataclass, inner)) else []
+
+
+def _tags(members: list[type]) -> str:
+    return ", ".join(f"!{m.__name__}" for m in members)
+
+
+def _flow(mapping: dict, limit: int = 60) -> str:
+    """`mapping` as short YAML flow text, for an example in a message."""
+    text = dump_flow(mapping)
+    return text if len(text) <= limit else "{...}"
+
+
+def _untagged(value: Any, members: list[type]) -> str:
+    """What is wrong with an untagged `value` where a variant of `members` goes, and the fix.
+    A mapping with a `kind:` naming a member's `kind` (a class attribute, e.g. FaultKind's
+    `grip-lost`) is written with that member's tag instead."""
+    first = members[0].__name__
+    if not isinstance(value, dict):
+        return f"expected a tagged mapping, e.g. !{first} {{...}}, got {_short(value)}"
+    if "kind" not in value:
+        return f"untagged {_flow(value)}: tag it with its type, e.g. !{first} {_flow(value)}"
+    rest = {k: v for k, v in value.items() if k != "kind"}
+    kinds = {m: getattr(m, "kind", None) for m in members}
+    named = [m for m, kind in kinds.items() if kind is not None and str(kind) == str(value["kind"])]
+    if named:
+        return f"the kind is a tag, not a key: write !{named[0].__name__} {_flow(rest)}"
+    return (
+        f"the kind is a tag, not a key (and {_short(value['kind'])} is none): write e.g. "
+        f"!{first} {_flow(rest)}"
+    )
+
+
+def _variant(value: Any, members: list[type], key: str, default: Any) -> Any:
+    """The member of a union of dataclasses that the YAML tag `!Name` names (the class's
+    `__name__`), read from the tagged mapping as that dataclass (merged onto `default` when it
+    is already of that member, as Drake merges)."""
+    if not isinstance(value, _Tagged):
+        raise TypedYamlError(f"{key}: {_untagged(value, members)}; the tags are {_tags(members)}")
+    chosen = next((m for m in members if m.__name__ == value.name), None)
+    if chosen is None:
+        close = difflib.get_close_matches(value.name, [m.__name__ for m in members], n=1)
+        hint = f" (did you mean !{close[0]}?)" if close else ""
+        raise TypedYamlError(
+            f"{key}: unknown tag !{value.name}{hint}; the tags are {_tags(members)}"
+        )
+    base = default if isinstance(default, chosen) else None
+    return _merge(value.value, chosen, key, base)
+
+
 def _convert(value: Any, tp: Any, key: str, default: Any = dataclasses.MISSING) -> Any:
     origin = typing.get_origin(tp)
     args = typing.get_args(tp)
+    members = _variants(tp)
+    if members and not (value is None and type(None) in args):
+        return _variant(value, members, key, default)
+    if isinstance(value, _Tagged):
+        raise TypedYamlError(
+            f"{key}: a tag (!{value.name}) chooses among variants; {key} has none: leave it out"
+        )
     if origin in (typing.Union, types.UnionType):
         if value is None and type(None) in args:
             return None
@@ -177,7 +304,7 @@ def load_typed(
     """
     if text is not None:
         try:
-            data = safe_load_unique(text)
+            data = load_tagged(text)
         except yaml.YAMLError as err:
             raise YamlSyntaxError(yaml_error_line(err, source)) from None
     base = dataclasses.replace(defaults) if defaults is not None else None

@@ -429,7 +429,7 @@ def test_a_person_does_a_task_the_robot_hands_over(chromium, tmp_path):
     that the part is lost after the person's answer however slowly the page comes up."""
     text = (
         "{interaction: {mode: wait}, run: {recover_tries: 0, indication_timeout: 60.0}, "
-        "faults: [{kind: grip-lost, task: 1}]}"
+        "faults: [!GripLost {task: 1}]}"
     )
     port = free_port()
     args = ["--live", "--lean", "--scenario", "row1-optimal", "--port", str(port)]

@@ -133,6 +133,20 @@ def test_simulate_refuses_what_it_accepted_silently(capsys, tmp_path, argv, word
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize(
+    ("entry", "words"),
+    [
+        ("{kind: grip-lost, task: 1}", ["faults[0]", "not a key", "!GripLost {task: 1}"]),
+        ("{task: 1}", ["faults[0]", "untagged", "!GripLost {task: 1}"]),
+        ("!Slipped {task: 1}", ["faults[0]", "unknown tag !Slipped"]),
+    ],
+)
+def test_a_fault_without_its_tag_is_one_line_naming_the_tags(capsys, tmp_path, entry, words):
+    argv = ["--scenario-text", f"{{faults: [{entry}]}}", "--record", tmp_path / "r.html"]
+    assert_one_line(*refused(capsys, "simulate", *argv, "--lean"), *words, "the tags are !GripLost")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_duplicate_keys_in_a_scenario_file_are_refused(capsys, tmp_path):
     scenario = tmp_path / "twice.yaml"
     scenario.write_text("motion:\n  hold_time: 1\nmotion:\n  hold_time: 5\n")

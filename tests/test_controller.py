@@ -113,7 +113,7 @@ def _loop(scenario_name: str = "row1-optimal"):
 def test_an_arm_pushed_off_its_path_stops_the_task_with_the_reason():
     # 150 N·m on the shoulder pan from 2 s into the first task, well past the UR3's 56 N·m
     # shoulder servo.
-    push = "{faults: [{kind: pushed, task: 1, after: 2.0, torque: 150}]}"
+    push = "{faults: [!Pushed {task: 1, after: 2.0, torque: 150}]}"
     loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, NO_DELAY, push]))
     assert loop.advance_to(2.0) == Mode.EXECUTE  # on its way to the first part
     assert loop.advance_to(4.0) == Mode.FAILED

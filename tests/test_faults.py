@@ -9,7 +9,7 @@ import pytest
 from hrc_drake.cell.controller.supervisor import Mode
 from hrc_drake.cell.run.run import build_closed_loop
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
-from hrc_drake.hri.faults import FaultConfig, FaultError, check_faults
+from hrc_drake.hri.faults import FaultError, GripLost, NoSeat, Pushed, check_faults
 from hrc_drake.robot_models import UR3, UR3_JOINTS
 
 ROW1_STATES = [(), ("F1",), ("F1", "S23"), ("F1", "S23", "F03")]
@@ -27,7 +27,7 @@ def _result(text: str, scenario: str = "row1-optimal"):
 
 def test_a_protective_stop_halts_the_arm_on_its_path_and_the_task_resumes():
     # Task 2's motion starts about 2.6 s after its prompt; the stop comes 4 s after it.
-    text = "{faults: [{kind: protective-stop, task: 2, duration: 1.5}]}"
+    text = "{faults: [!ProtectiveStop {task: 2, duration: 1.5}]}"
     loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, text]))
     plant, station = loop.station.plant, loop.station
     speeds = []
@@ -49,7 +49,7 @@ def test_a_protective_stop_halts_the_arm_on_its_path_and_the_task_resumes():
 
 
 def test_a_silent_operator_is_asked_again_and_the_assembly_goes_on():
-    result = _result("{faults: [{kind: operator-silent, task: 2, duration: 12}]}")
+    result = _result("{faults: [!OperatorSilent {task: 2, duration: 12}]}")
     assert result.done and result.states == ROW1_STATES
     (record,) = result.faults
     assert record.kind == "operator-silent" and record.recovered and record.recovery == "ask"
@@ -62,15 +62,13 @@ def test_a_silent_operator_is_asked_again_and_the_assembly_goes_on():
 @pytest.mark.parametrize(
     ("fault", "task", "cause"),
     [
-        ("kind: pushed", 2, "tracking"),
-        ("kind: gripper-stuck", 1, "grip"),
-        ("kind: gripper-stuck, stuck: open", 2, "release"),
+        ("!Pushed {task: 2}", 2, "tracking"),
+        ("!GripperStuck {task: 1}", 1, "grip"),
+        ("!GripperStuck {task: 2, stuck: open}", 2, "release"),
     ],
 )
 def test_faults_the_cell_cannot_fix_stop_the_task_and_hand_it_over(fault, task, cause):
-    loop = build_closed_loop(
-        load_cell_scenario("row1-optimal", [LEAN, f"{{faults: [{{{fault}, task: {task}}}]}}"])
-    )
+    loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, f"{{faults: [{fault}]}}"]))
     result = loop.run()
     (found,) = loop.status.detections
     assert found.cause == cause and found.step == task
@@ -85,9 +83,7 @@ def test_faults_the_cell_cannot_fix_stop_the_task_and_hand_it_over(fault, task, 
 
 def test_a_lost_grip_lets_the_part_fall_and_the_robot_picks_it_up_from_where_it_lies():
     loop = build_closed_loop(
-        load_cell_scenario(
-            "row1-optimal", [LEAN, "{faults: [{kind: grip-lost, task: 1, after: 1.0}]}"]
-        )
+        load_cell_scenario("row1-optimal", [LEAN, "{faults: [!GripLost {task: 1, after: 1.0}]}"])
     )
     plant, station = loop.station.plant, loop.station
     fell = None
@@ -118,7 +114,7 @@ def test_a_part_that_fell_out_of_reach_is_handed_over_and_the_assembly_goes_on()
     # put it there by hand, run.handover_time, then the lean 0.5 s bolting), and the robot
     # goes on with the next task from where its arm stopped.
     # (The robot waits for the indication: the fall depends on the carry's timing.)
-    text = "{interaction: {mode: wait}, faults: [{kind: grip-lost, task: 1, after: 0.5}]}"
+    text = "{interaction: {mode: wait}, faults: [!GripLost {task: 1, after: 0.5}]}"
     loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, text]))
     result = loop.run()
     assert result.done and result.error is None and result.states == ROW1_STATES
@@ -147,7 +143,7 @@ def test_a_part_that_fell_out_of_reach_is_handed_over_and_the_assembly_goes_on()
 def test_a_part_on_a_host_handed_over_is_seated_on_the_host_where_it_sits():
     # The oval flange of task 3 (F03, on the square flange) lands upside down: the operator
     # puts it in its row of the square, as the square measurably sits.
-    text = "{interaction: {mode: wait}, faults: [{kind: grip-lost, task: 3, after: 0.95}]}"
+    text = "{interaction: {mode: wait}, faults: [!GripLost {task: 3, after: 0.95}]}"
     loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, text]))
     result = loop.run()
     assert result.done and result.states == ROW1_STATES, result.error
@@ -161,7 +157,7 @@ def test_a_part_resting_tilted_within_half_a_radian_is_picked_again():
     # Lost later in the carry of task 3, the flange comes to rest about 0.37 rad tilted (past
     # the 0.2 rad a grasp from above allowed): the gripper tilts with it, picks it and places
     # it; the robot recovers by itself.
-    text = "{interaction: {mode: wait}, faults: [{kind: grip-lost, task: 3, after: 0.85}]}"
+    text = "{interaction: {mode: wait}, faults: [!GripLost {task: 3, after: 0.85}]}"
     loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, text]))
     plant, station = loop.station.plant, loop.station
     tilt, t = None, 0.0
@@ -187,7 +183,7 @@ def test_a_part_resting_tilted_within_half_a_radian_is_picked_again():
 
 def test_a_part_let_go_off_its_seat_is_picked_again_and_replaced():
     loop = build_closed_loop(
-        load_cell_scenario("row1-optimal", [LEAN, "{faults: [{kind: no-seat, task: 1}]}"])
+        load_cell_scenario("row1-optimal", [LEAN, "{faults: [!NoSeat {task: 1}]}"])
     )
     result = loop.run()
     assert result.done and result.states == ROW1_STATES, result.error
@@ -201,7 +197,7 @@ def test_a_part_let_go_off_its_seat_is_picked_again_and_replaced():
 def test_a_part_that_cannot_be_replaced_in_time_is_handed_over():
     # No second try: the first re-placement is the last; with none, the task is handed over,
     # and the operator seats the part.
-    text = "{run: {recover_tries: 0}, faults: [{kind: no-seat, task: 1}]}"
+    text = "{run: {recover_tries: 0}, faults: [!NoSeat {task: 1}]}"
     loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, text]))
     result = loop.run()
     assert result.done and result.states == ROW1_STATES, result.error
@@ -215,7 +211,7 @@ def test_an_obstacle_over_the_seat_blocks_the_path_until_it_is_taken_away():
     # The box stands over S23's seat for 6 s from task 2's prompt: the robot, which waits for
     # the indication, sees it, finds no path, holds still at home, and plans again once the box
     # is gone.
-    text = "{interaction: {mode: wait}, faults: [{kind: no-path, task: 2}]}"
+    text = "{interaction: {mode: wait}, faults: [!NoPath {task: 2}]}"
     loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, text]))
     plant, station = loop.station.plant, loop.station
     seen, speeds, t = [], [], 0.0
@@ -246,7 +242,7 @@ def test_an_obstacle_set_down_while_the_robot_moves_stops_it_on_its_path():
     # Anticipating, the robot has started on S23 when the box comes down over the seat: it
     # sees the box, stops along its path, finds no path from there, waits, and plans again
     # from where it stands once the box is gone.
-    result = _result("{faults: [{kind: no-path, task: 2}]}")
+    result = _result("{faults: [!NoPath {task: 2}]}")
     assert result.done and result.states == ROW1_STATES, result.error
     (record,) = result.faults
     assert record.recovered and record.recovery == "retry"
@@ -260,7 +256,7 @@ def test_an_obstacle_set_down_while_the_robot_moves_stops_it_on_its_path():
 def test_an_obstacle_that_stays_hands_the_task_over():
     # The operator, who set the box down, puts F1 in its seat under it by hand, and S23 too
     # while the box still stands in the robot's way (its paths go by it).
-    text = "{run: {path_timeout: 4}, faults: [{kind: no-path, task: 1, duration: 60}]}"
+    text = "{run: {path_timeout: 4}, faults: [!NoPath {task: 1, duration: 60}]}"
     result = _result(text)
     assert result.done and result.states == ROW1_STATES, result.error
     handed = [t.handed_over for t in result.tasks if t.handed_over]
@@ -277,7 +273,7 @@ def test_debris_in_the_pocket_keeps_the_part_off_its_seat_and_the_task_is_handed
     # The debris is too small for the cell to see: the part lands on it, is found off its seat
     # at the release, is picked and placed again (once), lands on it again, and is handed over.
     # Stopped at the handover: the part stands on the debris.
-    text = "{run: {recover_tries: 1}, faults: [{kind: no-seat, task: 1, obstacle: true}]}"
+    text = "{run: {recover_tries: 1}, faults: [!NoSeat {task: 1, obstacle: true}]}"
     loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, text]))
     t = 0.0
     while loop.advance_to(t) not in (Mode.HANDOVER, Mode.DONE, Mode.FAILED) and t < 120:
@@ -326,20 +322,18 @@ def test_without_faults_nothing_is_injected_or_detected():
 @pytest.mark.parametrize(
     ("entry", "message"),
     [
-        (FaultConfig(kind="slip", task=1), "unknown kind 'slip'"),
-        (FaultConfig(kind="pushed", task=0), "tasks count from 1"),
-        (FaultConfig(kind="pushed", task=4), "past the run, which has 3 task"),
-        (FaultConfig(kind="pushed", task=1, after=-2.0), "after -2.0 must be >= 0"),
-        (FaultConfig(kind="grip-lost", task=1, force=-1.0), "force -1.0 must be >= 0"),
-        (FaultConfig(kind="no-seat", task=1, offset=-0.01), "offset -0.01 must be >= 0"),
-        (FaultConfig(kind="pushed", task=1, joint="elbow"), "joint 'elbow' is not the robot's"),
+        ({"kind": "slip", "task": 1}, "is not a fault; give one of !GripLost, !NoSeat"),
+        (Pushed(task=0), "tasks count from 1"),
+        (Pushed(task=4), "past the run, which has 3 task"),
+        (Pushed(task=1, after=-2.0), "after -2.0 must be >= 0"),
+        (GripLost(task=1, force=-1.0), "force -1.0 must be >= 0"),
+        (NoSeat(task=1, offset=-0.01), "offset -0.01 must be >= 0"),
+        (Pushed(task=1, joint="elbow"), "joint 'elbow' is not the robot's"),
     ],
 )
 def test_bad_fault_entries_are_named(entry, message):
     with pytest.raises(FaultError, match=message) as err:
-        check_faults(
-            [FaultConfig(kind="pushed", task=1), entry], "test", max_tasks=3, joints=UR3_JOINTS
-        )
+        check_faults([Pushed(task=1), entry], "test", max_tasks=3, joints=UR3_JOINTS)
     assert "faults[1]" in str(err.value) and "\n" not in str(err.value)
 
 
@@ -348,7 +342,7 @@ def test_a_run_ended_by_a_fault_writes_its_json_and_recording(tmp_path):
     import sys
 
     record = tmp_path / "pushed.html"
-    text = "{faults: [{kind: pushed, task: 1}]}"
+    text = "{faults: [!Pushed {task: 1}]}"
     cmd = [sys.executable, "-m", "hrc_drake.cli", "simulate", "--lean", "--json"]
     done = subprocess.run(
         [*cmd, "--scenario-text", text, "--record", str(record)],
@@ -389,9 +383,7 @@ def test_an_operator_who_never_answers_is_given_up_on_with_the_json_written(tmp_
     import subprocess
     import sys
 
-    text = (
-        "{run: {indication_give_up: 30}, faults: [{kind: operator-silent, task: 2, duration: 200}]}"
-    )
+    text = "{run: {indication_give_up: 30}, faults: [!OperatorSilent {task: 2, duration: 200}]}"
     record = tmp_path / "silent.html"
     cmd = [sys.executable, "-m", "hrc_drake.cli", "simulate", "--lean", "--json"]
     done = subprocess.run(
@@ -420,7 +412,7 @@ def test_simulate_json_says_the_operator_recovered_a_part_the_robot_could_not_pi
     import subprocess
     import sys
 
-    text = "{faults: [{kind: grip-lost, task: 2}]}"
+    text = "{faults: [!GripLost {task: 2}]}"
     cmd = [sys.executable, "-m", "hrc_drake.cli", "simulate", "--scenario", "row1-optimal"]
     done = subprocess.run(
         [*cmd, "--lean", "--json", "--scenario-text", text],

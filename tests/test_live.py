@@ -280,7 +280,7 @@ def test_a_live_run_goes_on_once_the_person_says_they_did_the_task_handed_over(m
     from hrc_drake.cell.run.run import run_scenario
     from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 
-    text = "{run: {recover_tries: 0}, faults: [{kind: grip-lost, task: 1}]}"
+    text = "{run: {recover_tries: 0}, faults: [!GripLost {task: 1}]}"
     row = load_cell_scenario("row1-optimal", [LEAN, text])
     shown, later = [], []
 

@@ -1,38 +1,49 @@
 """Faults a scenario injects into the simulated cell, and what the run reports of them.
 
-A scenario's `faults:` list names, per entry, a kind and the task it strikes (`task: N`, the N-th
-task of the run, from 1) and the kind's parameters, each with a default, so that `{kind: K,
-task: N}` alone is a valid entry. The station injects them (`hrc_drake.cell.station.faults`); the
-controller never reads this list: it detects every fault from what it measures (the gripper,
-the configuration sensor, joint tracking, the protective-stop input, the operator's silence) and
-recovers or hands the task over to the operator.
+A scenario's `faults:` list holds one tagged entry per fault, as Drake's `model_drivers` hold
+their drivers: the tag names the kind (`!GripLost`, the class of that name below) and the
+mapping gives the task it strikes (`task: N`, the N-th task of the run, from 1) and the kind's
+own parameters, each with a default, so that `!GripLost {task: 2}` alone is a valid entry:
 
-Kinds (`FaultKind`) and their parameters (defaults in brackets):
+    faults: [!GripLost {task: 2}, !Pushed {task: 1, torque: 150}]
 
-- `grip-lost`: the grip force drops to `force` N [1.0] `after` s [1.0] into the carry, until the
-  fingers open again; the part falls where physics puts it.
-- `no-seat`: the part cannot seat: it slides `offset` m [0.008] along the pads `after` s [0.8]
-  into the carry (lifted clear of the tray), so it is placed that far off its seat; or, with
-  `obstacle: true`, debris too small for the cell to see drops into the pocket of the seat the
-  robot proposes when the task's prompt appears, and stays (the part lands on it).
-- `gripper-stuck`: the gripper does not close (`stuck: close`) or open (`stuck: open`).
-- `no-path`: a temporary obstacle (a box) stands over the seat of the task the robot proposes
-  from the task's prompt on, for `duration` s [6.0]; the operator, who set it down, answers 1 s
-  after the prompt.
-- `operator-silent`: the operator gives no indication for `duration` s [15.0].
-- `protective-stop`: an external stop signal `after` s [4.0] into the task, for `duration` s
-  [2.0].
-- `pushed`: a torque of `torque` N·m [80] on `joint` [shoulder_pan_joint] `after` s [4.0] into
-  the task, for `duration` s [0.3].
+The station injects them (`hrc_drake.cell.station.faults`); the controller never reads this
+list: it detects every fault from what it measures (the gripper, the configuration sensor, joint
+tracking, the protective-stop input, the operator's silence) and recovers or hands the task over
+to the operator. The run reports each by its kind (`FaultKind`, e.g. `grip-lost`).
+
+Kinds, their tags and their parameters (defaults in brackets):
+
+- `grip-lost` (`!GripLost`): the grip force drops to `force` N [1.0] `after` s [1.0] into the
+  carry, until the fingers open again; the part falls where physics puts it.
+- `no-seat` (`!NoSeat`): the part cannot seat: it slides `offset` m [0.008] along the pads
+  `after` s [0.8] into the carry (lifted clear of the tray), so it is placed that far off its
+  seat; or, with `obstacle: true` [false], debris too small for the cell to see drops into the
+  pocket of the seat the robot proposes when the task's prompt appears, and stays (the part
+  lands on it).
+- `gripper-stuck` (`!GripperStuck`): the gripper does not close (`stuck: close`, the default)
+  or open (`stuck: open`).
+- `no-path` (`!NoPath`): a temporary obstacle (a box) stands over the seat of the task the robot
+  proposes from the task's prompt on, for `duration` s [6.0]; the operator, who set it down,
+  answers 1 s after the prompt.
+- `operator-silent` (`!OperatorSilent`): the operator gives no indication for `duration` s
+  [15.0].
+- `protective-stop` (`!ProtectiveStop`): an external stop signal `after` s [4.0] into the task,
+  for `duration` s [2.0].
+- `pushed` (`!Pushed`): a torque of `torque` N·m [80] on `joint` [shoulder_pan_joint] `after` s
+  [4.0] into the task, for `duration` s [0.3].
 """
 
+import dataclasses
+import typing
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import ClassVar
 
 
 class FaultKind(StrEnum):
-    """The kinds of fault a scenario can inject."""
+    """The kinds of fault a scenario can inject (what the run's report calls them)."""
 
     GRIP_LOST = "grip-lost"
     NO_SEAT = "no-seat"
@@ -43,49 +54,95 @@ class FaultKind(StrEnum):
     PUSHED = "pushed"
 
 
-@dataclass
-class FaultConfig:
-    """One fault of a scenario's `faults:` list (see the module docstring for each kind's
-    parameters; those of other kinds are left at their defaults)."""
+class Stuck(StrEnum):
+    """Which command a stuck gripper does not obey (`GripperStuck.stuck`)."""
 
-    kind: str = ""
+    CLOSE = "close"  # the fingers can open, never close
+    OPEN = "open"  # closed on the part, they never open again
+
+
+# Plain (not frozen) dataclasses: Drake's `yaml_load_typed` sets their fields one by one.
+@dataclass
+class GripLost:
+    """`grip-lost`: the grip force drops to `force` N `after` s into the carry (from the
+    fingers' stall on the part), until the fingers open again."""
+
+    kind: ClassVar[FaultKind] = FaultKind.GRIP_LOST
     task: int = 0
     force: float = 1.0
-    after: float = -1.0  # -1: the kind's default (see `after_seconds`)
+    after: float = 1.0
+
+
+@dataclass
+class NoSeat:
+    """`no-seat`: the part slides `offset` m along the pads `after` s into the carry (from the
+    fingers' stall on the part); or, with `obstacle`, debris drops into the pocket of the seat
+    the robot proposes when the task's prompt appears (`offset` and `after` unused)."""
+
+    kind: ClassVar[FaultKind] = FaultKind.NO_SEAT
+    task: int = 0
     offset: float = 0.008
+    after: float = 0.8
     obstacle: bool = False
-    stuck: str = "close"
-    duration: float = -1.0  # -1: the kind's default (see `duration_seconds`)
+
+
+@dataclass
+class GripperStuck:
+    """`gripper-stuck`: the fingers do not obey `stuck` (a `Stuck`: close or open) in the task.
+    Text, not the enum, so that Drake's loader reads it too."""
+
+    kind: ClassVar[FaultKind] = FaultKind.GRIPPER_STUCK
+    task: int = 0
+    stuck: str = Stuck.CLOSE.value
+
+
+@dataclass
+class NoPath:
+    """`no-path`: a box stands over the seat the robot proposes for `duration` s from the
+    task's prompt."""
+
+    kind: ClassVar[FaultKind] = FaultKind.NO_PATH
+    task: int = 0
+    duration: float = 6.0
+
+
+@dataclass
+class OperatorSilent:
+    """`operator-silent`: the operator gives no indication for `duration` s."""
+
+    kind: ClassVar[FaultKind] = FaultKind.OPERATOR_SILENT
+    task: int = 0
+    duration: float = 15.0
+
+
+@dataclass
+class ProtectiveStop:
+    """`protective-stop`: an external stop signal `after` s into the task, for `duration` s."""
+
+    kind: ClassVar[FaultKind] = FaultKind.PROTECTIVE_STOP
+    task: int = 0
+    after: float = 4.0
+    duration: float = 2.0
+
+
+@dataclass
+class Pushed:
+    """`pushed`: a torque of `torque` N·m on `joint` `after` s into the task, for `duration`
+    s."""
+
+    kind: ClassVar[FaultKind] = FaultKind.PUSHED
+    task: int = 0
     torque: float = 80.0
     joint: str = "shoulder_pan_joint"
+    after: float = 4.0
+    duration: float = 0.3
 
-    @property
-    def fault_kind(self) -> FaultKind:
-        """The kind as an enum (ValueError for an unknown kind)."""
-        return FaultKind(self.kind)
 
-    @property
-    def after_seconds(self) -> float:
-        """Seconds into the carry (grip-lost, no-seat: from the fingers' stall on the part) or
-        into the task (protective-stop, pushed)."""
-        if self.after >= 0:
-            return self.after
-        if self.fault_kind in (FaultKind.GRIP_LOST, FaultKind.NO_SEAT):
-            return 1.0 if self.fault_kind == FaultKind.GRIP_LOST else 0.8
-        return 4.0
+# One entry of a scenario's `faults:` list: the YAML tag (`!GripLost`) chooses the member.
+FaultConfig = GripLost | NoSeat | GripperStuck | NoPath | OperatorSilent | ProtectiveStop | Pushed
 
-    @property
-    def duration_seconds(self) -> float:
-        """How long the fault lasts (no-path, operator-silent, protective-stop, pushed)."""
-        if self.duration >= 0:
-            return self.duration
-        return {
-            FaultKind.NO_PATH: 6.0,
-            FaultKind.OPERATOR_SILENT: 15.0,
-            FaultKind.PROTECTIVE_STOP: 2.0,
-            FaultKind.PUSHED: 0.3,
-        }.get(self.fault_kind, 0.0)
-
+# The entry's class of each kind (its YAML tag is the class's name: `!GripLost`).
+FAULT_CLASSES: dict[FaultKind, type] = {cls.kind: cls for cls in typing.get_args(FaultConfig)}
 
 # The kinds the simulated cell injects and the controller handles so far.
 SIMULATED = (
@@ -109,16 +166,18 @@ def check_faults(
     max_tasks: int | None = None,
     joints: Sequence[str] | None = None,
 ) -> None:
-    """Value checks of a `faults:` list: FaultError naming the entry (`faults[i]`) for an unknown
-    kind, a task before 1 (or past `max_tasks`, the run's length when it is known), a negative or
-    out-of-range parameter, or a pushed joint not among `joints` (the robot's, when known)."""
-    kinds = ", ".join(k.value for k in FaultKind)
+    """Value checks of a `faults:` list: FaultError naming the entry (`faults[i]`) for an entry
+    that is not a fault, a task before 1 (or past `max_tasks`, the run's length when it is
+    known), a negative or out-of-range parameter, or a pushed joint not among `joints` (the
+    robot's, when known)."""
     for i, fault in enumerate(faults):
-        where = f"scenario {source}: faults[{i}] ({fault.kind or 'no kind'})"
-        try:
-            kind = fault.fault_kind
-        except ValueError:
-            raise FaultError(f"{where}: unknown kind {fault.kind!r}; kinds are {kinds}") from None
+        if not isinstance(fault, FaultConfig):
+            tags = ", ".join(f"!{cls.__name__}" for cls in FAULT_CLASSES.values())
+            raise FaultError(
+                f"scenario {source}: faults[{i}]: {fault!r} is not a fault; give one of {tags}"
+            )
+        kind = fault.kind
+        where = f"scenario {source}: faults[{i}] ({kind.value})"
         if kind not in SIMULATED:
             built = ", ".join(k.value for k in SIMULATED)
             raise FaultError(
@@ -131,32 +190,33 @@ def check_faults(
                 f"{where}: task {fault.task} is past the run, which has {max_tasks} task(s); "
                 "choose a task within it"
             )
-        _check_values(fault, kind, where)
-        if kind == FaultKind.PUSHED and joints is not None and fault.joint not in joints:
+        _check_values(fault, where)
+        if isinstance(fault, Pushed) and joints is not None and fault.joint not in joints:
             raise FaultError(
                 f"{where}: joint {fault.joint!r} is not the robot's; use one of {', '.join(joints)}"
             )
 
 
-def _check_values(fault: FaultConfig, kind: FaultKind, where: str) -> None:
+def _check_values(fault: FaultConfig, where: str) -> None:
+    """The signs of the parameters the fault's kind has, then each kind's own ranges."""
+    own = [f.name for f in dataclasses.fields(fault)]
     for name in ("force", "offset", "torque"):
-        if getattr(fault, name) < 0:
+        if name in own and getattr(fault, name) < 0:
             raise FaultError(f"{where}: {name} {getattr(fault, name)} must be >= 0")
     for name in ("after", "duration"):
-        value = getattr(fault, name)
-        if value < 0 and value != -1.0:
-            raise FaultError(f"{where}: {name} {value} must be >= 0 (seconds)")
-    if kind == FaultKind.GRIP_LOST and fault.force >= 3.0:
+        if name in own and getattr(fault, name) < 0:
+            raise FaultError(f"{where}: {name} {getattr(fault, name)} must be >= 0 (seconds)")
+    if isinstance(fault, GripLost) and fault.force >= 3.0:
         raise FaultError(
             f"{where}: force {fault.force} N is a grip the RG2 can hold (3-40 N); a lost grip "
             "drops below 3 N"
         )
-    if kind == FaultKind.NO_SEAT and not fault.obstacle and fault.offset <= 0.0015:
+    if isinstance(fault, NoSeat) and not fault.obstacle and fault.offset <= 0.0015:
         raise FaultError(
             f"{where}: offset {fault.offset} m lets the part seat (the pockets have 1.5 mm of "
             "clearance); give more than 0.0015, or obstacle: true"
         )
-    if fault.stuck not in ("close", "open"):
+    if isinstance(fault, GripperStuck) and fault.stuck not in {s.value for s in Stuck}:
         raise FaultError(f"{where}: stuck {fault.stuck!r}: give close or open")
 
 
@@ -191,4 +251,19 @@ class FaultRecord:
         }
 
 
-__all__ = ["FaultConfig", "FaultError", "FaultKind", "FaultRecord", "check_faults"]
+__all__ = [
+    "FAULT_CLASSES",
+    "FaultConfig",
+    "FaultError",
+    "FaultKind",
+    "FaultRecord",
+    "GripLost",
+    "GripperStuck",
+    "NoPath",
+    "NoSeat",
+    "OperatorSilent",
+    "ProtectiveStop",
+    "Pushed",
+    "Stuck",
+    "check_faults",
+]

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import yaml
 
+from hrc_drake.hri.faults import FaultConfig
 from hrc_drake.scenario.schema import Scenario
 
 # Settings the station never reads, or that are labels only (dotted keys and their sub-keys).
@@ -45,7 +46,10 @@ SHOWN = 3  # differences named in a refusal; the rest are counted
 def _plain(value):
     """`value` as JSON's types (dataclasses and mappings as dicts, sequences as lists)."""
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+        fields = {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+        # A fault's kind is its class (its YAML tag), not a field: without it, two kinds with
+        # the same fields (`!NoPath {task: 1, duration: 9}`, `!OperatorSilent {...}`) would match.
+        return {"kind": value.kind.value, **fields} if isinstance(value, FaultConfig) else fields
     if isinstance(value, Mapping):
         return {str(k): _plain(v) for k, v in value.items()}
     if isinstance(value, enum.Enum):

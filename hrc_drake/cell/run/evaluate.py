@@ -36,8 +36,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from hrc_drake.evaluate import predicted_tasks, simulate_run
 from hrc_drake.evaluation_runs import RunResult, run_seed
 from hrc_drake.paths import UsageError
@@ -47,6 +45,7 @@ from hrc_drake.tasks.interaction import MODES, InteractionCosts, operator_delays
 from hrc_drake.tasks.policy import PolicyFileError
 from hrc_drake.tasks.protocols import TiresAlongTheRun, TotalDelay
 from hrc_drake.tasks.tokens import UNDO
+from hrc_drake.typed_yaml import dump_flow, load_tagged
 
 DEFAULT_BASE_SCENARIO = "row1-optimal"
 
@@ -136,7 +135,7 @@ class CellOptions:
 
         data: dict[str, Any] = {}
         for text in self.overrides[1:] if self._lean() else self.overrides:
-            _merge(data, _numbers(yaml.safe_load(text) or {}))
+            _merge(data, _numbers(load_tagged(text) or {}))  # tags (`!GripLost`) kept
         spec = setup.space.spec
         base = load_scenario(self.scenario)
         source = Path(spec.source) if spec.source else None
@@ -167,7 +166,7 @@ class CellOptions:
                 "decider": {"name": setup.decider, "seed": setup.seed, **costs},
             },
         )
-        return yaml.safe_dump(data, default_flow_style=True, width=10**6, sort_keys=False).strip()
+        return dump_flow(data)
 
     def run_scenario(self, setup, run: int):
         """The scenario of run `run`: the base with `--lean`'s text, then `run_text`, loaded as

@@ -42,14 +42,14 @@ def fault_records(
     end of the run when nothing resolved it (0 for a fault never injected)."""
     records = []
     if not injections:  # a station that does not say
-        injections = [Injection(f.kind, f.task) for f in faults]
+        injections = [Injection(f.kind.value, f.task) for f in faults]
     for fault, injection in zip(faults, injections, strict=True):
         injected = injection.injected_at
         found = next(
             (
                 d
                 for d in detections
-                if d.cause in CAUSES[fault.fault_kind]
+                if d.cause in CAUSES[fault.kind]
                 and d.step == fault.task
                 and injected is not None
                 and d.at >= injected - SLACK
@@ -65,7 +65,7 @@ def fault_records(
             lost = end_time - injected
         records.append(
             FaultRecord(
-                kind=fault.kind,
+                kind=fault.kind.value,
                 task=fault.task,
                 injected_at=injected,
                 detected_at=None if found is None else found.at,

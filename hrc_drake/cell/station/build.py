@@ -478,7 +478,7 @@ def _station_operator(scenario: Scenario, space, operator: Operator | None) -> O
     `operator-silent` and `no-path` faults, if any."""
     if operator is None:
         operator = scenario.operator_for(space)
-    if any(f.fault_kind in SilentOperator.KINDS for f in scenario.faults):
+    if any(f.kind in SilentOperator.KINDS for f in scenario.faults):
         operator = SilentOperator(operator, scenario.faults)
     return operator
 

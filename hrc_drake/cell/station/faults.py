@@ -32,7 +32,18 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 
 from hrc_drake.cell.station.gripper import STALL_GAP, stopped_short
 from hrc_drake.cell.station.obstacle import SeatPositions
-from hrc_drake.hri.faults import FaultConfig, FaultKind
+from hrc_drake.hri.faults import (
+    FaultConfig,
+    FaultKind,
+    GripLost,
+    GripperStuck,
+    NoPath,
+    NoSeat,
+    OperatorSilent,
+    ProtectiveStop,
+    Pushed,
+    Stuck,
+)
 from hrc_drake.hri.messages import Prompt, PromptKind
 from hrc_drake.obstacle_models import DEBRIS_PARK, OBSTACLE_PARK, obstacle_pose_over
 from hrc_drake.tasks.protocols import DelaysIndications
@@ -65,12 +76,12 @@ class Injection:
         return self
 
 
-def _window(fault: FaultConfig, injection: Injection, now: float) -> bool:
+def _window(fault: ProtectiveStop | Pushed, injection: Injection, now: float) -> bool:
     """Whether a timed fault (stop, push) acts at `now`."""
     if injection.task_start is None:
         return False
-    start = injection.task_start + fault.after_seconds
-    return start <= now < start + fault.duration_seconds
+    start = injection.task_start + fault.after
+    return start <= now < start + fault.duration
 
 
 def _carriage_state(park, placed, now: float) -> np.ndarray:
@@ -114,13 +125,13 @@ class FaultInjector(LeafSystem):
         self._nv = plant.num_velocities()
         self._dof = {}
         for fault in self._faults:
-            if fault.fault_kind == FaultKind.PUSHED:
+            if isinstance(fault, Pushed):
                 self._dof[fault.joint] = plant.GetJointByName(fault.joint).velocity_start()
         self._prompt = self.DeclareAbstractInputPort("hri.prompt", AbstractValue.Make(Prompt()))
         self._opening = self.DeclareVectorInputPort("opening", BasicVector(1))
         self._force = self.DeclareVectorInputPort("force", BasicVector(1))
         self._measured = self.DeclareVectorInputPort("measured", BasicVector(2))
-        initial = tuple(Injection(f.kind, f.task) for f in self._faults)
+        initial = tuple(Injection(f.kind.value, f.task) for f in self._faults)
         self._state = self.DeclareAbstractState(AbstractValue.Make(initial))
         self.DeclareVectorOutputPort("opening", BasicVector(1), self._calc_opening)
         self.DeclareVectorOutputPort("force", BasicVector(1), self._calc_force)
@@ -134,10 +145,10 @@ class FaultInjector(LeafSystem):
     def _injections(self, context) -> tuple[Injection, ...]:
         return context.get_abstract_state(self._state).get_value()
 
-    def _active(self, context, kind: FaultKind):
-        """(fault, injection) pairs of `kind` whose task has begun."""
+    def _active(self, context, cls: type):
+        """(fault, injection) pairs of the faults of class `cls` whose task has begun."""
         for fault, injection in zip(self._faults, self._injections(context), strict=True):
-            if fault.fault_kind == kind and injection.task_start is not None:
+            if isinstance(fault, cls) and injection.task_start is not None:
                 yield fault, injection
 
     def _in_task(self, context, injection: Injection) -> bool:
@@ -148,10 +159,10 @@ class FaultInjector(LeafSystem):
     def _calc_opening(self, context, output) -> None:
         opening = float(self._opening.Eval(context)[0])
         measured = float(self._measured.Eval(context)[0])
-        for fault, injection in self._active(context, FaultKind.GRIPPER_STUCK):
+        for fault, injection in self._active(context, GripperStuck):
             if not self._in_task(context, injection):
                 continue
-            if fault.stuck == "close":
+            if fault.stuck == Stuck.CLOSE:
                 opening = max(opening, measured)  # the fingers can open, never close
             elif injection.since is not None:
                 opening = min(opening, measured)  # closed on the part, they never open
@@ -159,7 +170,7 @@ class FaultInjector(LeafSystem):
 
     def _calc_force(self, context, output) -> None:
         force = float(self._force.Eval(context)[0])
-        for fault, injection in self._active(context, FaultKind.GRIP_LOST):
+        for fault, injection in self._active(context, GripLost):
             lost = injection.injected_at is not None and injection.ended_at is None
             if lost and self._in_task(context, injection):
                 force = min(force, fault.force)
@@ -167,26 +178,26 @@ class FaultInjector(LeafSystem):
 
     def _calc_stop(self, context, output) -> None:
         now = context.get_time()
-        stop = any(_window(f, i, now) for f, i in self._active(context, FaultKind.PROTECTIVE_STOP))
+        stop = any(_window(f, i, now) for f, i in self._active(context, ProtectiveStop))
         output.SetFromVector([1.0 if stop else 0.0])
 
     def _calc_torque(self, context, output) -> None:
         now = context.get_time()
         torque = np.zeros(self._nv)
-        for fault, injection in self._active(context, FaultKind.PUSHED):
+        for fault, injection in self._active(context, Pushed):
             if _window(fault, injection, now):
                 torque[self._dof[fault.joint]] += fault.torque
         output.SetFromVector(torque)
 
     def _calc_obstacle(self, context, output) -> None:
-        boxes = ((i, f.duration_seconds) for f, i in self._active(context, FaultKind.NO_PATH))
+        boxes = ((i, f.duration) for f, i in self._active(context, NoPath))
         output.SetFromVector(_carriage_state(OBSTACLE_PARK, boxes, context.get_time()))
 
     def _calc_debris(self, context, output) -> None:
         # The debris stays until the operator clears it (a task handed over: `clear_debris`).
         debris = (
             (i, np.inf if i.ended_at is None else i.ended_at - i.injected_at)
-            for f, i in self._active(context, FaultKind.NO_SEAT)
+            for f, i in self._active(context, NoSeat)
             if f.obstacle and i.injected_at is not None
         )
         output.SetFromVector(_carriage_state(DEBRIS_PARK, debris, context.get_time()))
@@ -200,59 +211,60 @@ class FaultInjector(LeafSystem):
             if injection.task_start is None:
                 if prompt.kind == PromptKind.CHOOSE and prompt.step == fault.task:
                     injection = replace(injection, task_start=now)
-                    if fault.fault_kind == FaultKind.OPERATOR_SILENT:
+                    if isinstance(fault, OperatorSilent):
                         injection = replace(injection, injected_at=now)
-                    if fault.fault_kind == FaultKind.NO_PATH or fault.obstacle:
+                    if isinstance(fault, NoPath) or (isinstance(fault, NoSeat) and fault.obstacle):
                         injection = self._set_down(fault, injection, prompt, now)
             elif injection.injected_at is None and prompt.step == fault.task:
                 injection = self._inject(context, fault, injection, now)
-            elif injection.ended_at is None and fault.fault_kind == FaultKind.GRIP_LOST:
+            elif injection.ended_at is None and isinstance(fault, GripLost):
                 injection = self._end_grip_loss(context, injection, now)
             updated.append(injection)
         state.get_mutable_abstract_state(self._state).set_value(tuple(updated))
 
     def _inject(self, context, fault: FaultConfig, injection: Injection, now: float):
         """The moment a fault of the running task takes effect, if it is now."""
-        kind = fault.fault_kind
-        if kind in (FaultKind.PROTECTIVE_STOP, FaultKind.PUSHED):
-            if now >= injection.task_start + fault.after_seconds:
+        if isinstance(fault, ProtectiveStop | Pushed):
+            if now >= injection.task_start + fault.after:
                 return replace(injection, injected_at=now)
             return injection
         command, opening, rate = self._fingers(context)
         # The fingers stand still short of their target: on a part (or stuck).
         stalled = stopped_short(opening, command) and abs(rate) < STILL_RATE
-        if kind in (FaultKind.NO_SEAT, FaultKind.GRIP_LOST):
+        if isinstance(fault, NoSeat | GripLost):
             return self._in_carry(fault, injection, stalled, now)
-        if kind == FaultKind.GRIPPER_STUCK and fault.stuck == "close" and stalled:
+        if not isinstance(fault, GripperStuck):
+            return injection
+        if fault.stuck == Stuck.CLOSE and stalled:
             return replace(injection, injected_at=now)  # a close the fingers do not obey
-        if kind == FaultKind.GRIPPER_STUCK and fault.stuck == "open":
+        if fault.stuck == Stuck.OPEN:
             if injection.since is None:
                 return replace(injection, since=now) if stalled else injection
             if command - opening > STALL_GAP:  # an open the fingers do not obey
                 return replace(injection, injected_at=now)
         return injection
 
-    def _set_down(self, fault: FaultConfig, injection: Injection, prompt: Prompt, now: float):
+    def _set_down(self, fault: NoPath | NoSeat, injection: Injection, prompt: Prompt, now: float):
         """A no-path fault's box goes over the seat the robot proposes; a no-seat fault's
         debris into its pocket."""
         seats = self._seat_position
         if seats is None:
             raise ValueError(f"a {fault.kind} fault needs the station's seat positions")
-        if fault.fault_kind == FaultKind.NO_PATH:
+        if isinstance(fault, NoPath):
             where = obstacle_pose_over(seats(prompt)).translation()
         else:
             where = seats.pocket(prompt)
         return replace(injection, injected_at=now, target=tuple(float(v) for v in where))
 
     @staticmethod
-    def _in_carry(fault: FaultConfig, injection: Injection, stalled: bool, now: float):
+    def _in_carry(fault: NoSeat | GripLost, injection: Injection, stalled: bool, now: float):
         """Faults of the carry strike `after` s after the fingers stalled on the part (the
         part lifted clear of the tray: sliding it in the fingers there would push it into the
         tray's pocket)."""
         if not stalled:
             return replace(injection, since=None)
         since = now if injection.since is None else injection.since
-        if now - since >= fault.after_seconds:
+        if now - since >= fault.after:
             return replace(injection, injected_at=now, since=since)
         return replace(injection, since=since)
 
@@ -266,7 +278,7 @@ class FaultInjector(LeafSystem):
         opening, rate = self._measured.Eval(context)
         return float(self._opening.Eval(context)[0]), float(opening), float(rate)
 
-    def pending_shifts(self, context) -> list[tuple[int, FaultConfig]]:
+    def pending_shifts(self, context) -> list[tuple[int, NoSeat]]:
         """(index, fault) of the no-seat faults injected whose part the station has not moved
         in the fingers yet (`context`: this system's)."""
         return [
@@ -274,7 +286,7 @@ class FaultInjector(LeafSystem):
             for k, (fault, injection) in enumerate(
                 zip(self._faults, self._injections(context), strict=True)
             )
-            if fault.fault_kind == FaultKind.NO_SEAT
+            if isinstance(fault, NoSeat)
             and not fault.obstacle
             and injection.injected_at is not None
             and not injection.shifted
@@ -286,7 +298,7 @@ class FaultInjector(LeafSystem):
         injections, now, cleared = list(self._injections(context)), context.get_time(), False
         for k, (fault, injection) in enumerate(zip(self._faults, injections, strict=True)):
             if (
-                fault.fault_kind == FaultKind.NO_SEAT
+                isinstance(fault, NoSeat)
                 and fault.obstacle
                 and injection.injected_at is not None
                 and injection.ended_at is None
@@ -314,9 +326,9 @@ class SilentOperator:
         self._operator = operator
         self._silence: dict[int, float] = {}
         for f in faults:
-            if f.fault_kind == FaultKind.OPERATOR_SILENT:
-                self._silence[f.task] = self._silence.get(f.task, 0.0) + f.duration_seconds
-            elif f.fault_kind == FaultKind.NO_PATH:
+            if isinstance(f, OperatorSilent):
+                self._silence[f.task] = self._silence.get(f.task, 0.0) + f.duration
+            elif isinstance(f, NoPath):
                 self._silence[f.task] = self._silence.get(f.task, 0.0) + OBSTACLE_SET_TIME
 
     def __call__(self, step, state, proposal):

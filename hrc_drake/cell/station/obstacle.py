@@ -21,7 +21,7 @@ from pydrake.multibody.tree import PdControllerGains
 from hrc_drake.cell.station.arm_servo import servo_actuators
 from hrc_drake.cell.station.contacts import geometry_owners
 from hrc_drake.cell_models import TABLE
-from hrc_drake.hri.faults import FaultKind
+from hrc_drake.hri.faults import NoPath, NoSeat
 from hrc_drake.hri.messages import Prompt
 from hrc_drake.motion.poses import CellFrames, part_pose
 from hrc_drake.obstacle_models import DEBRIS, DEBRIS_SIZE, OBSTACLE, add_mounted_obstacle
@@ -39,9 +39,9 @@ _KD = 100.0  # N·s/m
 def mounted_obstacles(faults) -> tuple[str, ...]:
     """The things a scenario's faults need on carriages: OBSTACLE (a no-path fault), DEBRIS (a
     no-seat fault with an obstacle)."""
-    kinds = {f.fault_kind for f in faults}
-    debris = any(f.fault_kind == FaultKind.NO_SEAT and f.obstacle for f in faults)
-    return (OBSTACLE,) * (FaultKind.NO_PATH in kinds) + (DEBRIS,) * debris
+    box = any(isinstance(f, NoPath) for f in faults)
+    debris = any(isinstance(f, NoSeat) and f.obstacle for f in faults)
+    return (OBSTACLE,) * box + (DEBRIS,) * debris
 
 
 def mount_obstacle(plant: MultibodyPlant, name: str):
