@@ -54,7 +54,7 @@ from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_opti
 from hrc_drake.cell.station import make_cell_station, station_scenario
 from hrc_drake.motion.plan import Stage
 from hrc_drake.motion.poses import default_layout
-from hrc_drake.robot_models import GRIPPER, UR3, UR3_JOINTS
+from hrc_drake.robot_names import GRIPPER, UR3, UR3_JOINTS
 from hrc_drake.scenario.schema import Scenario
 from hrc_drake.tasks.spec import load_spec
 

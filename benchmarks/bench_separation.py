@@ -38,7 +38,8 @@ from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.run.run import run_scenario
 from hrc_drake.cell.scenario import LEAN, cell_design, load_cell_scenario, motion_options
 from hrc_drake.cell.station.build import make_cell_station
-from hrc_drake.robot_models import RG2_FINGER_JOINTS, UR3_JOINTS
+from hrc_drake.robot_models import RG2_FINGER_JOINTS
+from hrc_drake.robot_names import UR3_JOINTS
 from hrc_drake.scenario.load import table2_scenarios
 from hrc_drake.tasks.spec import load_spec
 

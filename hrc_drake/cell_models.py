@@ -24,7 +24,8 @@ from pydrake.multibody.tree import ModelInstanceIndex
 
 from hrc_drake.layout import CellLayout, layout_from
 from hrc_drake.resources import package_uri
-from hrc_drake.robot_models import GRIPPER, UR3, add_robot, make_parser
+from hrc_drake.robot_models import add_robot, make_parser
+from hrc_drake.robot_names import GRIPPER, UR3
 from hrc_drake.tasks.assembly import AssemblySpec
 from hrc_drake.workpiece_sdf import (
     BAR_WIDTH,

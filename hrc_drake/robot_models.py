@@ -14,18 +14,9 @@ from pydrake.multibody.tree import ModelInstanceIndex
 
 from hrc_drake.resources import models_dir, package_uri
 
-# Model instance names of the arm and the gripper (models/cell/robot.dmd.yaml).
-UR3 = "ur3"
-GRIPPER = "rg2"
+# The names (model instances, joints) live in a Drake-free module: the scenario check needs them.
+from hrc_drake.robot_names import GRIPPER, UR3
 
-UR3_JOINTS: tuple[str, ...] = (
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-)
 UR3_VELOCITY_LIMITS: tuple[float, ...] = (math.pi,) * 3 + (2 * math.pi,) * 3
 UR3_EFFORT_LIMITS: tuple[float, ...] = (56.0, 56.0, 28.0, 12.0, 12.0, 12.0)
 RG2_MAX_OPENING = 0.110

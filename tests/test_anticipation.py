@@ -10,7 +10,7 @@ from hrc_drake.cell.controller.supervisor import Mode
 from hrc_drake.cell.ports import PartStatus
 from hrc_drake.cell.run.run import build_closed_loop
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
-from hrc_drake.robot_models import UR3
+from hrc_drake.robot_names import UR3
 
 
 def _loop(scenario: str, *texts: str):

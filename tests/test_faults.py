@@ -9,8 +9,15 @@ import pytest
 from hrc_drake.cell.controller.supervisor import Mode
 from hrc_drake.cell.run.run import build_closed_loop
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
-from hrc_drake.hri.faults import FaultError, GripLost, NoSeat, Pushed, check_faults
-from hrc_drake.robot_models import UR3, UR3_JOINTS
+from hrc_drake.hri.faults import (
+    FaultError,
+    GripLost,
+    NoSeat,
+    Pushed,
+    check_faults,
+    check_faults_within_run,
+)
+from hrc_drake.robot_names import UR3, UR3_JOINTS
 
 ROW1_STATES = [(), ("F1",), ("F1", "S23"), ("F1", "S23", "F03")]
 
@@ -333,7 +340,8 @@ def test_without_faults_nothing_is_injected_or_detected():
 )
 def test_bad_fault_entries_are_named(entry, message):
     with pytest.raises(FaultError, match=message) as err:
-        check_faults([Pushed(task=1), entry], "test", max_tasks=3, joints=UR3_JOINTS)
+        check_faults([Pushed(task=1), entry], "test", UR3_JOINTS)
+        check_faults_within_run([Pushed(task=1), entry], "test", 3)
     assert "faults[1]" in str(err.value) and "\n" not in str(err.value)
 
 

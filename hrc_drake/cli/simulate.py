@@ -12,10 +12,9 @@ from dataclasses import dataclass
 
 from hrc_drake.cell.run.run import run_scenario, scenario_policy
 from hrc_drake.cli.scenario_args import scenario_from_args, scenario_options
-from hrc_drake.hri.faults import FaultError, check_faults
+from hrc_drake.hri.faults import FaultError, check_faults_within_run
 from hrc_drake.hri.operator import ScriptedOperator
 from hrc_drake.paths import MESHCAT_RECORDING, PNG_FILE, UsageError, check_output_path
-from hrc_drake.robot_models import UR3_JOINTS
 from hrc_drake.scenario.schema import Scenario
 from hrc_drake.tasks.decide import check_script_within_run, run_decisions
 from hrc_drake.tasks.graph import StateSpace, generate_states
@@ -62,17 +61,17 @@ def _check_faults_within_run(scenario: Scenario, decisions) -> None:
     past the end is reported as never injected."""
     if not scenario.faults:
         return
-    tasks = None if decisions is None else len(decisions)
-    try:
-        check_faults(scenario.faults, scenario.name or "--scenario-text", tasks, UR3_JOINTS)
-    except FaultError as err:
-        raise UsageError(str(err)) from None
     if decisions is None:
         print(
             "note: faults: this run's length is known only when it ends; a fault whose task "
             "it does not reach is reported as not injected",
             file=sys.stderr,
         )
+        return
+    try:
+        check_faults_within_run(scenario.faults, scenario.name or "--scenario-text", len(decisions))
+    except FaultError as err:
+        raise UsageError(str(err)) from None
 
 
 def _check_port(port: int) -> None:

@@ -161,15 +161,11 @@ class FaultError(ValueError):
 
 
 def check_faults(
-    faults: list[FaultConfig],
-    source: str,
-    max_tasks: int | None = None,
-    joints: Sequence[str] | None = None,
+    faults: list[FaultConfig], source: str, joints: Sequence[str] | None = None
 ) -> None:
-    """Value checks of a `faults:` list: FaultError naming the entry (`faults[i]`) for an entry
-    that is not a fault, a task before 1 (or past `max_tasks`, the run's length when it is
-    known), a negative or out-of-range parameter, or a pushed joint not among `joints` (the
-    robot's, when known)."""
+    """Value checks of a `faults:` list (once, when the scenario is loaded): FaultError naming
+    the entry (`faults[i]`) for an entry that is not a fault, a task before 1, a negative or
+    out-of-range parameter, or a pushed joint not among `joints` (the robot's)."""
     for i, fault in enumerate(faults):
         if not isinstance(fault, FaultConfig):
             tags = ", ".join(f"!{cls.__name__}" for cls in FAULT_CLASSES.values())
@@ -185,15 +181,21 @@ def check_faults(
             )
         if fault.task < 1:
             raise FaultError(f"{where}: task {fault.task}: tasks count from 1 (the run's first)")
-        if max_tasks is not None and fault.task > max_tasks:
-            raise FaultError(
-                f"{where}: task {fault.task} is past the run, which has {max_tasks} task(s); "
-                "choose a task within it"
-            )
         _check_values(fault, where)
         if isinstance(fault, Pushed) and joints is not None and fault.joint not in joints:
             raise FaultError(
                 f"{where}: joint {fault.joint!r} is not the robot's; use one of {', '.join(joints)}"
+            )
+
+
+def check_faults_within_run(faults: list[FaultConfig], source: str, tasks: int) -> None:
+    """FaultError naming the first entry whose task is past a run of `tasks` tasks (known
+    before the run when the operator's choices are)."""
+    for i, fault in enumerate(faults):
+        if fault.task > tasks:
+            raise FaultError(
+                f"scenario {source}: faults[{i}] ({fault.kind.value}): task {fault.task} is past "
+                f"the run, which has {tasks} task(s); choose a task within it"
             )
 
 
@@ -266,4 +268,5 @@ __all__ = [
     "Pushed",
     "Stuck",
     "check_faults",
+    "check_faults_within_run",
 ]

@@ -31,7 +31,8 @@ from pydrake.systems.framework import DiagramBuilder
 from hrc_drake.cell_models import CellDesign, add_cell_models, check_cell_models
 from hrc_drake.motion.poses import CellFrames, part_pose, pose_from_values, pose_values
 from hrc_drake.obstacle_models import add_fixed_obstacle, far_below
-from hrc_drake.robot_models import GRIPPER, RG2_FINGER_JOINTS, RG2_MAX_OPENING, UR3, UR3_JOINTS
+from hrc_drake.robot_models import RG2_FINGER_JOINTS, RG2_MAX_OPENING
+from hrc_drake.robot_names import GRIPPER, UR3, UR3_JOINTS
 from hrc_drake.workpiece_sdf import PLATE, TRAY
 
 ROBOT = UR3

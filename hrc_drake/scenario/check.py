@@ -6,6 +6,7 @@ import dataclasses
 import math
 
 from hrc_drake.hri.faults import FaultError, check_faults
+from hrc_drake.robot_names import UR3_JOINTS
 from hrc_drake.scenario.schema import (
     TEXT_SOURCE,
     Activity,
@@ -98,7 +99,7 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
     _check_separation(scenario.safety, fail)
     _check_interaction(scenario.interaction, fail)
     try:
-        check_faults(scenario.faults, source)
+        check_faults(scenario.faults, source, UR3_JOINTS)
     except FaultError as err:
         raise ScenarioError(str(err)) from err
     return scenario

@@ -27,7 +27,8 @@ from pydrake.systems.framework import DiagramBuilder
 
 from hrc_drake.cell_models import CellDesign, add_cell_models
 from hrc_drake.motion.scene import TCP
-from hrc_drake.robot_models import GRIPPER, RG2_FINGER_JOINTS, UR3, UR3_JOINTS
+from hrc_drake.robot_models import RG2_FINGER_JOINTS
+from hrc_drake.robot_names import GRIPPER, UR3, UR3_JOINTS
 
 GRASP = "grasp"  # the frame of a part where the gripper's tcp holds it (cell_models)
 _TINY = 1e-12  # keeps the divisions by a length finite where it vanishes

@@ -55,7 +55,7 @@ from hrc_drake.cell.controller.robot_envelope import RobotEnvelope, nearest_poin
 from hrc_drake.cell.person import CHAIN_GAP
 from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell_models import CellDesign
-from hrc_drake.robot_models import UR3_JOINTS
+from hrc_drake.robot_names import UR3_JOINTS
 from hrc_drake.scenario.schema import SafetyConfig
 
 # A joint this much faster than commanded is moved from outside [rad/s] (our choice: the

@@ -91,7 +91,7 @@ from hrc_drake.hri.messages import Prompt, PromptKind
 from hrc_drake.motion.plan import Plan
 from hrc_drake.motion.plan_request import PlanFailure
 from hrc_drake.motion.service import PlanService
-from hrc_drake.robot_models import UR3_JOINTS
+from hrc_drake.robot_names import UR3_JOINTS
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.policy import Policy
 from hrc_drake.tasks.tokens import UNDO

@@ -13,7 +13,7 @@ from hrc_drake.hri.messages import Prompt
 from hrc_drake.motion.clearance import Hold
 from hrc_drake.motion.plan import Plan
 from hrc_drake.motion.plan_request import PlanRequest
-from hrc_drake.robot_models import UR3_JOINTS
+from hrc_drake.robot_names import UR3_JOINTS
 from hrc_drake.tasks.tokens import UNDO
 
 N_JOINTS = len(UR3_JOINTS)

@@ -29,7 +29,7 @@ from hrc_drake.cell.link.lcm_struct import LcmDecodeError, parse_definitions
 from hrc_drake.cell.ports import BodySpheres, CellConfiguration, PartPlacement, PartStatus
 from hrc_drake.cell.station.contacts import Owner
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
-from hrc_drake.robot_models import UR3_JOINTS
+from hrc_drake.robot_names import UR3_JOINTS
 
 N_JOINTS = len(UR3_JOINTS)
 

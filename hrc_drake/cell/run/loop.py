@@ -45,7 +45,7 @@ from hrc_drake.hri.faults import FaultRecord
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.service import PlanService
 from hrc_drake.progress import ProgressLine
-from hrc_drake.robot_models import GRIPPER, UR3
+from hrc_drake.robot_names import GRIPPER, UR3
 from hrc_drake.scenario.schema import Scenario, Separation
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.policy import Policy

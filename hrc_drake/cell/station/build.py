@@ -75,11 +75,10 @@ from hrc_drake.cell.station.sim_operator import SimulatedOperator
 from hrc_drake.cell.station.slot_monitor import SlotMonitor
 from hrc_drake.cell.station.welds import Bolts
 from hrc_drake.cell_models import CellDesign, add_cell_models
-from hrc_drake.hri.faults import check_faults
 from hrc_drake.motion.poses import IN_TRAY, CellFrames, layout_poses
 from hrc_drake.motion.scene import read_cell_frames
 from hrc_drake.obstacle_models import DEBRIS, OBSTACLE
-from hrc_drake.robot_models import GRIPPER, UR3, UR3_JOINTS
+from hrc_drake.robot_names import GRIPPER, UR3, UR3_JOINTS
 from hrc_drake.scenario.schema import Activity, CameraSettings, Scenario
 from hrc_drake.tasks.assembly import SpecError
 from hrc_drake.tasks.decide import Operator
@@ -97,8 +96,6 @@ def check_station_scenario(scenario: Scenario, design: CellDesign) -> None:
             f"physics.discrete_contact_approximation={approximation!r}: the station's bolts "
             f"(locked joints) need a SAP-family one; use one of {', '.join(_SAP_FAMILY)}"
         )
-    # The scenario check could not know the robot's joints (the HRI layer imports no Drake).
-    check_faults(scenario.faults, scenario.name or "scenario", joints=UR3_JOINTS)
     station = scenario.station
     for part, where in station.initial_placements.items():
         key = f"station.initial_placements.{part}"

@@ -29,7 +29,7 @@ from hrc_drake.cell_models import CellDesign
 from hrc_drake.hri.messages import Prompt
 from hrc_drake.motion.poses import CellFrames, layout_poses, part_pose
 from hrc_drake.obstacle_models import DEBRIS, DEBRIS_PARK
-from hrc_drake.robot_models import GRIPPER, UR3
+from hrc_drake.robot_names import GRIPPER, UR3
 from hrc_drake.scenario.schema import Scenario
 from hrc_drake.tasks.tokens import UNDO
 

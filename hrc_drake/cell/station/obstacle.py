@@ -25,7 +25,7 @@ from hrc_drake.hri.faults import NoPath, NoSeat
 from hrc_drake.hri.messages import Prompt
 from hrc_drake.motion.poses import CellFrames, part_pose
 from hrc_drake.obstacle_models import DEBRIS, DEBRIS_SIZE, OBSTACLE, add_mounted_obstacle
-from hrc_drake.robot_models import GRIPPER, UR3
+from hrc_drake.robot_names import GRIPPER, UR3
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.tokens import UNDO
 from hrc_drake.workpiece_sdf import PLATE, POCKET_DEPTH, SEAT_GAP, TRAY

@@ -33,7 +33,7 @@ from hrc_drake.cell.ports import (
 from hrc_drake.cell.station.contacts import contact_pairs, geometry_owners
 from hrc_drake.motion.poses import CellFrames, seat_pose
 from hrc_drake.obstacle_models import OBSTACLE, OBSTACLE_SEEN_ABOVE, OBSTACLE_SIZE
-from hrc_drake.robot_models import GRIPPER
+from hrc_drake.robot_names import GRIPPER
 from hrc_drake.tasks.assembly import SpecError
 from hrc_drake.workpiece_sdf import BOSS, PLATE, POCKET_CLEARANCE, POCKET_DEPTH
 
