@@ -5,7 +5,8 @@ part's bolts and nuts from bins beside the robot's carry path), every operator p
 interaction modes, the same operator seeds (each seed its own person: `body.spread`), once with
 monitoring alone (`reactive`) and once with the robot timing its moves around its forecast of the
 operator (`predictive`). Per run: the assembly's simulated seconds, `ssm_delay` (what slowing and
-stopping added), the planned waits, least separation and margin, violations, body contacts.
+stopping added), the planned waits, least separation and margin, violations (by the run's own
+check, `hrc_drake.cell.run.safety_check`), body contacts.
 
 Section 2: the regression cells — Table 2's nine rows and the 4-slot and 5-slot cells — in both
 separation modes: the states of `react`, terminal, collisions, violations, body contacts.
@@ -109,8 +110,10 @@ def one_run(job: tuple) -> dict:
         "replans": result.replans,
         "min_separation": safety.min_separation,
         "min_margin": safety.min_margin,
-        "violations": safety.violations,
-        "body_contacts": safety.body_contacts,
+        # The run's own check (`hrc_drake.cell.run.safety_check`); the monitor's count beside.
+        "violations": result.safety_check.violations,
+        "monitor_violations": safety.violations,
+        "body_contacts": result.safety_check.body_contacts,
         "collisions": len(result.collisions),
         "error": result.error,
         "robot_late": robot_late(scenario, result) if job[0] != "regression" else 0.0,

@@ -92,6 +92,7 @@ def test_a_row_with_a_mistake_and_undo_runs_with_the_body_and_no_violation():
     result = run_scenario("row7-forces-9", scenario_text=LEAN)
     assert result.error is None and result.done and result.collisions == []
     assert result.safety.violations == 0 and result.safety.body_contacts == 0
+    assert result.safety_check.violations == 0 and result.safety_check.body_contacts == 0
     assert result.safety.min_separation > 0
     short = "{body: {enabled: false}, run: {max_sim_time: 1.0}}"
     off = run_scenario("row7-forces-9", scenario_text=[LEAN, short])

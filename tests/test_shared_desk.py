@@ -272,6 +272,7 @@ def test_predictive_separation_waits_where_monitoring_alone_stops(desk_runs):
     assert predictive.waited > 1.0
     assert predictive.safety.ssm_delay < reactive.safety.ssm_delay / 2
     assert predictive.safety.violations == 0
+    assert predictive.safety_check.violations == 0  # the run's own check
     assert predictive.to_json()["separation"] == "predictive"
     assert predictive.to_json()["safety"]["ssm_delay"] == pytest.approx(
         predictive.safety.ssm_delay, abs=1e-3
@@ -285,6 +286,7 @@ def test_a_person_unlike_the_forecast_makes_the_robot_retime_and_keeps_separatio
     assert result.done and not result.collisions
     assert result.replans > 0
     assert result.safety.violations == 0 and result.safety.body_contacts == 0
+    assert result.safety_check.violations == 0 and result.safety_check.body_contacts == 0
 
 
 def test_a_part_put_back_is_timed_around_the_operator_too():

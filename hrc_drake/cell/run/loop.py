@@ -33,10 +33,18 @@ from pydrake.systems.framework import Diagram, DiagramBuilder, EventStatus
 from hrc_drake.atomic import atomic_write_bytes, atomic_write_text
 from hrc_drake.cell.controller.build import Controller, connect_controller
 from hrc_drake.cell.controller.keep_clear import VIEW_TIMES
+from hrc_drake.cell.controller.robot_envelope import RobotEnvelope
 from hrc_drake.cell.controller.separation import SafetyLog
 from hrc_drake.cell.controller.supervisor import Mode, SupervisorStatus, TaskRecord
 from hrc_drake.cell.ports import CellConfiguration
 from hrc_drake.cell.run.fault_report import fault_records
+from hrc_drake.cell.run.safety_check import (
+    SafetyCheck,
+    SafetySample,
+    SafetyTrace,
+    check_separation,
+    held_part,
+)
 from hrc_drake.cell.run.view import frame_cell
 from hrc_drake.cell.station.cell_station import CellStation
 from hrc_drake.cell.station.contacts import Owner, geometry_owners, owner_pairs
@@ -70,6 +78,8 @@ class RunResult:
     events: tuple[str, ...] = field(default_factory=tuple)
     safety: SafetyLog | None = None
     """Separation monitoring figures (None: the scenario has no operator body)."""
+    safety_check: SafetyCheck | None = None
+    """The run's own check of separation (`hrc_drake.cell.run.safety_check`; None: no body)."""
     speed_changes: tuple[tuple[float, str], ...] = ()
     """(simulated time, "moving" | "slowed" | "stopped") each time the robot's speed state
     changes (with the operator body)."""
@@ -143,11 +153,18 @@ class RunResult:
         }
 
     def _safety_json(self) -> dict | None:
-        """The monitor's figures, and the planned waits and re-timings of predictive mode."""
+        """The run's own check (`violations`, `least_margin`, `body_contacts`), then the
+        monitor's figures (its own count of violations as `monitor_violations`), and the planned
+        waits and re-timings of predictive mode."""
         if self.safety is None:
             return None
+        monitor = self.safety.to_json()
+        monitor["monitor_violations"] = monitor.pop("violations")
+        monitor["monitor_body_contacts"] = monitor.pop("body_contacts")
+        check = self.safety_check.to_json() if self.safety_check is not None else {}
         return {
-            **self.safety.to_json(),
+            **check,
+            **monitor,
             "planned_wait": round(self.waited, 3),
             "replans": self.replans,
         }
@@ -288,6 +305,8 @@ class ClosedLoop:
             _StackLight(cell.meshcat) if setup.scenario.body.enabled else None,
             (still[0], Path(still[1])) if still is not None else None,
         )
+        if setup.scenario.body.enabled:
+            self.watch.safety = _SafetySampler(self, setup.scenario.run.period)
         if cell.meshcat is not None and setup.scenario.safety.separation == Separation.PREDICTIVE:
             self.watch.forecast = _ForecastView(cell.meshcat, len(VIEW_TIMES))
         self.simulator.set_monitor(_monitor(self))
@@ -476,6 +495,37 @@ class _Watch:
     next_check: float = 0.0
     welds: frozenset = frozenset()  # the welds applied last
     forecast: _ForecastView | None = None
+    safety: _SafetySampler | None = None  # the samples the run's own safety check reads
+
+
+class _SafetySampler:
+    """Takes the safety check's samples (`hrc_drake.cell.run.safety_check`) from the cell's
+    measured ports and the arm's command, once per monitor period."""
+
+    def __init__(self, loop: ClosedLoop, period: float):
+        self.trace = SafetyTrace(period)
+        self._cell, self._controller = loop.cell.diagram, loop.controller.diagram
+
+    def sample(self, root, now: float) -> None:
+        """Take a sample if one is due at `now`."""
+        if not self.trace.due(now):
+            return
+        cell = self._cell.GetMyContextFromRoot(root)
+        arm = self._cell.GetOutputPort("ur3.state_estimated").Eval(cell)
+        controller = self._controller.GetMyContextFromRoot(root)
+        commanded = self._controller.GetOutputPort("ur3.velocity").Eval(controller)
+        n = len(commanded)
+        self.trace.add(
+            SafetySample(
+                time=now,
+                q=np.array(arm[:n]),
+                v=np.array(arm[n:]),
+                commanded=np.array(commanded),
+                opening=float(self._cell.GetOutputPort("rg2.state_measured").Eval(cell)[0]),
+                carrying=held_part(self._cell.GetOutputPort("configuration").Eval(cell)),
+                body=self._cell.GetOutputPort("operator.body").Eval(cell),
+            )
+        )
 
 
 def _monitor(loop: ClosedLoop):
@@ -494,6 +544,8 @@ def _monitor(loop: ClosedLoop):
             watch.next_check = now + period
             handled = status.task.part if status.task else None
             watch.contacts.check(cell.touching(context), handled or None, now)
+        if watch.safety is not None:
+            watch.safety.sample(context, now)
         if watch.lights is not None:
             watch.lights.show(status, now)
         if watch.forecast is not None:
@@ -540,6 +592,20 @@ def _ctrl_c_ignored():
         signal.signal(signal.SIGINT, previous)
 
 
+def _safety_check(loop: ClosedLoop) -> SafetyCheck | None:
+    """The run's own check of separation over its samples (None without a body)."""
+    sampler = loop.watch.safety
+    if sampler is None:
+        return None
+    setup = loop.setup
+    return check_separation(
+        sampler.trace.samples,
+        RobotEnvelope(setup.design),
+        setup.scenario.safety,
+        setup.options.joint_acceleration_limit,
+    )
+
+
 def _result(loop: ClosedLoop, wall: float, path, interrupted: bool) -> RunResult:
     setup, watch = loop.setup, loop.watch
     root, space, status = loop.simulator.get_context(), setup.space, loop.status
@@ -570,6 +636,7 @@ def _result(loop: ClosedLoop, wall: float, path, interrupted: bool) -> RunResult
         recording=path,
         events=status.events,
         safety=loop.controller.safety_log(root),
+        safety_check=_safety_check(loop),
         speed_changes=tuple(watch.lights.changes) if watch.lights is not None else (),
         interrupted=interrupted,
         interaction=setup.scenario.interaction.mode,

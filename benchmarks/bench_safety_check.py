@@ -1,0 +1,112 @@
+"""Separation by the run's own check against the monitor's own count -> benchmarks/reports/
+safety_check.md.
+
+The separation monitor counts a violation when the separation falls below the S_p it computes
+from what it knows (the hand's speed now); the run's own check (`hrc_drake.cell.run.safety_check`)
+counts one when it falls below the S_p of the person's actual travel over the next T_r + T_s,
+the same for every mode and setting. This benchmark runs `shared-desk` (the operator points and
+fetches beside the carry path) with the `follows` population, anticipating, on a few operator
+seeds, in five configurations: monitoring off, monitoring alone and predictive with the tracked
+hand speed, and both with the constant 1.6 m/s of a person whose speed is not monitored. Per
+configuration: the assembly's simulated seconds, `ssm_delay`, both counts and both least margins,
+body contacts.
+
+Full settings (5 s holds). Usage:
+``python benchmarks/bench_safety_check.py [--seeds 3] [--workers 2] [--lean]`` (with ``--lean``
+the report is printed, not written).
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import sys
+from pathlib import Path
+
+from cell_pool import pooled_loop, publish, run_pool
+
+CONFIGURATIONS = {
+    "monitoring off": "{safety: {enabled: false, separation: reactive}}",
+    "monitoring alone, tracked": "{safety: {separation: reactive}}",
+    "predictive, tracked": "{safety: {separation: predictive}}",
+    "monitoring alone, 1.6 m/s": "{safety: {separation: reactive, track_human_speed: false}}",
+    "predictive, 1.6 m/s": "{safety: {separation: predictive, track_human_speed: false}}",
+}
+POPULATION, INTERACTION = "follows", "anticipate"
+REPORT = Path(__file__).parent / "reports" / "safety_check.md"
+
+
+def one_run(job: tuple) -> dict:
+    """One run of (configuration, seed, lean): its figures."""
+    from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+
+    configuration, seed, lean = job
+    operator = (
+        f"{{operator: {{model: {POPULATION}, seed: {seed}}}, interaction: {{mode: {INTERACTION}}}}}"
+    )
+    texts = [operator, CONFIGURATIONS[configuration], *([LEAN] if lean else [])]
+    scenario = load_cell_scenario("shared-desk", texts)
+    result = pooled_loop(scenario, scenario.assembly).run()
+    monitor, check = result.safety, result.safety_check
+    return {
+        "job": job,
+        "terminal": result.done,
+        "seconds": result.sim_time,
+        "ssm_delay": monitor.ssm_delay,
+        "monitor_violations": monitor.violations,
+        "monitor_margin": monitor.min_margin,
+        "violations": check.violations,
+        "least_margin": check.least_margin,
+        "body_contacts": check.body_contacts,
+        "error": result.error,
+    }
+
+
+def _range(values, form: str = ".1f") -> str:
+    low, high = min(values), max(values)
+    return f"{low:{form}}" if f"{low:{form}}" == f"{high:{form}}" else f"{low:{form}}–{high:{form}}"
+
+
+def report(runs: list[dict], seeds: int, wall: float, lean: bool) -> str:
+    """The markdown report."""
+    lines = [
+        "# Separation: the run's own check against the monitor's own count",
+        "",
+        f"`shared-desk`, population `{POPULATION}`, {INTERACTION}, operator seeds 0–{seeds - 1}"
+        f"{' (lean)' if lean else ''}; one run each. `python benchmarks/bench_safety_check.py "
+        f"--seeds {seeds}` on {platform.machine()}, {wall:.0f} s wall.",
+        "",
+        "| configuration | time [s] | ssm_delay [s] | violations: monitor / check | least "
+        "margin [m]: monitor / check | body contacts | terminal |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for configuration in CONFIGURATIONS:
+        rows = [r for r in runs if r["job"][0] == configuration]
+        monitor = ", ".join(str(r["monitor_violations"]) for r in rows)
+        check = ", ".join(str(r["violations"]) for r in rows)
+        lines.append(
+            f"| {configuration} | {_range([r['seconds'] for r in rows])} | "
+            f"{_range([r['ssm_delay'] for r in rows])} | {monitor} / {check} | "
+            f"{min(r['monitor_margin'] for r in rows):+.3f} / "
+            f"{min(r['least_margin'] for r in rows):+.3f} | "
+            f"{sum(r['body_contacts'] for r in rows)} | "
+            f"{sum(r['terminal'] for r in rows)}/{len(rows)} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    """Run the configurations and write (or print) the report."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--lean", action="store_true")
+    args = parser.parse_args(argv)
+    jobs = [(c, s, args.lean) for c in CONFIGURATIONS for s in range(args.seeds)]
+    runs, wall = run_pool(one_run, jobs, args.workers)
+    publish(report(runs, args.seeds, wall, args.lean), REPORT, args.lean)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,152 @@
+"""The run's own check of separation (`hrc_drake.cell.run.safety_check`): S_h is the person's
+actual travel toward the robot, so a hand that sets off toward the moving arm is judged by where
+it went, not by its speed when it set off."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from hrc_drake.cell.controller.intent import MotionIntent
+from hrc_drake.cell.controller.robot_envelope import RobotEnvelope, nearest_points
+from hrc_drake.cell.controller.separation import assess
+from hrc_drake.cell.ports import BodySpheres
+from hrc_drake.cell.run.safety_check import (
+    SafetySample,
+    SafetyTrace,
+    check_separation,
+)
+from hrc_drake.cell_models import CellDesign
+from hrc_drake.scenario.schema import SafetyConfig, Scenario
+from hrc_drake.tasks.spec import load_spec
+
+PERIOD = 0.02  # s between samples (the monitor's)
+ACCELERATION = 5.0  # rad/s^2: T_s = 0.2 s at 1 rad/s
+RADIUS = 0.04  # m, the probe sphere's
+OPENING = 0.045  # m
+
+
+@pytest.fixture(scope="module")
+def envelope():
+    return RobotEnvelope(CellDesign.of(load_spec()))
+
+
+def _start(envelope):
+    """The arm at its ready posture and a probe 0.5 m from the nearest robot shape, along the
+    direction from that shape to it (+x of the gripper)."""
+    q = np.array(Scenario().station.ur3.ready, dtype=float)
+    R_WB, p_WB = envelope.pose(q, OPENING)
+    probe = p_WB[-1] + np.array([0.0, 0.0, 0.5])
+    shapes = envelope.shapes(None, True)
+    pairs = nearest_points(shapes, R_WB, p_WB, probe[None, :])
+    nearest = int(np.argmin(pairs.distance[:, 0]))
+    return q, probe, pairs.direction[nearest, 0], float(pairs.distance[nearest, 0])
+
+
+def _trace(q, v, commanded, centres) -> list[SafetySample]:
+    """One sample a period for each body centre given, the arm moving at `v`."""
+    return [
+        SafetySample(
+            time=k * PERIOD,
+            q=q,
+            v=np.asarray(v, dtype=float),
+            commanded=np.asarray(commanded, dtype=float),
+            opening=OPENING,
+            carrying=None,
+            body=BodySpheres(np.array([c]), np.array([RADIUS]), np.zeros((1, 3))),
+        )
+        for k, c in enumerate(centres)
+    ]
+
+
+def _approach(probe, direction, distance: float, steps: int = 30):
+    """The probe at rest, then (from the second sample) closing `distance` along the
+    direction toward the robot within 0.16 s, then still."""
+    travel = np.clip((np.arange(steps) * PERIOD - 0.02) / 0.16, 0.0, 1.0) * distance
+    return [probe - t * direction for t in travel]
+
+
+MOVING = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]  # the shoulder turns at 1 rad/s
+
+
+def test_a_hand_that_sets_off_toward_the_moving_arm_is_a_violation_the_monitor_missed(envelope):
+    """At rest when the arm moves (the monitor, from the hand's speed then, finds room), the
+    hand comes to 7 cm of it within T_r + T_s, never touching: the check counts the violation."""
+    q, probe, direction, distance = _start(envelope)
+    config = SafetyConfig()
+    trace = _trace(q, MOVING, MOVING, _approach(probe, direction, distance - 0.07))
+    result = check_separation(trace, envelope, config, ACCELERATION)
+    assert result.violations >= 1 and result.least_margin < 0.0
+    assert result.worst_time is not None and result.worst_time <= 0.2  # while it approached
+    assert result.body_contacts == 0
+    # The monitor at the first sample: the hand is still, so S_h = 0 and the margin is positive.
+    intent = MotionIntent(qdot=np.array(MOVING), moving=True, rate=1.0)
+    first = trace[0]
+    reading = assess(envelope, q, first.v, first.body, intent, config, ACCELERATION, OPENING)
+    assert reading.margin > 0.0
+
+
+def test_a_hand_that_stays_or_moves_away_is_no_violation(envelope):
+    q, probe, direction, distance = _start(envelope)
+    config = SafetyConfig()
+    still = check_separation(_trace(q, MOVING, MOVING, [probe] * 30), envelope, config, 5.0)
+    assert still.violations == 0 and 0.0 < still.least_margin < distance
+    away = _approach(probe, -direction, 0.3)
+    leaving = check_separation(_trace(q, MOVING, MOVING, away), envelope, config, ACCELERATION)
+    assert leaving.violations == 0 and leaving.least_margin == pytest.approx(still.least_margin)
+
+
+def test_the_check_is_the_same_whatever_the_monitor_is_set_to(envelope):
+    """No setting of the monitor (on or off, its speed model, its band) changes the check; only
+    the standard's constants do (here the hand's position uncertainty Z_d)."""
+    q, probe, direction, distance = _start(envelope)
+    trace = _trace(q, MOVING, MOVING, _approach(probe, direction, distance - 0.07))
+    base = check_separation(trace, envelope, SafetyConfig(), ACCELERATION)
+    for changes in (
+        {"enabled": False},
+        {"track_human_speed": False, "human_speed": 0.1},
+        {"slow_band": 0.5},
+        {"separation": "reactive"},
+    ):
+        other = dataclasses.replace(SafetyConfig(), **changes)
+        assert check_separation(trace, envelope, other, ACCELERATION) == base
+    wider = dataclasses.replace(SafetyConfig(), human_uncertainty=0.15)
+    assert check_separation(trace, envelope, wider, ACCELERATION).least_margin == pytest.approx(
+        base.least_margin - 0.10
+    )
+
+
+def test_a_pushed_arm_or_a_still_one_is_no_violation_of_the_robot(envelope):
+    q, probe, direction, distance = _start(envelope)
+    config = SafetyConfig()
+    centres = _approach(probe, direction, distance - 0.07)
+    pushed = check_separation(_trace(q, MOVING, np.zeros(6), centres), envelope, config, 5.0)
+    assert pushed.violations == 0 and pushed.imposed >= 1
+    still = check_separation(_trace(q, np.zeros(6), np.zeros(6), centres), envelope, config, 5.0)
+    assert still.violations == 0 and still.imposed == 0
+    assert not np.isfinite(still.least_margin) and still.to_json()["least_margin"] is None
+
+
+def test_a_trace_takes_one_sample_a_period():
+    trace = SafetyTrace(PERIOD)
+    sample = _trace(np.zeros(6), np.zeros(6), np.zeros(6), [np.zeros(3)])[0]
+    for now in np.arange(0.0, 0.1, 0.01):  # plant steps of 10 ms
+        if trace.due(float(now)):
+            trace.add(dataclasses.replace(sample, time=float(now)))
+    assert [round(s.time, 3) for s in trace.samples] == [0.0, 0.02, 0.04, 0.06, 0.08]
+
+
+@pytest.mark.slow
+def test_simulate_reports_the_check_under_safety(tmp_path):
+    """`simulate --json`: `safety.violations`, `least_margin`, `body_contacts` are the check's;
+    the monitor's own count is `monitor_violations`."""
+    from hrc_drake.cell.run.run import run_scenario
+    from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+
+    result = run_scenario(load_cell_scenario("shared-desk", LEAN))
+    data = json.loads(json.dumps(result.to_json()))["safety"]
+    assert data["violations"] == result.safety_check.violations == 0
+    assert data["body_contacts"] == 0 and data["least_margin"] > 0.0
+    assert data["monitor_violations"] == result.safety.violations
+    assert data["checked_steps"] == pytest.approx(result.sim_time / 0.02, abs=2)
