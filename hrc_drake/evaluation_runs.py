@@ -48,7 +48,8 @@ class RunResult:
     states: tuple[str, ...] = ()
     """Cell only: the states the run went through (their names)."""
     violations: int = 0
-    """Cell only: separation violations (ISO/TS 15066 S_p; 0 without the operator's body)."""
+    """Cell only: separation violations by the run's own check (`hrc_drake.cell.run.safety_check`;
+    0 without the operator's body)."""
     handovers: int = 0
     """Cell only: tasks the robot handed over and the operator did by hand."""
     capped: bool = False

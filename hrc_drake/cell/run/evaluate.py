@@ -362,7 +362,7 @@ def play_cell_run(scenario, space: StateSpace, decider, operator):
         swaps=sum(bool(t.swapped) for t in tasks),
         indication_delay=float(operator.total_delay() if isinstance(operator, TotalDelay) else 0.0),
         states=tuple(result.names),
-        violations=0 if result.safety is None else int(result.safety.violations),
+        violations=0 if result.safety_check is None else int(result.safety_check.violations),
         handovers=result.handovers,
         capped=result.capped,
     )
