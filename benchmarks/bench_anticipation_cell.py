@@ -100,7 +100,7 @@ def one_run(job: tuple[str, str, str, bool]) -> dict:
         "retargets": sum(t.retargeted for t in result.tasks),
         "swaps": sum(t.swapped for t in result.tasks),
         "collisions": len(result.collisions),
-        "violations": safety.violations if safety is not None else 0,
+        "violations": result.safety_check.violations if safety is not None else 0,
         "error": result.error,
         # A part out of the gripper in the carry, or let go out of its seat, as the Supervisor
         # found it from the gripper and the configuration sensor.
