@@ -6,8 +6,9 @@ from what it knows (the hand's speed now); the run's own check (`hrc_drake.cell.
 counts one when it falls below the S_p of the person's actual travel over the next T_r + T_s,
 the same for every mode and setting. This benchmark runs `shared-desk` (the operator points and
 fetches beside the carry path) with the `follows` population, anticipating, on a few operator
-seeds, in five configurations: monitoring off, monitoring alone and predictive with the tracked
-hand speed, and both with the constant 1.6 m/s of a person whose speed is not monitored. Per
+seeds, in seven configurations: monitoring off, monitoring alone and predictive with the
+tracked hand speed held over the window, with the constant 1.6 m/s of a person whose speed is
+not monitored, and with the tracked speed bounded by the hand's acceleration. Per
 configuration: the assembly's simulated seconds, `ssm_delay`, both counts and both least margins,
 body contacts.
 
@@ -31,6 +32,12 @@ CONFIGURATIONS = {
     "predictive, tracked": "{safety: {separation: predictive}}",
     "monitoring alone, 1.6 m/s": "{safety: {separation: reactive, track_human_speed: false}}",
     "predictive, 1.6 m/s": "{safety: {separation: predictive, track_human_speed: false}}",
+    # The tracked speed bounded by what a hand can reach (`safety.hand_acceleration`): 30 m/s²
+    # covers the simulated hands' 24-29 m/s² (measured on these runs' samples).
+    "monitoring alone, bounded 30 m/s²": (
+        "{safety: {separation: reactive, hand_acceleration: 30.0}}"
+    ),
+    "predictive, bounded 30 m/s²": "{safety: {separation: predictive, hand_acceleration: 30.0}}",
 }
 POPULATION, INTERACTION = "follows", "anticipate"
 REPORT = Path(__file__).parent / "reports" / "safety_check.md"

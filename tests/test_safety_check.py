@@ -10,7 +10,7 @@ import pytest
 
 from hrc_drake.cell.controller.intent import MotionIntent
 from hrc_drake.cell.controller.robot_envelope import RobotEnvelope, nearest_points
-from hrc_drake.cell.controller.separation import assess
+from hrc_drake.cell.controller.separation import assess, bounded_travel
 from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.run.safety_check import (
     SafetySample,
@@ -150,3 +150,31 @@ def test_simulate_reports_the_check_under_safety(tmp_path):
     assert data["body_contacts"] == 0 and data["least_margin"] > 0.0
     assert data["monitor_violations"] == result.safety.violations
     assert data["checked_steps"] == pytest.approx(result.sim_time / 0.02, abs=2)
+
+
+def test_bounded_travel_speeds_up_to_the_cap_and_no_further():
+    # From rest at 10 m/s^2 for 0.1 s: 0.05 m; for 0.3 s the cap 1.6 m/s is reached at 0.16 s.
+    assert bounded_travel(0.0, 0.1, 10.0, 1.6) == pytest.approx(0.05)
+    assert bounded_travel(0.0, 0.3, 10.0, 1.6) == pytest.approx(0.5 * 10 * 0.16**2 + 1.6 * 0.14)
+    # A hand already at the cap, or faster, keeps its speed.
+    assert bounded_travel(1.6, 0.3, 10.0, 1.6) == pytest.approx(0.48)
+    assert bounded_travel(2.5, 0.3, 10.0, 1.6) == pytest.approx(0.75)
+
+
+def test_a_monitor_bounded_by_the_hands_acceleration_allows_for_the_hand_that_sets_off(envelope):
+    """The approach the check counts as a violation: the monitor with the tracked speed held
+    finds room at the first sample (the hand is still); bounded by what a hand can reach within
+    T_r + T_s, it finds none and slows the arm."""
+    q, probe, direction, distance = _start(envelope)
+    trace = _trace(q, MOVING, MOVING, _approach(probe, direction, distance - 0.07))
+    intent = MotionIntent(qdot=np.array(MOVING), moving=True, rate=1.0)
+    first = trace[0]
+
+    def reading(config):
+        return assess(envelope, q, first.v, first.body, intent, config, ACCELERATION, OPENING)
+
+    held, bounded = reading(SafetyConfig()), reading(SafetyConfig(hand_acceleration=30.0))
+    assert held.margin > 0.0 > bounded.margin
+    assert bounded.limit < held.limit
+    # Acceleration 0 is the speed held: today's monitor, to the bit.
+    assert reading(SafetyConfig(hand_acceleration=0.0)) == held

@@ -171,7 +171,13 @@ def _check_run(scenario: Scenario, fail) -> None:
 
 def _check_safety_body_and_station(scenario: Scenario, fail) -> None:
     """The separation formula's terms, the body's coordinates and the gripper's force."""
-    for key in ("human_speed", "reaction_time", "intrusion", "human_uncertainty"):
+    for key in (
+        "human_speed",
+        "hand_acceleration",
+        "reaction_time",
+        "intrusion",
+        "human_uncertainty",
+    ):
         if getattr(scenario.safety, key) < 0:
             raise fail(f"safety.{key}", "must be >= 0")
     for key in ("stance", "rest_hand", "reach_offset"):

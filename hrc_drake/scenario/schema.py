@@ -260,6 +260,10 @@ class SafetyConfig:
             ISO 13855: 1.6 m/s for a person whose speed is not monitored).
         track_human_speed: the simulated body is tracked exactly: v_h is its measured speed
             toward the robot (the TS allows a monitored speed); off, `human_speed` throughout.
+        hand_acceleration: m/s²; with a tracked speed, S_h is the farthest a hand can travel
+            in T_r + T_s speeding up at most at this rate from its speed now, up to ISO 13855's
+            1.6 m/s (2.0 m/s within 0.5 m); 0: the speed now, held (the simulated hands reach
+            24-29 m/s², `benchmarks/reports/safety_check.md`).
         reaction_time: T_r [s], the robot's reaction time (0.1 s is a common assumption).
         intrusion: C [m]; 0 when the distance is taken to the body itself.
         human_uncertainty: Z_d [m], the body's position uncertainty (a tracked hand).
@@ -280,6 +284,7 @@ class SafetyConfig:
     enabled: bool = True
     human_speed: float = 1.6
     track_human_speed: bool = True
+    hand_acceleration: float = 0.0
     reaction_time: float = 0.1
     intrusion: float = 0.0
     human_uncertainty: float = 0.05

@@ -63,6 +63,10 @@ from hrc_drake.scenario.schema import SafetyConfig
 # reaches this within one 20 ms period).
 IMPOSED_SPEED = 0.3
 _TINY = 1e-12  # keeps `allowed_scale`'s division finite where its root vanishes
+# ISO 13855's approach speeds, which ISO/TS 15066 §5.5.4.2.3 takes for a person whose speed is
+# not monitored (shared/reference/collaboration.md): 1.6 m/s, 2.0 m/s closer than 0.5 m. A
+# tracked hand bounded by `SafetyConfig.hand_acceleration` speeds up to them, no further.
+FAR_SPEED, NEAR_SPEED, NEAR_DISTANCE = 1.6, 2.0, 0.5  # m/s, m/s, m
 
 
 @dataclass(frozen=True)
@@ -141,6 +145,30 @@ def allowed_scale(gap, a0, a1, a2) -> float:
     return float(np.clip((2.0 * room / np.maximum(root, _TINY)).min(), 0.0, 1.0))
 
 
+def bounded_travel(v0, window: float, acceleration: float, cap) -> np.ndarray:
+    """The farthest [m] a hand moving toward the robot at `v0` [m/s] can travel in `window` s
+    when it speeds up at most at `acceleration` [m/s²], up to `cap` [m/s] (a hand already faster
+    keeps its speed). Vectorised over `v0` and `cap`."""
+    v0 = np.asarray(v0, dtype=float)
+    cap = np.maximum(cap, v0)
+    rising = np.minimum((cap - v0) / acceleration, window)
+    return v0 * rising + acceleration * rising * rising / 2 + cap * (window - rising)
+
+
+def _human_travel(v_h, gap, config: SafetyConfig, t_s: float, t_s1: float):
+    """(S_h with the measured stopping time, the speed v such that v (T_r + T_s(s)) bounds
+    S_h for every speed scale s of the plan): the tracked speed held (`hand_acceleration` 0),
+    or bounded by what the hand can reach within the window (`bounded_travel`, capped at ISO
+    13855's speeds); the bound for the plan takes its longest window, at s = 1."""
+    t_r = config.reaction_time
+    if not (config.track_human_speed and config.hand_acceleration > 0):
+        return v_h * (t_r + t_s), v_h
+    a = config.hand_acceleration
+    cap = np.where(gap < NEAR_DISTANCE, NEAR_SPEED, FAR_SPEED)
+    planned = np.minimum(np.maximum(cap, v_h), v_h + a * (t_r + t_s1))
+    return bounded_travel(v_h, t_r + t_s, a, cap), planned
+
+
 def assess(
     envelope: RobotEnvelope,
     q: np.ndarray,
@@ -176,10 +204,11 @@ def assess(
     t_r = config.reaction_time
     # Measured: the S_p the standard asks to keep.
     t_s = np.abs(v).max(initial=0.0) / joint_acceleration
-    s_p = v_h * (t_r + t_s) + v_r * t_r + v_r * t_s / 2 + const
-    # Planned at scale s: S_p(s) = a0 + a1 s + a2 s^2.
     t_s1 = np.abs(qdot).max(initial=0.0) / joint_acceleration
-    a0, a1, a2 = v_h * t_r + const, v_h * t_s1 + v_r1 * t_r, v_r1 * t_s1 / 2
+    s_h, v_plan = _human_travel(v_h, gap, config, t_s, t_s1)
+    s_p = s_h + v_r * t_r + v_r * t_s / 2 + const
+    # Planned at scale s: S_p(s) = a0 + a1 s + a2 s^2.
+    a0, a1, a2 = v_plan * t_r + const, v_plan * t_s1 + v_r1 * t_r, v_r1 * t_s1 / 2
     limit = allowed_scale(gap - config.slow_band, a0, a1, a2) if config.enabled else 1.0
     return SeparationReading(
         separation=float(gap.min()),
@@ -310,6 +339,7 @@ __all__ = [
     "SeparationReading",
     "allowed_scale",
     "assess",
+    "bounded_travel",
     "log_step",
     "plan_moves",
 ]
