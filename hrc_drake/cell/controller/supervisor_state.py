@@ -312,7 +312,7 @@ class SupervisorStatus:
         return replace(self, events=(*self.events, event), **changes)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # arrays inside: compared by identity, never by value
 class ArmCommand:
     """What the Supervisor commands: the arm's joint positions [rad] and velocities [rad/s],
     and the gripper's opening [m]."""
