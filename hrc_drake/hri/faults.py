@@ -160,6 +160,12 @@ class FaultError(ValueError):
     """A fault entry that cannot be used; the message names the entry and the fix."""
 
 
+def _named(source: str) -> str:
+    """Where a faults list came from, as an error names it: `scenario FILE`, or the option
+    (`--scenario-text`) that gave it."""
+    return source if source.startswith("--") else f"scenario {source}"
+
+
 def check_faults(
     faults: list[FaultConfig], source: str, joints: Sequence[str] | None = None
 ) -> None:
@@ -170,10 +176,10 @@ def check_faults(
         if not isinstance(fault, FaultConfig):
             tags = ", ".join(f"!{cls.__name__}" for cls in FAULT_CLASSES.values())
             raise FaultError(
-                f"scenario {source}: faults[{i}]: {fault!r} is not a fault; give one of {tags}"
+                f"{_named(source)}: faults[{i}]: {fault!r} is not a fault; give one of {tags}"
             )
         kind = fault.kind
-        where = f"scenario {source}: faults[{i}] ({kind.value})"
+        where = f"{_named(source)}: faults[{i}] ({kind.value})"
         if kind not in SIMULATED:
             built = ", ".join(k.value for k in SIMULATED)
             raise FaultError(
@@ -194,7 +200,7 @@ def check_faults_within_run(faults: list[FaultConfig], source: str, tasks: int) 
     for i, fault in enumerate(faults):
         if fault.task > tasks:
             raise FaultError(
-                f"scenario {source}: faults[{i}] ({fault.kind.value}): task {fault.task} is past "
+                f"{_named(source)}: faults[{i}] ({fault.kind.value}): task {fault.task} is past "
                 f"the run, which has {tasks} task(s); choose a task within it"
             )
 
