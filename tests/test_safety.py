@@ -74,6 +74,8 @@ def test_a_hand_in_the_robots_path_slows_then_stops_it_and_it_resumes():
     assert result.names == list(scenario.minimum_effort) and result.collisions == []
     safety = result.safety
     assert safety.violations == 0 and safety.body_contacts == 0
+    # By the run's own check too: the hand that set off toward the carry was allowed for.
+    assert result.safety_check.violations == 0 and result.safety_check.body_contacts == 0
     assert safety.slowed_time > 0 and safety.stopped_time > 0
     assert 0 < safety.min_separation < 0.2
     states = [state for _, state in result.speed_changes]
