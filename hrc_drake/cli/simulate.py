@@ -314,11 +314,14 @@ def _print_summary(result, scenario) -> None:
         f"(real-time factor {result.real_time_factor or 0:.2f})"
     )
     if result.safety is not None:
-        figures = result.safety.to_json()
+        # The run's own check's violations (`hrc_drake.cell.run.safety_check`), then the
+        # monitor's figures.
+        figures = result.to_json()["safety"]
+        pushed = figures.get("imposed_violations", 0)
         print(
             f"  safety: least separation {figures['min_separation']} m, "
-            f"{figures['violations']} violation(s)"
-            + (f" (+{figures['imposed']} moved from outside)" if figures["imposed"] else "")
+            f"{figures.get('violations', 0)} violation(s) by the run's check"
+            + (f" (+{pushed} moved from outside)" if pushed else "")
             + f", slowed {figures['slowed_time']} s, "
             f"stopped {figures['stopped_time']} s (added {figures['ssm_delay']} s); "
             f"separation {result.separation}"
