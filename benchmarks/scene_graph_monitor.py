@@ -44,7 +44,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 from hrc_drake.cell.controller.separation import SafetyLog, SeparationReading, allowed_scale
 from hrc_drake.cell.controller.supervisor import Mode, SupervisorStatus
 from hrc_drake.cell.person import CHAIN_GAP
-from hrc_drake.cell.ports import BodySpheres
+from hrc_drake.cell.ports import NOBODY, BodySpheres
 from hrc_drake.motion.plan import Stage
 from hrc_drake.scenario.schema import SafetyConfig
 
@@ -103,8 +103,7 @@ class SeparationMonitor(LeafSystem):
         self._query_port = self.DeclareAbstractInputPort(
             "query_object", scene_graph.get_query_output_port().Allocate()
         )
-        empty = BodySpheres(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
-        self._body_port = self.DeclareAbstractInputPort("body", AbstractValue.Make(empty))
+        self._body_port = self.DeclareAbstractInputPort("body", AbstractValue.Make(NOBODY))
         self._status_port = self.DeclareAbstractInputPort(
             "status", AbstractValue.Make(SupervisorStatus())
         )

@@ -136,6 +136,11 @@ class BodySpheres:
         return self  # immutable once made (Drake copies abstract values often)
 
 
+# Nobody tracked: what the body tracker reports with no one in the cell (and an unconnected
+# body input reads).
+NOBODY = BodySpheres(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
+
+
 class ActivityKind(StrEnum):
     """What the simulated operator is doing."""
 
@@ -163,6 +168,7 @@ class OperatorActivity:
 
 
 __all__ = [
+    "NOBODY",
     "ActivityKind",
     "BodySpheres",
     "CellConfiguration",

@@ -11,10 +11,8 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, InputPort, LeafSystem
 
 from hrc_drake.cell.controller.supervisor_state import N_JOINTS
-from hrc_drake.cell.ports import BodySpheres, CellConfiguration
+from hrc_drake.cell.ports import NOBODY, BodySpheres, CellConfiguration
 from hrc_drake.hri.messages import Indication
-
-NOBODY = BodySpheres(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
 
 
 @dataclass(frozen=True)
@@ -91,4 +89,4 @@ class Readings:
         return port.Eval(self._context) if port.HasValue(self._context) else NOBODY
 
 
-__all__ = ["NOBODY", "Readings", "SupervisorInputs"]
+__all__ = ["Readings", "SupervisorInputs"]

@@ -53,7 +53,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 from hrc_drake.cell.controller.intent import MotionIntent
 from hrc_drake.cell.controller.robot_envelope import RobotEnvelope, nearest_points, speeds_toward
 from hrc_drake.cell.person import CHAIN_GAP
-from hrc_drake.cell.ports import BodySpheres
+from hrc_drake.cell.ports import NOBODY, BodySpheres
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.robot_names import UR3_JOINTS
 from hrc_drake.scenario.schema import SafetyConfig
@@ -155,6 +155,23 @@ def bounded_travel(v0, window: float, acceleration: float, cap) -> np.ndarray:
     return v0 * rising + acceleration * rising * rising / 2 + cap * (window - rising)
 
 
+def body_gaps(
+    envelope: RobotEnvelope,
+    q: np.ndarray,
+    opening: float | None,
+    carrying: str | None,
+    body: BodySpheres,
+):
+    """(R_WB, p_WB, pairs, gap): the envelope posed at arm positions `q` and the gripper's
+    measured `opening` (None: the fingers over their whole travel) with the part `carrying`,
+    its nearest points to every body sphere, and each pair's gap, the distance less the sphere's
+    radius counted `1 + CHAIN_GAP` times (a chain of spheres is thinner than its capsule)."""
+    shapes = envelope.shapes(carrying, opening is not None)
+    R_WB, p_WB = envelope.pose(np.asarray(q, dtype=float), opening)
+    pairs = nearest_points(shapes, R_WB, p_WB, body.centres)
+    return R_WB, p_WB, pairs, pairs.distance - body.radii[None, :] * (1.0 + CHAIN_GAP)
+
+
 def _human_travel(v_h, gap, config: SafetyConfig, t_s: float, t_s1: float):
     """(S_h with the measured stopping time, the speed v such that v (T_r + T_s(s)) bounds
     S_h for every speed scale s of the plan): the tracked speed held (`hand_acceleration` 0),
@@ -190,10 +207,7 @@ def assess(
     if len(body.radii) == 0:
         return SeparationReading(moving=moving, imposed=imposed)
     qdot = np.asarray(intent.qdot, dtype=float)
-    shapes = envelope.shapes(intent.carrying, opening is not None)
-    R_WB, p_WB = envelope.pose(np.asarray(q, dtype=float), opening)
-    pairs = nearest_points(shapes, R_WB, p_WB, body.centres)
-    gap = pairs.distance - body.radii[None, :] * (1.0 + CHAIN_GAP)
+    R_WB, p_WB, pairs, gap = body_gaps(envelope, q, opening, intent.carrying, body)
     speeds = speeds_toward(envelope.link_velocities(R_WB, p_WB, np.stack([v, qdot])), pairs)
     if config.track_human_speed:
         v_h = np.maximum(0.0, -np.einsum("nj,mnj->mn", body.velocities, pairs.direction))
@@ -285,8 +299,7 @@ class ControllerSeparationMonitor(LeafSystem):
         self.envelope = envelope if envelope is not None else RobotEnvelope(design)
         self._config, self._acc, self._period = config, joint_acceleration, period
         self._state_port = self.DeclareVectorInputPort("ur3.state_estimated", 2 * len(UR3_JOINTS))
-        empty = BodySpheres(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
-        self._body_port = self.DeclareAbstractInputPort("operator.body", AbstractValue.Make(empty))
+        self._body_port = self.DeclareAbstractInputPort("operator.body", AbstractValue.Make(NOBODY))
         self._intent_port = self.DeclareAbstractInputPort(
             "intent", AbstractValue.Make(MotionIntent())
         )
@@ -339,6 +352,7 @@ __all__ = [
     "SeparationReading",
     "allowed_scale",
     "assess",
+    "body_gaps",
     "bounded_travel",
     "log_step",
     "plan_moves",

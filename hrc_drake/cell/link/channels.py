@@ -14,7 +14,6 @@ import struct
 from collections.abc import Callable
 from dataclasses import dataclass
 
-import numpy as np
 from drake import lcmt_panda_command, lcmt_panda_status
 
 from hrc_drake.cell.link.lcm_messages import (
@@ -46,7 +45,7 @@ from hrc_drake.cell.link.lcm_messages import (
     ur3_status_values,
 )
 from hrc_drake.cell.link.lcm_struct import LcmDecodeError
-from hrc_drake.cell.ports import BodySpheres, CellConfiguration
+from hrc_drake.cell.ports import NOBODY, BodySpheres, CellConfiguration
 from hrc_drake.hri.messages import Indication, Prompt
 
 
@@ -81,7 +80,7 @@ class StationChannel:
 
 
 def _no_body() -> BodySpheres:
-    return BodySpheres(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
+    return NOBODY
 
 
 COMMANDS: tuple[StationChannel, ...] = (

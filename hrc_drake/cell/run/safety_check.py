@@ -27,9 +27,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hrc_drake.cell.controller.robot_envelope import RobotEnvelope, nearest_points, speeds_toward
-from hrc_drake.cell.controller.separation import IMPOSED_SPEED
-from hrc_drake.cell.person import CHAIN_GAP
+from hrc_drake.cell.controller.robot_envelope import RobotEnvelope, speeds_toward
+from hrc_drake.cell.controller.separation import IMPOSED_SPEED, body_gaps
 from hrc_drake.cell.ports import BodySpheres, CellConfiguration, PartStatus
 from hrc_drake.scenario.schema import SafetyConfig
 
@@ -122,7 +121,6 @@ def check_separation(
     joint_acceleration: float,
 ) -> SafetyCheck:
     """The check of the module docstring over a run's `samples`."""
-    check = SafetyCheck(steps=len(samples))
     violations = imposed = contacts = 0
     least, worst = float("inf"), None
     constant = config.intrusion + config.human_uncertainty + config.robot_uncertainty
@@ -130,10 +128,9 @@ def check_separation(
         body = sample.body
         if len(body.radii) == 0:
             continue
-        shapes = envelope.shapes(sample.carrying, True)
-        R_WB, p_WB = envelope.pose(sample.q, sample.opening)
-        pairs = nearest_points(shapes, R_WB, p_WB, body.centres)
-        gap = pairs.distance - body.radii[None, :] * (1.0 + CHAIN_GAP)
+        R_WB, p_WB, pairs, gap = body_gaps(
+            envelope, sample.q, sample.opening, sample.carrying, body
+        )
         contacts += int(gap.min() <= 0.0)
         speed = float(np.abs(sample.v).max(initial=0.0))
         if speed <= config.moving_speed:
@@ -151,7 +148,7 @@ def check_separation(
         if margin < least:
             least, worst = margin, sample.time
     return SafetyCheck(
-        steps=check.steps,
+        steps=len(samples),
         violations=violations,
         least_margin=least,
         body_contacts=contacts,

@@ -56,7 +56,7 @@ from pydrake.systems.sensors import CameraConfig, RgbdSensor
 
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.person import desk_of
-from hrc_drake.cell.ports import BodySpheres
+from hrc_drake.cell.ports import NOBODY
 from hrc_drake.cell.scenario import cell_design, plant_config, scene_graph_config
 from hrc_drake.cell.station.arm_servo import GravityCompensation, servo_actuators
 from hrc_drake.cell.station.cell_station import CellStation
@@ -231,9 +231,8 @@ def _add_operator(builder, plant, scene_graph, parts, scenario: Scenario, operat
     builder.ExportInput(person.GetInputPort("hri.prompt"), "hri.prompt")
     builder.ExportOutput(person.GetOutputPort("hri.indication"), "hri.indication")
     if not scenario.body.enabled:
-        nobody = BodySpheres(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
         tracker = builder.AddNamedSystem(
-            "body_tracker", ConstantValueSource(AbstractValue.Make(nobody))
+            "body_tracker", ConstantValueSource(AbstractValue.Make(NOBODY))
         )
         builder.ExportOutput(tracker.get_output_port(), "operator.body")
         return person

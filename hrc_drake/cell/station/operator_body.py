@@ -46,7 +46,7 @@ from hrc_drake.cell.person import (
     BodyPose,
     body_pose,
 )
-from hrc_drake.cell.ports import ActivityKind, BodySpheres, OperatorActivity
+from hrc_drake.cell.ports import NOBODY, ActivityKind, BodySpheres, OperatorActivity
 from hrc_drake.hri.activity import bolting_hand, min_jerk
 from hrc_drake.scenario.schema import BodyConfig
 
@@ -127,9 +127,6 @@ def _along(a: np.ndarray, b: np.ndarray) -> RigidTransform:
     return RigidTransform(RotationMatrix.MakeFromOneVector(z / np.linalg.norm(z), 2), (a + b) / 2)
 
 
-_EMPTY = BodySpheres(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
-
-
 class OperatorBody(LeafSystem):
     """Poses the operator's body geometry and publishes it as spheres, every `period` seconds
     (the tracker's rate: between updates the body stands where it was last seen).
@@ -175,7 +172,7 @@ class OperatorBody(LeafSystem):
         )
         rest = body_pose(self._stance, self._script(0.0, OperatorActivity(), None), self._left)
         self._pose = self.DeclareAbstractState(AbstractValue.Make(rest))
-        self._spheres = self.DeclareAbstractState(AbstractValue.Make(_EMPTY))
+        self._spheres = self.DeclareAbstractState(AbstractValue.Make(NOBODY))
         self.DeclareAbstractOutputPort(
             "geometry_pose",
             lambda: AbstractValue.Make(FramePoseVector()),
