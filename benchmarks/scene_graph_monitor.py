@@ -41,10 +41,11 @@ from pydrake.geometry import Role
 from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from hrc_drake.cell.controller.separation import SafetyLog, SeparationReading, allowed_scale
+from hrc_drake.cell.controller.separation import SafetyLog, SeparationReading
 from hrc_drake.cell.controller.supervisor import Mode, SupervisorStatus
 from hrc_drake.cell.person import CHAIN_GAP
 from hrc_drake.cell.ports import NOBODY, BodySpheres
+from hrc_drake.cell.ssm import allowed_scale
 from hrc_drake.motion.plan import Stage
 from hrc_drake.scenario.schema import SafetyConfig
 

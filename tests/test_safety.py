@@ -6,19 +6,19 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.analysis import Simulator
 
 from hrc_drake.cell.controller.intent import MotionIntent
-from hrc_drake.cell.controller.robot_envelope import RobotEnvelope, nearest_points
 from hrc_drake.cell.controller.separation import (
     ControllerSeparationMonitor,
     SafetyLog,
     SeparationReading,
-    allowed_scale,
     assess,
     log_step,
 )
 from hrc_drake.cell.person import CHAIN_GAP, body_pose
 from hrc_drake.cell.ports import BodySpheres
+from hrc_drake.cell.robot_envelope import RobotEnvelope, nearest_points
 from hrc_drake.cell.run.run import run_scenario, shared_planner
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario, motion_options
+from hrc_drake.cell.ssm import allowed_scale
 from hrc_drake.cell.station.build import make_cell_station, station_scenario
 from hrc_drake.cell.station.operator_body import ReachInto
 from hrc_drake.motion.plan import Stage
@@ -102,7 +102,7 @@ def test_a_row_with_a_mistake_and_undo_runs_with_the_body_and_no_violation():
 
 
 # The controller's separation monitor (hrc_drake.cell.controller.separation): its own model of the
-# robot (hrc_drake.cell.controller.robot_envelope), measured inputs only.
+# robot (hrc_drake.cell.robot_envelope), measured inputs only.
 
 POSTURES = (
     (0.0, -1.57, 1.2, -1.2, -1.57, 0.0),

@@ -9,14 +9,15 @@ import numpy as np
 import pytest
 
 from hrc_drake.cell.controller.intent import MotionIntent
-from hrc_drake.cell.controller.robot_envelope import RobotEnvelope, nearest_points
-from hrc_drake.cell.controller.separation import assess, bounded_travel
+from hrc_drake.cell.controller.separation import assess
 from hrc_drake.cell.ports import BodySpheres
+from hrc_drake.cell.robot_envelope import RobotEnvelope, nearest_points
 from hrc_drake.cell.run.safety_check import (
     SafetySample,
     SafetyTrace,
     check_separation,
 )
+from hrc_drake.cell.ssm import bounded_travel
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.scenario.schema import SafetyConfig, Scenario
 from hrc_drake.tasks.spec import load_spec

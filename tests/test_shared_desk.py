@@ -307,7 +307,7 @@ def test_the_robot_keeps_clear_of_the_desks_bins_in_every_placement_plan():
     """The bins are drawn, not in the robot's plant: the layout keeps them clear. Every
     placement plan of the flange case keeps the arm, its fingers as commanded and the part it
     carries at least 1 cm from every point of the bins' tops."""
-    from hrc_drake.cell.controller.robot_envelope import RobotEnvelope, nearest_points
+    from hrc_drake.cell.robot_envelope import RobotEnvelope, nearest_points
     from hrc_drake.cell.run.run import shared_planner
     from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
     from hrc_drake.tasks.graph import generate_states

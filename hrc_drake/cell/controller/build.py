@@ -20,7 +20,6 @@ from pydrake.systems.framework import Diagram, DiagramBuilder
 from hrc_drake.cell.controller.forecast import OperatorForecast
 from hrc_drake.cell.controller.intent import MotionIntent
 from hrc_drake.cell.controller.keep_clear import KeepClearSettings
-from hrc_drake.cell.controller.robot_envelope import RobotEnvelope
 from hrc_drake.cell.controller.separation import (
     ControllerSeparationMonitor,
     SafetyLog,
@@ -34,6 +33,7 @@ from hrc_drake.cell.controller.supervisor import (
 )
 from hrc_drake.cell.person import desk_of
 from hrc_drake.cell.ports import BodySpheres
+from hrc_drake.cell.robot_envelope import RobotEnvelope
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.scene import load_cell_frames

@@ -1,14 +1,16 @@
 """Speed and separation monitoring (ISO/TS 15066 §5.5.4) in the controller, from what a real cell
 measures.
 
-The monitor belongs to the controller. It reads what a real cell offers: the arm's measured joint
+The monitor belongs to the controller and serves its planning: it slows the plan so that the
+station's safety function (`hrc_drake.cell.station.safety_function`), which executes the stops,
+need not. It reads what a real cell offers: the arm's measured joint
 state (`ur3.state_estimated`), optionally the gripper's measured opening (`rg2.state_measured`),
 the tracked operator body (`operator.body`, world-frame spheres with velocities), and what the
 Supervisor is about to do (`intent`: the plan's joint velocities at full speed, the part it
 carries). Nothing comes from the simulator's SceneGraph or plant state.
 
 Like a real controller it has its own kinematic model of the robot (`RobotEnvelope`,
-`hrc_drake.cell.controller.robot_envelope`): the UR3, the gripper and the part it carries as
+`hrc_drake.cell.robot_envelope`): the UR3, the gripper and the part it carries as
 convex primitives posed from the measured joint state, never farther from a point than the true
 shapes.
 
@@ -20,16 +22,8 @@ the sphere at the shape's nearest point, from its link's spatial velocity (the l
 velocity Jacobian, from the posed joint axes of the serial arm, times the measured v and times
 the plan's q̇ at full speed). Every pair is assessed, not only each sphere's nearest shape: a
 farther shape moving fast toward the sphere can need more room. With them it evaluates the
-protective separation distance
-
-    S_p = v_h (T_r + T_s) + v_r T_r + S_s + C + Z_d + Z_r
-
-(ISO/TS 15066:2016 §5.5.4.2; the worked example of Marvel & Norcross 2017, "Implementing speed
-and separation monitoring in collaborative robot workcells", Robot. Comput.-Integr. Manuf. 44).
-The stopping time and distance come from the arm's joint acceleration limit a (MotionOptions): the
-robot stops along its path by scaling its trajectory's time, so every joint decelerates together
-and the fastest one sets the time, T_s = max_j |q̇_j| / a; a point's speed then falls linearly to
-zero, S_s = v_r T_s / 2.
+protective separation distance of `hrc_drake.cell.ssm` with S_h = v_h (T_r + T_s) (or the
+hand's bounded travel, `SafetyConfig.hand_acceleration`).
 
 `speed_limit` (the Supervisor's input) is the largest speed scale s ∈ [0, 1] of the plan at which
 every pair keeps at least S_p(s) + `slow_band`, with the plan's own velocities scaled by s (S_p
@@ -51,22 +45,23 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from hrc_drake.cell.controller.intent import MotionIntent
-from hrc_drake.cell.controller.robot_envelope import RobotEnvelope, nearest_points, speeds_toward
-from hrc_drake.cell.person import CHAIN_GAP
 from hrc_drake.cell.ports import NOBODY, BodySpheres
+from hrc_drake.cell.robot_envelope import RobotEnvelope, speeds_toward
+from hrc_drake.cell.ssm import (
+    FAR_SPEED,
+    IMPOSED_SPEED,
+    NEAR_DISTANCE,
+    NEAR_SPEED,
+    allowed_scale,
+    body_gaps,
+    bounded_travel,
+    protective_distance,
+    separation_constant,
+    stopping_time,
+)
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.robot_names import UR3_JOINTS
 from hrc_drake.scenario.schema import SafetyConfig
-
-# A joint this much faster than commanded is moved from outside [rad/s] (our choice: the
-# servo tracks its command to a few hundredths of a rad/s; an 80 N·m push on the shoulder
-# reaches this within one 20 ms period).
-IMPOSED_SPEED = 0.3
-_TINY = 1e-12  # keeps `allowed_scale`'s division finite where its root vanishes
-# ISO 13855's approach speeds, which ISO/TS 15066 §5.5.4.2.3 takes for a person whose speed is
-# not monitored (shared/reference/collaboration.md): 1.6 m/s, 2.0 m/s closer than 0.5 m. A
-# tracked hand bounded by `SafetyConfig.hand_acceleration` speeds up to them, no further.
-FAR_SPEED, NEAR_SPEED, NEAR_DISTANCE = 1.6, 2.0, 0.5  # m/s, m/s, m
 
 
 @dataclass(frozen=True)
@@ -128,50 +123,6 @@ class SafetyLog:
         }
 
 
-def allowed_scale(gap, a0, a1, a2) -> float:
-    """The largest s ∈ [0, 1] with a0 + a1 s + a2 s² ≤ gap for every entry (0 if none).
-
-    Vectorised over the entries; the root is taken in the form 2 (g − a0) / (a1 + √(a1² +
-    4 a2 (g − a0))), which is exact for a2 = 0 and free of cancellation for small a2."""
-    gap, a0, a1, a2 = (np.atleast_1d(np.asarray(x, dtype=float)) for x in (gap, a0, a1, a2))
-    limiting = a0 + a1 + a2 > gap
-    if not limiting.any():
-        return 1.0
-    g, c0, c1, c2 = gap[limiting], a0[limiting], a1[limiting], a2[limiting]
-    room = g - c0
-    if (room < 0.0).any():
-        return 0.0
-    root = c1 + np.sqrt(np.maximum(c1 * c1 + 4.0 * c2 * room, 0.0))
-    return float(np.clip((2.0 * room / np.maximum(root, _TINY)).min(), 0.0, 1.0))
-
-
-def bounded_travel(v0, window: float, acceleration: float, cap) -> np.ndarray:
-    """The farthest [m] a hand moving toward the robot at `v0` [m/s] can travel in `window` s
-    when it speeds up at most at `acceleration` [m/s²], up to `cap` [m/s] (a hand already faster
-    keeps its speed). Vectorised over `v0` and `cap`."""
-    v0 = np.asarray(v0, dtype=float)
-    cap = np.maximum(cap, v0)
-    rising = np.minimum((cap - v0) / acceleration, window)
-    return v0 * rising + acceleration * rising * rising / 2 + cap * (window - rising)
-
-
-def body_gaps(
-    envelope: RobotEnvelope,
-    q: np.ndarray,
-    opening: float | None,
-    carrying: str | None,
-    body: BodySpheres,
-):
-    """(R_WB, p_WB, pairs, gap): the envelope posed at arm positions `q` and the gripper's
-    measured `opening` (None: the fingers over their whole travel) with the part `carrying`,
-    its nearest points to every body sphere, and each pair's gap, the distance less the sphere's
-    radius counted `1 + CHAIN_GAP` times (a chain of spheres is thinner than its capsule)."""
-    shapes = envelope.shapes(carrying, opening is not None)
-    R_WB, p_WB = envelope.pose(np.asarray(q, dtype=float), opening)
-    pairs = nearest_points(shapes, R_WB, p_WB, body.centres)
-    return R_WB, p_WB, pairs, pairs.distance - body.radii[None, :] * (1.0 + CHAIN_GAP)
-
-
 def _human_travel(v_h, gap, config: SafetyConfig, t_s: float, t_s1: float):
     """(S_h with the measured stopping time, the speed v such that v (T_r + T_s(s)) bounds
     S_h for every speed scale s of the plan): the tracked speed held (`hand_acceleration` 0),
@@ -214,13 +165,13 @@ def assess(
     else:
         v_h = np.full(gap.shape, config.human_speed)
     v_r, v_r1 = np.maximum(0.0, speeds)
-    const = config.intrusion + config.human_uncertainty + config.robot_uncertainty
+    const = separation_constant(config)
     t_r = config.reaction_time
     # Measured: the S_p the standard asks to keep.
-    t_s = np.abs(v).max(initial=0.0) / joint_acceleration
-    t_s1 = np.abs(qdot).max(initial=0.0) / joint_acceleration
+    t_s = stopping_time(v, joint_acceleration)
+    t_s1 = stopping_time(qdot, joint_acceleration)
     s_h, v_plan = _human_travel(v_h, gap, config, t_s, t_s1)
-    s_p = s_h + v_r * t_r + v_r * t_s / 2 + const
+    s_p = protective_distance(s_h, v_r, t_s, config)
     # Planned at scale s: S_p(s) = a0 + a1 s + a2 s^2.
     a0, a1, a2 = v_plan * t_r + const, v_plan * t_s1 + v_r1 * t_r, v_r1 * t_s1 / 2
     limit = allowed_scale(gap - config.slow_band, a0, a1, a2) if config.enabled else 1.0
@@ -350,10 +301,7 @@ __all__ = [
     "ControllerSeparationMonitor",
     "SafetyLog",
     "SeparationReading",
-    "allowed_scale",
     "assess",
-    "body_gaps",
-    "bounded_travel",
     "log_step",
     "plan_moves",
 ]

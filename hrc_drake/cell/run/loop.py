@@ -33,10 +33,10 @@ from pydrake.systems.framework import Diagram, DiagramBuilder, EventStatus
 from hrc_drake.atomic import atomic_write_bytes, atomic_write_text
 from hrc_drake.cell.controller.build import Controller, connect_controller
 from hrc_drake.cell.controller.keep_clear import VIEW_TIMES
-from hrc_drake.cell.controller.robot_envelope import RobotEnvelope
 from hrc_drake.cell.controller.separation import SafetyLog
 from hrc_drake.cell.controller.supervisor import Mode, SupervisorStatus, TaskRecord
 from hrc_drake.cell.ports import CellConfiguration
+from hrc_drake.cell.robot_envelope import RobotEnvelope
 from hrc_drake.cell.run.fault_report import fault_records
 from hrc_drake.cell.run.safety_check import (
     SafetyCheck,

@@ -27,9 +27,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hrc_drake.cell.controller.robot_envelope import RobotEnvelope, speeds_toward
-from hrc_drake.cell.controller.separation import IMPOSED_SPEED, body_gaps
 from hrc_drake.cell.ports import BodySpheres, CellConfiguration, PartStatus
+from hrc_drake.cell.robot_envelope import RobotEnvelope, speeds_toward
+from hrc_drake.cell.ssm import IMPOSED_SPEED, body_gaps, protective_distance, stopping_time
 from hrc_drake.scenario.schema import SafetyConfig
 
 
@@ -123,7 +123,6 @@ def check_separation(
     """The check of the module docstring over a run's `samples`."""
     violations = imposed = contacts = 0
     least, worst = float("inf"), None
-    constant = config.intrusion + config.human_uncertainty + config.robot_uncertainty
     for k, sample in enumerate(samples):
         body = sample.body
         if len(body.radii) == 0:
@@ -135,11 +134,11 @@ def check_separation(
         speed = float(np.abs(sample.v).max(initial=0.0))
         if speed <= config.moving_speed:
             continue
-        t_s = speed / joint_acceleration
+        t_s = stopping_time(sample.v, joint_acceleration)
         velocities = envelope.link_velocities(R_WB, p_WB, sample.v[None, :])
         v_r = np.maximum(0.0, speeds_toward(velocities, pairs)[0])
         s_h = _travel_toward(samples, k, config.reaction_time + t_s, pairs.direction)
-        s_p = s_h + v_r * config.reaction_time + v_r * t_s / 2 + constant
+        s_p = protective_distance(s_h, v_r, t_s, config)
         margin = float((gap - s_p).min())
         if np.abs(sample.v - sample.commanded).max(initial=0.0) > IMPOSED_SPEED:
             imposed += int(margin < 0.0)

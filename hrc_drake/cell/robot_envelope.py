@@ -1,18 +1,19 @@
-"""The controller's own kinematic model of the robot, for its separation monitor
-(`hrc_drake.cell.controller.separation`): the robot's collision shapes as convex primitives, the
-distance from points to them, and how fast the robot's points move toward them.
+"""A kinematic model of the robot for separation monitoring: the robot's collision shapes as convex
+primitives, the distance from points to them, and how fast the robot's points move toward them.
+The controller's planning monitor (`hrc_drake.cell.controller.separation`), the station's safety
+function (`hrc_drake.cell.station.safety_function`) and the run's check each build their own.
 
-Like a real controller, the monitor has its own kinematic model: a MultibodyPlant of the cell
-parsed from the project's models (`add_cell_models`), of which it uses the UR3, the gripper and the
-parts' shapes. At construction every collision shape of the robot, and of each part as it sits in
-the gripper (the gripper's `tcp` at the part's `grasp` frame), becomes a convex primitive in numpy
-(`RobotEnvelope`): a box, a cylinder (a disc swept along z), a capsule or a sphere, each the shape
-itself, so the distance from a point is exact; an ellipsoid or a mesh becomes its enclosing box.
-Fingers whose opening is not measured take the box they sweep over their whole travel. So the
-monitor's distance is never more than the true one.
+Like a real controller or safety controller, each has its own kinematic model: a MultibodyPlant of
+the cell parsed from the project's models (`add_cell_models`), of which it uses the UR3, the
+gripper and the parts' shapes. At construction every collision shape of the robot, and of each
+part as it sits in the gripper (the gripper's `tcp` at the part's `grasp` frame), becomes a convex
+primitive in numpy (`RobotEnvelope`): a box, a cylinder (a disc swept along z), a capsule or a
+sphere, each the shape itself, so the distance from a point is exact; an ellipsoid or a mesh
+becomes its enclosing box. Fingers whose opening is not measured take the box they sweep over
+their whole travel. So the distance is never more than the true one.
 
-Apart from the monitor because this is geometry and kinematics, the same whatever the
-standard asks: the monitor turns these distances and speeds into ISO/TS 15066's separation.
+Apart from the monitors because this is geometry and kinematics, the same whatever the standard
+asks: `hrc_drake.cell.ssm` turns these distances and speeds into ISO/TS 15066's separation.
 """
 
 from __future__ import annotations

@@ -1,0 +1,108 @@
+"""Speed and separation monitoring's arithmetic (ISO/TS 15066:2016 §5.5.4), stated once for the
+three that evaluate it: the controller's planning monitor (`hrc_drake.cell.controller.separation`),
+the station's safety function (`hrc_drake.cell.station.safety_function`) and the run's own check
+(`hrc_drake.cell.run.safety_check`). Each has its own robot model (`RobotEnvelope`) and its own
+idea of the person's travel S_h; the protective separation distance around it is the same:
+
+    S_p = S_h + v_r T_r + S_s + C + Z_d + Z_r
+
+(§5.5.4.2; the worked example of Marvel & Norcross 2017, "Implementing speed and separation
+monitoring in collaborative robot workcells", Robot. Comput.-Integr. Manuf. 44). The robot stops
+along its path by scaling its trajectory's time, so every joint decelerates together at the arm's
+joint acceleration limit a and the fastest one sets the time, T_s = max_j |q̇_j| / a; a point's
+speed then falls linearly to zero, S_s = v_r T_s / 2.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hrc_drake.cell.person import CHAIN_GAP
+from hrc_drake.cell.ports import BodySpheres
+from hrc_drake.cell.robot_envelope import RobotEnvelope, nearest_points
+from hrc_drake.scenario.schema import SafetyConfig
+
+# A joint this much faster than commanded is moved from outside [rad/s] (our choice: the
+# servo tracks its command to a few hundredths of a rad/s; an 80 N·m push on the shoulder
+# reaches this within one 20 ms period).
+IMPOSED_SPEED = 0.3
+_TINY = 1e-12  # keeps `allowed_scale`'s division finite where its root vanishes
+# ISO 13855's approach speeds, which ISO/TS 15066 §5.5.4.2.3 takes for a person whose speed is
+# not monitored (shared/reference/collaboration.md): 1.6 m/s, 2.0 m/s closer than 0.5 m. A
+# tracked hand bounded by `SafetyConfig.hand_acceleration` speeds up to them, no further.
+FAR_SPEED, NEAR_SPEED, NEAR_DISTANCE = 1.6, 2.0, 0.5  # m/s, m/s, m
+
+
+def allowed_scale(gap, a0, a1, a2) -> float:
+    """The largest s ∈ [0, 1] with a0 + a1 s + a2 s² ≤ gap for every entry (0 if none).
+
+    Vectorised over the entries; the root is taken in the form 2 (g − a0) / (a1 + √(a1² +
+    4 a2 (g − a0))), which is exact for a2 = 0 and free of cancellation for small a2."""
+    gap, a0, a1, a2 = (np.atleast_1d(np.asarray(x, dtype=float)) for x in (gap, a0, a1, a2))
+    limiting = a0 + a1 + a2 > gap
+    if not limiting.any():
+        return 1.0
+    g, c0, c1, c2 = gap[limiting], a0[limiting], a1[limiting], a2[limiting]
+    room = g - c0
+    if (room < 0.0).any():
+        return 0.0
+    root = c1 + np.sqrt(np.maximum(c1 * c1 + 4.0 * c2 * room, 0.0))
+    return float(np.clip((2.0 * room / np.maximum(root, _TINY)).min(), 0.0, 1.0))
+
+
+def bounded_travel(v0, window: float, acceleration: float, cap) -> np.ndarray:
+    """The farthest [m] a hand moving toward the robot at `v0` [m/s] can travel in `window` s
+    when it speeds up at most at `acceleration` [m/s²], up to `cap` [m/s] (a hand already faster
+    keeps its speed). Vectorised over `v0` and `cap`."""
+    v0 = np.asarray(v0, dtype=float)
+    cap = np.maximum(cap, v0)
+    rising = np.minimum((cap - v0) / acceleration, window)
+    return v0 * rising + acceleration * rising * rising / 2 + cap * (window - rising)
+
+
+def body_gaps(
+    envelope: RobotEnvelope,
+    q: np.ndarray,
+    opening: float | None,
+    carrying: str | None,
+    body: BodySpheres,
+):
+    """(R_WB, p_WB, pairs, gap): the envelope posed at arm positions `q` and the gripper's
+    measured `opening` (None: the fingers over their whole travel) with the part `carrying`,
+    its nearest points to every body sphere, and each pair's gap, the distance less the sphere's
+    radius counted `1 + CHAIN_GAP` times (a chain of spheres is thinner than its capsule)."""
+    shapes = envelope.shapes(carrying, opening is not None)
+    R_WB, p_WB = envelope.pose(np.asarray(q, dtype=float), opening)
+    pairs = nearest_points(shapes, R_WB, p_WB, body.centres)
+    return R_WB, p_WB, pairs, pairs.distance - body.radii[None, :] * (1.0 + CHAIN_GAP)
+
+
+def stopping_time(v: np.ndarray, joint_acceleration: float) -> float:
+    """T_s [s]: the arm at joint velocities `v` [rad/s] stopping along its path, every joint
+    decelerating together at `joint_acceleration` [rad/s²] (the fastest sets the time)."""
+    return float(np.abs(np.asarray(v, dtype=float)).max(initial=0.0)) / joint_acceleration
+
+
+def separation_constant(config: SafetyConfig) -> float:
+    """C + Z_d + Z_r [m]: the intrusion distance and the position uncertainties."""
+    return config.intrusion + config.human_uncertainty + config.robot_uncertainty
+
+
+def protective_distance(s_h, v_r, t_s: float, config: SafetyConfig):
+    """S_p [m] from the person's travel `s_h` [m] and the robot's speed toward them `v_r`
+    [m/s] with stopping time `t_s` [s]: S_h + v_r T_r + v_r T_s / 2 + C + Z_d + Z_r."""
+    return s_h + v_r * config.reaction_time + v_r * t_s / 2 + separation_constant(config)
+
+
+__all__ = [
+    "FAR_SPEED",
+    "IMPOSED_SPEED",
+    "NEAR_DISTANCE",
+    "NEAR_SPEED",
+    "allowed_scale",
+    "body_gaps",
+    "bounded_travel",
+    "protective_distance",
+    "separation_constant",
+    "stopping_time",
+]
