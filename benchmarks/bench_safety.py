@@ -26,7 +26,7 @@ from hrc_drake.scenario.load import table2_scenarios
 
 REPORT = Path(__file__).parent / "reports" / "safety.md"
 OFF = "{body: {enabled: false}}"
-UNTRACKED = "{safety: {track_human_speed: false}}"
+UNTRACKED = "{safety: {human_speed: constant}}"
 STOCHASTIC = ("stochastic-mistakes", "stochastic-long")
 
 

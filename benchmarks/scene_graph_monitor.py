@@ -41,11 +41,11 @@ from pydrake.geometry import Role
 from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from hrc_drake.cell.controller.separation import SafetyLog, SeparationReading
+from hrc_drake.cell.controller.separation import CONTACT_SHARE, SafetyLog, SeparationReading
 from hrc_drake.cell.controller.supervisor import Mode, SupervisorStatus
 from hrc_drake.cell.person import CHAIN_GAP
 from hrc_drake.cell.ports import NOBODY, BodySpheres
-from hrc_drake.cell.ssm import allowed_scale
+from hrc_drake.cell.ssm import allowed_scale, person_travel
 from hrc_drake.motion.plan import Stage
 from hrc_drake.scenario.schema import SafetyConfig
 
@@ -168,27 +168,27 @@ class SeparationMonitor(LeafSystem):
             v_now[rows] = (J @ v_meas).reshape(-1, 3)
         toward = centres - np.array([h[1] for h in hits])
         toward /= np.maximum(np.linalg.norm(toward, axis=1, keepdims=True), 1e-9)
-        if cfg.track_human_speed:
-            v_h = np.maximum(0.0, -np.sum(human * toward, 1))
-        else:
-            v_h = np.full(n, cfg.human_speed)
+        v_h = -np.sum(human * toward, 1)  # signed: a hand moving away must turn first
         const = cfg.intrusion + cfg.human_uncertainty + cfg.robot_uncertainty
-        t_r = cfg.reaction_time
+        t_r, t_rp = cfg.reaction_time, cfg.reaction_time + self._period
         # Measured: the S_p the standard asks to keep.
         t_s = np.abs(v_meas).max(initial=0.0) / self._acc
         v_r = np.maximum(0.0, np.sum(v_now * toward, 1))
-        s_p = v_h * (t_r + t_s) + v_r * t_r + v_r * t_s / 2 + const
-        # Planned at scale s: S_p(s) = a0 + a1 s + a2 s^2.
+        s_p = person_travel(v_h, gap, t_r + t_s, cfg) + v_r * t_r + v_r * t_s / 2 + const
+        # Planned at scale s: S_p(s) = a0 + a1 s + a2 s^2 (the function's sampling period
+        # added to the reaction), or no faster toward the body than the contact speed.
         t_s1 = np.abs(qdot_nom).max(initial=0.0) / self._acc
         v_r1 = np.maximum(0.0, np.sum(v_nom * toward, 1))
-        a0, a1, a2 = v_h * t_r + const, v_h * t_s1 + v_r1 * t_r, v_r1 * t_s1 / 2
-        allowed = [
+        v_plan = person_travel(v_h, gap, t_rp + t_s1, cfg) / (t_rp + t_s1)
+        a0, a1, a2 = v_plan * t_rp + const, v_plan * t_s1 + v_r1 * t_rp, v_r1 * t_s1 / 2
+        slow = np.minimum(CONTACT_SHARE * cfg.contact_speed / np.maximum(v_r1, 1e-9), 1.0)
+        separated = [
             allowed_scale(
                 gap[k : k + 1] - cfg.slow_band, a0[k : k + 1], a1[k : k + 1], a2[k : k + 1]
             )
             for k in range(n)
         ]
-        return s_p, np.array(allowed)
+        return s_p, np.maximum(np.array(separated), slow)
 
     def _calc_reading(self, context, output) -> None:
         cfg, plant = self._config, self._plant

@@ -80,6 +80,12 @@ class FakeStation(LeafSystem):
         self.DeclareVectorOutputPort(
             "safety.stop", 1, lambda c, o: o.SetFromVector([float(c.get_time() % 0.5 > 0.4)])
         )
+        # The mode that stop is: a protective stop (3), else normal (1).
+        self.DeclareVectorOutputPort(
+            "safety.mode",
+            1,
+            lambda c, o: o.SetFromVector([3.0 if c.get_time() % 0.5 > 0.4 else 1.0]),
+        )
         self.DeclareAbstractOutputPort(
             "configuration", lambda: AbstractValue.Make(CellConfiguration()), self._configuration
         )

@@ -37,6 +37,7 @@ class _BareCell(LeafSystem):
         self.DeclareVectorOutputPort("rg2.state_measured", 2, self._gripper)
         self.DeclareVectorOutputPort("rg2.grip_detected", 1, lambda c, o: o.SetFromVector([0]))
         self.DeclareVectorOutputPort("safety.stop", 1, lambda c, o: o.SetFromVector([0]))
+        self.DeclareVectorOutputPort("safety.mode", 1, lambda c, o: o.SetFromVector([1]))
         self.DeclareAbstractOutputPort(
             "configuration", lambda: AbstractValue.Make(tray), lambda c, o: o.set_value(tray)
         )

@@ -42,6 +42,7 @@ from hrc_drake.cell.ports import (
     CellConfiguration,
     PartPlacement,
     PartStatus,
+    SafetyMode,
     placement_transform,
     pose_tuple,
 )
@@ -211,14 +212,24 @@ def test_defaults_and_session_round_trip():
 
 
 def test_ur3_status_leaves_what_a_simulation_does_not_measure_unknown():
-    status = lm.ur3_status(1, np.arange(12.0), [0.0])
+    status = lm.ur3_status(1, np.arange(12.0), [0.0], [1.0])
     assert all(math.isnan(x) for x in status.joint_torque + status.joint_position_desired)
     assert status.num_joints == 6 and status.joint_velocity == list(np.arange(6.0, 12.0))
     assert lm.ur3_status_values(status)[1][0] == 0.0
-    # A protective stop is the robot mode a stopped arm reports, and back.
-    stopped = lm.lcmt_panda_status.decode(lm.ur3_status(1, np.arange(12.0), [1.0]).encode())
-    assert stopped.robot_mode == lm.lcmt_panda_status.kReflex
-    assert lm.ur3_status_values(stopped)[1][0] == 1.0
+    # Each safety mode is a robot mode, and back; a stop says it is one.
+    for mode, robot_mode, stop in (
+        (SafetyMode.NORMAL, lm.lcmt_panda_status.kMove, 0.0),
+        (SafetyMode.REDUCED, lm.lcmt_panda_status.kOther, 0.0),
+        (SafetyMode.PROTECTIVE_STOP, lm.lcmt_panda_status.kReflex, 1.0),
+        (SafetyMode.SAFEGUARD_STOP, lm.lcmt_panda_status.kUserStopped, 1.0),
+    ):
+        message = lm.ur3_status(1, np.arange(12.0), [stop], [float(mode)])
+        decoded = lm.lcmt_panda_status.decode(message.encode())
+        assert decoded.robot_mode == robot_mode
+        _, stopped, back = lm.ur3_status_values(decoded)
+        assert stopped[0] == stop and SafetyMode(int(back[0])) == mode
+    with pytest.raises(ValueError, match=r"safety\.mode 4\.0 is not a safety mode"):
+        lm.ur3_status(1, np.arange(12.0), [0.0], [4.0])
 
 
 def test_decode_errors_name_the_type():

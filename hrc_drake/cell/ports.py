@@ -113,6 +113,10 @@ class CellConfiguration:
         """Which part instance sits at each token: instance -> token, seated parts only."""
         return {name: p.token for name, p in self.placements if p.token is not None}
 
+    def held(self) -> str | None:
+        """The part read as in the gripper (None: none)."""
+        return next((name for name, p in self.placements if p.status == PartStatus.HELD), None)
+
 
 @dataclass(frozen=True)
 class BodySpheres:
@@ -139,6 +143,22 @@ class BodySpheres:
 # Nobody tracked: what the body tracker reports with no one in the cell (and an unconnected
 # body input reads).
 NOBODY = BodySpheres(np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
+
+
+class SafetyMode(enum.IntEnum):
+    """The robot's safety mode as its safety system reports it (`safety.mode`), with the codes
+    of UR's RTDE `safety_mode` (Universal Robots' client library and RTDE guide: 1 normal,
+    2 reduced, 3 protective stop, 5 safeguard stop)."""
+
+    NORMAL = 1  # full limits
+    REDUCED = 2  # a person within the reduced band: the safety function may stop the arm soon
+    PROTECTIVE_STOP = 3  # stopped until the cause clears and someone unlocks
+    SAFEGUARD_STOP = 5  # stopped until the separation clears, then resumes by itself
+
+    @property
+    def stopped(self) -> bool:
+        """Whether the safety system holds the arm still."""
+        return self in (SafetyMode.PROTECTIVE_STOP, SafetyMode.SAFEGUARD_STOP)
 
 
 class ActivityKind(StrEnum):

@@ -11,16 +11,22 @@ monitoring in collaborative robot workcells", Robot. Comput.-Integr. Manuf. 44).
 along its path by scaling its trajectory's time, so every joint decelerates together at the arm's
 joint acceleration limit a and the fastest one sets the time, T_s = max_j |q̇_j| / a; a point's
 speed then falls linearly to zero, S_s = v_r T_s / 2.
+
+Separation and contact combine as ISO/TS 15066 allows: falling short of S_p counts only where
+the robot moves toward the person faster than `safety.contact_speed`, a speed at which a contact
+stays within power and force limiting's permissible transient contact (`beyond_contact_speed`;
+the default 0.25 m/s is ISO 10218-1's reduced speed, well below the ≈1.4 m/s that Annex A's
+figures give for the hand against a UR3-class arm, shared/reference/collaboration.md).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from hrc_drake.cell.person import CHAIN_GAP
+from hrc_drake.cell.person import CHAIN_GAP, touchable
 from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.robot_envelope import RobotEnvelope, nearest_points
-from hrc_drake.scenario.schema import SafetyConfig
+from hrc_drake.scenario.schema import HumanSpeed, SafetyConfig
 
 # A joint this much faster than commanded is moved from outside [rad/s] (our choice: the
 # servo tracks its command to a few hundredths of a rad/s; an 80 N·m push on the shoulder
@@ -33,21 +39,23 @@ _TINY = 1e-12  # keeps `allowed_scale`'s division finite where its root vanishes
 FAR_SPEED, NEAR_SPEED, NEAR_DISTANCE = 1.6, 2.0, 0.5  # m/s, m/s, m
 
 
-def allowed_scale(gap, a0, a1, a2) -> float:
-    """The largest s ∈ [0, 1] with a0 + a1 s + a2 s² ≤ gap for every entry (0 if none).
+def entry_scales(gap, a0, a1, a2) -> np.ndarray:
+    """Per entry, the largest s ∈ [0, 1] with a0 + a1 s + a2 s² ≤ gap (0 if none).
 
     Vectorised over the entries; the root is taken in the form 2 (g − a0) / (a1 + √(a1² +
     4 a2 (g − a0))), which is exact for a2 = 0 and free of cancellation for small a2."""
-    gap, a0, a1, a2 = (np.atleast_1d(np.asarray(x, dtype=float)) for x in (gap, a0, a1, a2))
-    limiting = a0 + a1 + a2 > gap
-    if not limiting.any():
-        return 1.0
-    g, c0, c1, c2 = gap[limiting], a0[limiting], a1[limiting], a2[limiting]
-    room = g - c0
-    if (room < 0.0).any():
-        return 0.0
-    root = c1 + np.sqrt(np.maximum(c1 * c1 + 4.0 * c2 * room, 0.0))
-    return float(np.clip((2.0 * room / np.maximum(root, _TINY)).min(), 0.0, 1.0))
+    gap, a0, a1, a2 = np.broadcast_arrays(
+        *(np.atleast_1d(np.asarray(x, dtype=float)) for x in (gap, a0, a1, a2))
+    )
+    room = gap - a0
+    root = a1 + np.sqrt(np.maximum(a1 * a1 + 4.0 * a2 * np.maximum(room, 0.0), 0.0))
+    scales = np.clip(2.0 * room / np.maximum(root, _TINY), 0.0, 1.0)
+    return np.where(a0 + a1 + a2 <= gap, 1.0, np.where(room < 0.0, 0.0, scales))
+
+
+def allowed_scale(gap, a0, a1, a2) -> float:
+    """The largest s ∈ [0, 1] with a0 + a1 s + a2 s² ≤ gap for every entry (0 if none)."""
+    return float(entry_scales(gap, a0, a1, a2).min(initial=1.0))
 
 
 def bounded_travel(v0, window: float, acceleration: float, cap) -> np.ndarray:
@@ -77,6 +85,32 @@ def body_gaps(
     return R_WB, p_WB, pairs, pairs.distance - body.radii[None, :] * (1.0 + CHAIN_GAP)
 
 
+def person_travel(
+    v_toward, gap, window: float, config: SafetyConfig, near: float = NEAR_DISTANCE
+) -> np.ndarray:
+    """S_h [m] per pair: how far the person can come toward the robot in `window` s, as
+    `safety.human_speed` says: `tracked`, from their tracked speed toward it `v_toward` [m/s]
+    (signed: a hand moving away must turn first) speeding up at most at `hand_acceleration`
+    up to ISO 13855's speeds; `constant`, those speeds throughout. The speed is 2.0 m/s where
+    the `gap` is under `near` (ISO 13855's 0.5 m), else 1.6 m/s. Vectorised over the pairs."""
+    cap = np.where(np.asarray(gap) < near, NEAR_SPEED, FAR_SPEED)
+    if config.human_speed == HumanSpeed.CONSTANT:
+        return cap * window
+    travel = bounded_travel(v_toward, window, config.hand_acceleration, cap)
+    return np.maximum(travel, 0.0)
+
+
+def beyond_contact_speed(v_r, config: SafetyConfig, body: BodySpheres):
+    """Per (shape, sphere) pair, where the robot moves toward the person faster than
+    `safety.contact_speed` [m/s], or toward the head at all: only there does falling short of
+    S_p count. Slower, a contact is one that power and force limiting permits (ISO/TS 15066
+    §5.5.5 with Annex A, which permits none with the face or skull, `touchable`). A contact
+    speed of 0 is separation alone: every pair counts."""
+    if config.contact_speed <= 0.0:
+        return np.ones(np.shape(v_r), dtype=bool)
+    return (np.asarray(v_r) > config.contact_speed) | ~touchable(body)[None, :]
+
+
 def stopping_time(v: np.ndarray, joint_acceleration: float) -> float:
     """T_s [s]: the arm at joint velocities `v` [rad/s] stopping along its path, every joint
     decelerating together at `joint_acceleration` [rad/s²] (the fastest sets the time)."""
@@ -100,8 +134,11 @@ __all__ = [
     "NEAR_DISTANCE",
     "NEAR_SPEED",
     "allowed_scale",
+    "beyond_contact_speed",
     "body_gaps",
     "bounded_travel",
+    "entry_scales",
+    "person_travel",
     "protective_distance",
     "separation_constant",
     "stopping_time",

@@ -11,8 +11,10 @@ from hrc_drake.scenario.schema import (
     TEXT_SOURCE,
     Activity,
     DeciderConfig,
+    HumanSpeed,
     InteractionConfig,
     SafetyConfig,
+    SafetyFunctionConfig,
     Scenario,
     ScenarioError,
     Separation,
@@ -172,8 +174,7 @@ def _check_run(scenario: Scenario, fail) -> None:
 def _check_safety_body_and_station(scenario: Scenario, fail) -> None:
     """The separation formula's terms, the body's coordinates and the gripper's force."""
     for key in (
-        "human_speed",
-        "hand_acceleration",
+        "contact_speed",
         "reaction_time",
         "intrusion",
         "human_uncertainty",
@@ -216,6 +217,29 @@ def _check_separation(safety: SafetyConfig, fail) -> None:
         raise fail(
             "safety.forecast_spread", f"give a fraction in [0, 1], got {safety.forecast_spread}"
         )
+    if safety.human_speed not in HUMAN_SPEEDS:
+        raise fail(
+            "safety.human_speed",
+            f"unknown speed {safety.human_speed!r}; use {' or '.join(HUMAN_SPEEDS)} (the "
+            "constant speeds are ISO 13855's)",
+        )
+    if safety.hand_acceleration <= 0:
+        raise fail(
+            "safety.hand_acceleration",
+            f"give an acceleration > 0 m/s² (30 bounds the simulated hands), got "
+            f"{safety.hand_acceleration}",
+        )
+    _check_safety_function(safety.function, fail)
+
+
+HUMAN_SPEEDS = tuple(m.value for m in HumanSpeed)
+
+
+def _check_safety_function(function: SafetyFunctionConfig, fail) -> None:
+    """The station's safety function: distances it can keep."""
+    for key in ("resume_clearance", "reduced_band"):
+        if getattr(function, key) < 0:
+            raise fail(f"safety.function.{key}", f"give metres >= 0, got {getattr(function, key)}")
 
 
 def _check_body(scenario: Scenario, fail) -> None:

@@ -241,11 +241,39 @@ class Separation(StrEnum):
     REACTIVE = "reactive"  # the separation monitor alone
 
 
+class HumanSpeed(StrEnum):
+    """`safety.function.human_speed`: the person's speed the station's safety function assumes."""
+
+    TRACKED = "tracked"  # the tracked speed, bounded by what a hand can reach (an acceleration)
+    CONSTANT = "constant"  # ISO 13855's 1.6 m/s (2.0 m/s within 0.5 m) throughout
+
+
 class Activity(StrEnum):
     """`body.activity`: what the operator's body does."""
 
     BOLTING = "bolting"  # reaches in only to bolt the held part
     DESK = "desk"  # also points at the seat and fetches bolts and nuts from the bins
+
+
+@dataclass
+class SafetyFunctionConfig:
+    """The station's separation safety function (`hrc_drake.cell.station.safety_function`): what a
+    safety-rated scanner and the robot's safety controller would run, apart from the controller.
+
+    Attributes:
+        enabled: the station stops the arm itself when the separation falls short (off: the
+            command reaches the arm as the controller gives it; the run's check still counts).
+        resume_clearance: m beyond the S_p of a robot at rest at which a safeguard stop clears
+            and the arm resumes by itself.
+        reduced_band: m beyond S_p within which the safety mode reads `reduced`.
+        unlock_delay: s after a protective stop's cause clears until the simulated operator
+            presses unlock (a negative value: never; the `safety.unlock` input alone unlocks).
+    """
+
+    enabled: bool = True
+    resume_clearance: float = 0.05
+    reduced_band: float = 0.15
+    unlock_delay: float = 1.0
 
 
 @dataclass
@@ -256,14 +284,17 @@ class SafetyConfig:
     Attributes:
         enabled: monitor the separation and scale the robot's speed (off: the robot ignores the
             operator's body, which is still drawn and measured).
-        human_speed: v_h [m/s] when the body is not tracked (ISO/TS 15066 5.5.4.2.3 and
-            ISO 13855: 1.6 m/s for a person whose speed is not monitored).
-        track_human_speed: the simulated body is tracked exactly: v_h is its measured speed
-            toward the robot (the TS allows a monitored speed); off, `human_speed` throughout.
-        hand_acceleration: m/s²; with a tracked speed, S_h is the farthest a hand can travel
-            in T_r + T_s speeding up at most at this rate from its speed now, up to ISO 13855's
-            1.6 m/s (2.0 m/s within 0.5 m); 0: the speed now, held (the simulated hands reach
-            24-29 m/s², `benchmarks/reports/safety_check.md`).
+        human_speed: how far the person can come while the robot reacts and stops (S_h), for
+            the planning monitor and the station's safety function alike: `tracked` (from the
+            body's tracked speed toward the robot, speeding up at most at `hand_acceleration`
+            up to ISO 13855's 1.6 m/s, 2.0 m/s within 0.5 m; ISO/TS 15066 5.5.4.2.3 allows a
+            monitored speed) or `constant` (those speeds throughout, as for a person whose
+            speed is not monitored).
+        hand_acceleration: m/s², the bound of `tracked` (the simulated hands reach 24-29 m/s²,
+            `benchmarks/reports/safety_check.md`).
+        contact_speed: m/s; closer than S_p the robot may still move toward the person this
+            fast, as power and force limiting permits a contact (ISO/TS 15066 §5.5.5, Annex A);
+            0.25 m/s is ISO 10218-1's reduced speed; 0: separation alone.
         reaction_time: T_r [s], the robot's reaction time (0.1 s is a common assumption).
         intrusion: C [m]; 0 when the distance is taken to the body itself.
         human_uncertainty: Z_d [m], the body's position uncertainty (a tracked hand).
@@ -279,12 +310,14 @@ class SafetyConfig:
             takes the person's modelled timing as exact, the bound that a perfect forecast of a
             person who behaves as modelled would reach;
             `hrc_drake.cell.controller.forecast.OperatorForecast`).
+        function: the station's safety function (`SafetyFunctionConfig`); the settings above
+            but T_r, C, Z_d and Z_r, which it shares, are the controller's.
     """
 
     enabled: bool = True
-    human_speed: float = 1.6
-    track_human_speed: bool = True
-    hand_acceleration: float = 0.0
+    human_speed: str = HumanSpeed.TRACKED.value
+    hand_acceleration: float = 30.0
+    contact_speed: float = 0.25
     reaction_time: float = 0.1
     intrusion: float = 0.0
     human_uncertainty: float = 0.05
@@ -295,6 +328,7 @@ class SafetyConfig:
     departure: float = 0.15
     max_wait: float = 6.0
     forecast_spread: float = 1.0
+    function: SafetyFunctionConfig = field(default_factory=SafetyFunctionConfig)
 
 
 _PERSON = Person()  # the defaults live there (Drake-free module)

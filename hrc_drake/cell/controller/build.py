@@ -34,6 +34,7 @@ from hrc_drake.cell.controller.supervisor import (
 from hrc_drake.cell.person import desk_of
 from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.robot_envelope import RobotEnvelope
+from hrc_drake.cell.ssm import NEAR_SPEED
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.scene import load_cell_frames
@@ -47,6 +48,7 @@ MEASURED = (
     "rg2.state_measured",
     "rg2.grip_detected",
     "safety.stop",
+    "safety.mode",
     "configuration",
     "operator.body",
     "hri.indication",
@@ -112,10 +114,9 @@ def keep_clear_settings(
     forecast = OperatorForecast(
         body.person(), desk, delay.median, delay.sigma, safety.forecast_spread
     )
-    acceleration = options.joint_acceleration_limit
-
+    acceleration, period = options.joint_acceleration_limit, scenario.run.period
     reach = REACH_BOUND + max(
-        (safety.human_speed + TCP_BOUND) * (safety.reaction_time + STOP_BOUND), 0.0
+        (NEAR_SPEED + TCP_BOUND) * (safety.reaction_time + period + STOP_BOUND), 0.0
     )
 
     def scale(q, qdot, carrying, centres, radii, velocities) -> float:
@@ -126,7 +127,8 @@ def keep_clear_settings(
             return 1.0
         intent = MotionIntent(qdot=qdot, carrying=carrying, moving=True, rate=1.0)
         spheres = BodySpheres(centres, radii, velocities)
-        return assess(envelope, q, qdot, spheres, intent, safety, acceleration).limit
+        reading = assess(envelope, q, qdot, spheres, intent, safety, acceleration, None, period)
+        return reading.limit
 
     return KeepClearSettings(forecast, scale, safety.max_wait, safety.departure)
 

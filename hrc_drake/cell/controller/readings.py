@@ -11,7 +11,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, InputPort, LeafSystem
 
 from hrc_drake.cell.controller.supervisor_state import N_JOINTS
-from hrc_drake.cell.ports import NOBODY, BodySpheres, CellConfiguration
+from hrc_drake.cell.ports import NOBODY, BodySpheres, CellConfiguration, SafetyMode
 from hrc_drake.hri.messages import Indication
 
 
@@ -27,6 +27,7 @@ class SupervisorInputs:
     speed_limit: InputPort
     stop: InputPort
     body: InputPort
+    safety_mode: InputPort
 
     @staticmethod
     def declare(system: LeafSystem) -> SupervisorInputs:
@@ -44,6 +45,7 @@ class SupervisorInputs:
             speed_limit=system.DeclareVectorInputPort("speed_limit", BasicVector(1)),
             stop=system.DeclareVectorInputPort("safety.stop", BasicVector(1)),
             body=system.DeclareAbstractInputPort("operator.body", AbstractValue.Make(NOBODY)),
+            safety_mode=system.DeclareVectorInputPort("safety.mode", BasicVector(1)),
         )
 
 
@@ -79,9 +81,17 @@ class Readings:
         return port.Eval(self._context)[0] if port.HasValue(self._context) else 1.0
 
     def stop(self) -> bool:
-        """Whether the robot's protective-stop input is on (unconnected: never)."""
+        """Whether the robot's safety system holds the arm (unconnected: never)."""
         port = self._inputs.stop
         return port.HasValue(self._context) and port.Eval(self._context)[0] > 0.5
+
+    def safety_mode(self) -> SafetyMode:
+        """The robot's safety mode (unconnected: a protective stop while `stop`, else
+        normal)."""
+        port = self._inputs.safety_mode
+        if port.HasValue(self._context):
+            return SafetyMode(round(port.Eval(self._context)[0]))
+        return SafetyMode.PROTECTIVE_STOP if self.stop() else SafetyMode.NORMAL
 
     def body(self) -> BodySpheres:
         """The tracked operator body (unconnected: nobody)."""

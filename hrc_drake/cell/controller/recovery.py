@@ -30,7 +30,7 @@ from hrc_drake.cell.controller.supervisor_state import (
     obstacle_moved,
     resolve,
 )
-from hrc_drake.cell.ports import CellConfiguration, PartStatus
+from hrc_drake.cell.ports import CellConfiguration, PartStatus, SafetyMode
 from hrc_drake.hri.messages import Prompt, PromptKind
 from hrc_drake.motion.plan import Stage
 from hrc_drake.motion.plan_request import PlanFailure, PlanRequest
@@ -219,11 +219,17 @@ class FaultRecovery:
         event = f"{now:.2f}: an obstacle appears: stops to plan {task} again"
         return s.noted(event, turn=replace(s.turn, change=task))
 
-    def note_stop(self, s: SupervisorStatus, stop: bool, now: float) -> SupervisorStatus:
-        """Note the protective-stop input turning on (the robot stops on its path) and off
-        (it resumes where it stopped, the task state untouched)."""
+    def note_stop(
+        self, s: SupervisorStatus, stop: bool, now: float, mode: SafetyMode
+    ) -> SupervisorStatus:
+        """Note the robot's safety system stopping the arm (the plan stops on its path) and
+        letting it go (it resumes where it stopped, the task state untouched). A protective
+        stop is a fault found (a `Detection`); a safeguard stop is the separation kept."""
         if stop == s.recovery.stopped or s.mode in (Mode.DONE, Mode.FAILED):
             return s
+        if stop and mode == SafetyMode.SAFEGUARD_STOP:
+            event = f"{now:.2f}: safeguard stop (the separation): the robot stops on its path"
+            return s.noted(event, recovery=replace(s.recovery, stopped=True))
         if stop:
             event = f"{now:.2f}: protective stop: the robot stops on its path"
             found = Detection(Cause.STOP, s.step, now)

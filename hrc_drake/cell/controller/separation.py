@@ -45,16 +45,16 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from hrc_drake.cell.controller.intent import MotionIntent
+from hrc_drake.cell.person import touchable
 from hrc_drake.cell.ports import NOBODY, BodySpheres
 from hrc_drake.cell.robot_envelope import RobotEnvelope, speeds_toward
 from hrc_drake.cell.ssm import (
-    FAR_SPEED,
     IMPOSED_SPEED,
     NEAR_DISTANCE,
-    NEAR_SPEED,
-    allowed_scale,
+    beyond_contact_speed,
     body_gaps,
-    bounded_travel,
+    entry_scales,
+    person_travel,
     protective_distance,
     separation_constant,
     stopping_time,
@@ -62,6 +62,15 @@ from hrc_drake.cell.ssm import (
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.robot_names import UR3_JOINTS
 from hrc_drake.scenario.schema import SafetyConfig
+
+# The plan moves toward a person closer than S_p at this share of `safety.contact_speed` at
+# most: the servo lags its command and a point's speed is not linear in the joints' (our
+# choice).
+CONTACT_SHARE = 0.8
+# The plan allows for ISO 13855's near speed this much farther out than the standard's 0.5 m:
+# S_h steps up there, and the arm needs time to slow (our choice).
+NEAR_AHEAD = 0.1  # m
+_SLOWEST = 1e-9  # m/s: a point this slow toward the person never limits the plan
 
 
 @dataclass(frozen=True)
@@ -71,6 +80,8 @@ class SeparationReading:
     Attributes:
         separation: least distance robot–body [m] (inf: nothing measured).
         margin: least separation − S_p with the measured velocities [m].
+        short: the separation falls short of S_p where the robot moves toward the person
+            faster than `safety.contact_speed` (`hrc_drake.cell.ssm.beyond_contact_speed`).
         limit: the speed scale allowed (see the module docstring).
         moving: a robot joint moves faster than `SafetyConfig.moving_speed`.
         imposed: a joint moves faster than commanded by more than IMPOSED_SPEED: the arm is
@@ -79,6 +90,7 @@ class SeparationReading:
 
     separation: float = float("inf")
     margin: float = float("inf")
+    short: bool = False
     limit: float = 1.0
     moving: bool = False
     imposed: bool = False
@@ -123,18 +135,14 @@ class SafetyLog:
         }
 
 
-def _human_travel(v_h, gap, config: SafetyConfig, t_s: float, t_s1: float):
-    """(S_h with the measured stopping time, the speed v such that v (T_r + T_s(s)) bounds
-    S_h for every speed scale s of the plan): the tracked speed held (`hand_acceleration` 0),
-    or bounded by what the hand can reach within the window (`bounded_travel`, capped at ISO
-    13855's speeds); the bound for the plan takes its longest window, at s = 1."""
-    t_r = config.reaction_time
-    if not (config.track_human_speed and config.hand_acceleration > 0):
-        return v_h * (t_r + t_s), v_h
-    a = config.hand_acceleration
-    cap = np.where(gap < NEAR_DISTANCE, NEAR_SPEED, FAR_SPEED)
-    planned = np.minimum(np.maximum(cap, v_h), v_h + a * (t_r + t_s1))
-    return bounded_travel(v_h, t_r + t_s, a, cap), planned
+def _human_travel(v_h, gap, config: SafetyConfig, now: float, longest: float):
+    """(S_h over the window `now`, the speed v̄ with v̄ w ≥ S_h(w) for every window w up to
+    `longest`): the person's travel of `person_travel`. The hand's speed only rises within a
+    window, so S_h(w) / w grows with w and the longest window's average bounds the rest. The
+    plan takes the near speed `NEAR_AHEAD` sooner, so that it slows before the safety
+    function's S_h steps up at 0.5 m."""
+    planned = person_travel(v_h, gap, longest, config, NEAR_DISTANCE + NEAR_AHEAD)
+    return person_travel(v_h, gap, now, config), planned / max(longest, 1e-9)
 
 
 def assess(
@@ -146,11 +154,14 @@ def assess(
     config: SafetyConfig,
     joint_acceleration: float,
     opening: float | None = None,
+    sampling: float = 0.0,
 ) -> SeparationReading:
     """One step of the monitor (see the module docstring) without a diagram: the arm at
     measured `q`, `v` (UR3_JOINTS order), the gripper at the measured `opening` (None: not
-    measured), the operator's `body`, and the controller's `intent`. Poses `envelope`'s own
-    context (its only side effect)."""
+    measured), the operator's `body`, and the controller's `intent`. The plan's speed keeps
+    S_p with the reaction time lengthened by `sampling` [s], the station's safety function's
+    period, so that the function, which judges a period late, need not stop it. Poses
+    `envelope`'s own context (its only side effect)."""
     v = np.asarray(v, dtype=float)
     moving = bool(np.abs(v).max(initial=0.0) > config.moving_speed)
     commanded = np.asarray(intent.qdot, dtype=float) * intent.rate
@@ -160,24 +171,26 @@ def assess(
     qdot = np.asarray(intent.qdot, dtype=float)
     R_WB, p_WB, pairs, gap = body_gaps(envelope, q, opening, intent.carrying, body)
     speeds = speeds_toward(envelope.link_velocities(R_WB, p_WB, np.stack([v, qdot])), pairs)
-    if config.track_human_speed:
-        v_h = np.maximum(0.0, -np.einsum("nj,mnj->mn", body.velocities, pairs.direction))
-    else:
-        v_h = np.full(gap.shape, config.human_speed)
+    v_h = -np.einsum("nj,mnj->mn", body.velocities, pairs.direction)
     v_r, v_r1 = np.maximum(0.0, speeds)
     const = separation_constant(config)
     t_r = config.reaction_time
     # Measured: the S_p the standard asks to keep.
     t_s = stopping_time(v, joint_acceleration)
     t_s1 = stopping_time(qdot, joint_acceleration)
-    s_h, v_plan = _human_travel(v_h, gap, config, t_s, t_s1)
+    t_rp = t_r + sampling
+    s_h, v_plan = _human_travel(v_h, gap, config, t_r + t_s, t_rp + t_s1)
     s_p = protective_distance(s_h, v_r, t_s, config)
-    # Planned at scale s: S_p(s) = a0 + a1 s + a2 s^2.
-    a0, a1, a2 = v_plan * t_r + const, v_plan * t_s1 + v_r1 * t_r, v_r1 * t_s1 / 2
-    limit = allowed_scale(gap - config.slow_band, a0, a1, a2) if config.enabled else 1.0
+    # Planned at scale s: S_p(s) = a0 + a1 s + a2 s^2, or no faster than the contact speed.
+    a0, a1, a2 = v_plan * t_rp + const, v_plan * t_s1 + v_r1 * t_rp, v_r1 * t_s1 / 2
+    separated = entry_scales(gap - config.slow_band, a0, a1, a2)
+    slow = CONTACT_SHARE * config.contact_speed / np.maximum(v_r1, _SLOWEST)
+    slow = np.where(touchable(body)[None, :], slow, 0.0)  # the head: separation alone
+    limit = float(np.maximum(separated, np.minimum(slow, 1.0)).min()) if config.enabled else 1.0
     return SeparationReading(
         separation=float(gap.min()),
         margin=float((gap - s_p).min()),
+        short=bool(((gap < s_p) & beyond_contact_speed(v_r, config, body)).any()),
         limit=limit,
         moving=moving,
         imposed=imposed,
@@ -198,7 +211,7 @@ def log_step(
         body_contacts=log.body_contacts + int(reading.separation <= 0.0),
     )
     if reading.moving:
-        short = int(reading.margin < 0.0)
+        short = int(reading.short)
         commanded = plan_moves(intent) and not reading.imposed
         log = replace(
             log,
@@ -284,6 +297,7 @@ class ControllerSeparationMonitor(LeafSystem):
             self._config,
             self._acc,
             opening,
+            self._period,
         )
         output.set_value(reading)
 

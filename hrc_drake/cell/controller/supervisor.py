@@ -228,11 +228,12 @@ class Supervisor(LeafSystem):
         cell = Readings(self._inputs, context)
         limit = cell.speed_limit()
         stop = cell.stop()
-        status = self._recovery.note_stop(status, stop, now)
+        status = self._recovery.note_stop(status, stop, now, cell.safety_mode())
         if stop or self._anticipation.stopping_to_turn(status, now):
             limit = 0.0  # decelerate along the path, as for the separation monitor's stop
         try:
-            self._check_tracking(status, cell, now)
+            if not stop:  # the robot's safety system holds the arm, not its command
+                self._check_tracking(status, cell, now)
             status = self._advance(status, float(np.clip(limit, 0.0, 1.0)), now)
             status = self._step(status, cell, now)
             status = self._keep_clear.update(status, cell.body, now)

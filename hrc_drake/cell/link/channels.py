@@ -112,7 +112,7 @@ MEASUREMENTS: tuple[StationChannel, ...] = (
     StationChannel(
         "UR3_STATUS",
         lcmt_panda_status,
-        (Port("ur3.state_estimated", 2 * N_JOINTS), Port("safety.stop", 1)),
+        (Port("ur3.state_estimated", 2 * N_JOINTS), Port("safety.stop", 1), Port("safety.mode", 1)),
         ur3_status,
         ur3_status_values,
     ),

@@ -26,7 +26,13 @@ import numpy as np
 from drake import lcmt_panda_command, lcmt_panda_status
 
 from hrc_drake.cell.link.lcm_struct import LcmDecodeError, parse_definitions
-from hrc_drake.cell.ports import BodySpheres, CellConfiguration, PartPlacement, PartStatus
+from hrc_drake.cell.ports import (
+    BodySpheres,
+    CellConfiguration,
+    PartPlacement,
+    PartStatus,
+    SafetyMode,
+)
 from hrc_drake.cell.station.contacts import Owner
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
 from hrc_drake.robot_names import UR3_JOINTS
@@ -185,13 +191,35 @@ _UR3_STATUS_NOT_SIMULATED = (
 )
 
 
-def ur3_status(stamp: int, state, stop) -> lcmt_panda_status:
-    """`ur3.state_estimated` (positions, then velocities) and `safety.stop` as a UR3 status:
-    a protective stop is the robot mode `kReflex` (the arm stopped by its safety system),
-    otherwise `kMove`. The simulated station measures no torques and reports no targets: those
-    members are NaN (a real driver fills them from RTDE, see docs/hardware.md)."""
+# The robot's safety mode as the Panda status's robot mode: a protective stop is `kReflex` (the
+# arm stopped by its safety system), a safeguard stop `kUserStopped` (stopped by an outside
+# safeguard), the reduced mode `kOther` (the message has none of its own), normal `kMove`.
+_ROBOT_MODE = {
+    SafetyMode.NORMAL: lcmt_panda_status.kMove,
+    SafetyMode.REDUCED: lcmt_panda_status.kOther,
+    SafetyMode.PROTECTIVE_STOP: lcmt_panda_status.kReflex,
+    SafetyMode.SAFEGUARD_STOP: lcmt_panda_status.kUserStopped,
+}
+_SAFETY_MODE = {robot: safety for safety, robot in _ROBOT_MODE.items()}
+
+
+def ur3_status(stamp: int, state, stop, mode) -> lcmt_panda_status:
+    """`ur3.state_estimated` (positions, then velocities), `safety.stop` and `safety.mode` as a
+    UR3 status: the safety mode is the robot mode (`_ROBOT_MODE`), which also says the stop.
+    The simulated station measures no torques and reports no targets: those members are NaN
+    (a real driver fills them from RTDE, see docs/hardware.md)."""
     state = _count(state, 2 * N_JOINTS, "ur3.state_estimated")
     (stopped,) = _count(stop, 1, "safety.stop")
+    (code,) = _count(mode, 1, "safety.mode")
+    try:
+        safety = SafetyMode(round(code))
+    except ValueError as err:
+        raise ValueError(
+            f"safety.mode {code} is not a safety mode; use one of "
+            f"{', '.join(f'{m.value} ({m.name.lower()})' for m in SafetyMode)}"
+        ) from err
+    if (stopped > 0.5) != safety.stopped:
+        raise ValueError(f"safety.stop {stopped} disagrees with safety.mode {safety.name}")
     unknown = [math.nan] * N_JOINTS
     message = lcmt_panda_status()
     message.utime = message.robot_utime = stamp
@@ -200,19 +228,24 @@ def ur3_status(stamp: int, state, stop) -> lcmt_panda_status:
     for name in _UR3_STATUS_NOT_SIMULATED:
         setattr(message, name, unknown)
     message.control_command_success_rate = math.nan
-    message.robot_mode = lcmt_panda_status.kReflex if stopped > 0.5 else lcmt_panda_status.kMove
+    message.robot_mode = _ROBOT_MODE[safety]
     message.control_mode = (
         lcmt_panda_status.CONTROL_MODE_POSITION | lcmt_panda_status.CONTROL_MODE_VELOCITY
     )
     return message
 
 
-def ur3_status_values(message: lcmt_panda_status) -> tuple[np.ndarray, np.ndarray]:
-    """(`ur3.state_estimated`, `safety.stop`) of a UR3 status."""
+def ur3_status_values(message: lcmt_panda_status) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(`ur3.state_estimated`, `safety.stop`, `safety.mode`) of a UR3 status (a robot mode
+    that is none of `_ROBOT_MODE`'s reads as normal)."""
     position = _count(message.joint_position, N_JOINTS, "UR3 status positions")
     velocity = _count(message.joint_velocity, N_JOINTS, "UR3 status velocities")
-    stopped = 1.0 if message.robot_mode == lcmt_panda_status.kReflex else 0.0
-    return np.array(position + velocity), np.array([stopped])
+    safety = _SAFETY_MODE.get(message.robot_mode, SafetyMode.NORMAL)
+    return (
+        np.array(position + velocity),
+        np.array([1.0 if safety.stopped else 0.0]),
+        np.array([float(safety)]),
+    )
 
 
 def rg2_command(stamp: int, opening, force) -> lcmt_rg2_command:

@@ -115,6 +115,11 @@ class RemoteCell:
         controller's detections are still in the run's events)."""
         return ()
 
+    def safety_function(self, root) -> None:
+        """The station keeps its safety function's log to itself over LCM (its stops reach the
+        controller as the robot's safety mode)."""
+        return None
+
     def configuration(self, root):
         """The configuration the station measured last."""
         return self.diagram.GetOutputPort("configuration").Eval(self._context(root))

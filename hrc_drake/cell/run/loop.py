@@ -43,11 +43,11 @@ from hrc_drake.cell.run.safety_check import (
     SafetySample,
     SafetyTrace,
     check_separation,
-    held_part,
 )
 from hrc_drake.cell.run.view import frame_cell
 from hrc_drake.cell.station.cell_station import CellStation
 from hrc_drake.cell.station.contacts import Owner, geometry_owners, owner_pairs
+from hrc_drake.cell.station.safety_function import SafetyFunctionLog
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.hri.faults import FaultRecord
 from hrc_drake.motion.options import MotionOptions
@@ -80,6 +80,8 @@ class RunResult:
     """Separation monitoring figures (None: the scenario has no operator body)."""
     safety_check: SafetyCheck | None = None
     """The run's own check of separation (`hrc_drake.cell.run.safety_check`; None: no body)."""
+    safety_function: SafetyFunctionLog | None = None
+    """What the station's safety function did (None: a station that does not say)."""
     speed_changes: tuple[tuple[float, str], ...] = ()
     """(simulated time, "moving" | "slowed" | "stopped") each time the robot's speed state
     changes (with the operator body)."""
@@ -162,11 +164,13 @@ class RunResult:
         monitor["monitor_violations"] = monitor.pop("violations")
         monitor["monitor_body_contacts"] = monitor.pop("body_contacts")
         check = self.safety_check.to_json() if self.safety_check is not None else {}
+        function = self.safety_function
         return {
             **check,
             **monitor,
             "planned_wait": round(self.waited, 3),
             "replans": self.replans,
+            "function": None if function is None else function.to_json(),
         }
 
 
@@ -228,6 +232,9 @@ class CellSide(Protocol):
     def configuration(self, root) -> CellConfiguration:
         """The configuration the station measures now."""
 
+    def safety_function(self, root) -> SafetyFunctionLog | None:
+        """What the station's safety function did (a station that does not say: None)."""
+
     def save_still(self, root, path: Path) -> None:
         """Save the camera's image (a simulated station only)."""
 
@@ -264,6 +271,11 @@ class LocalCell:
     def configuration(self, root) -> CellConfiguration:
         """The configuration sensor's reading."""
         return self.station.configuration(root)
+
+    def safety_function(self, root) -> SafetyFunctionLog | None:
+        """The station's safety function's log (None: a station without the robot)."""
+        state = self.station.safety_function_state(root)
+        return None if state is None else state.log
 
     def save_still(self, root, path: Path) -> None:
         """The station camera's image, as PNG, written atomically."""
@@ -522,7 +534,7 @@ class _SafetySampler:
                 v=np.array(arm[n:]),
                 commanded=np.array(commanded),
                 opening=float(self._cell.GetOutputPort("rg2.state_measured").Eval(cell)[0]),
-                carrying=held_part(self._cell.GetOutputPort("configuration").Eval(cell)),
+                carrying=self._cell.GetOutputPort("configuration").Eval(cell).held(),
                 body=self._cell.GetOutputPort("operator.body").Eval(cell),
             )
         )
@@ -637,6 +649,7 @@ def _result(loop: ClosedLoop, wall: float, path, interrupted: bool) -> RunResult
         events=status.events,
         safety=loop.controller.safety_log(root),
         safety_check=_safety_check(loop),
+        safety_function=loop.cell.safety_function(root),
         speed_changes=tuple(watch.lights.changes) if watch.lights is not None else (),
         interrupted=interrupted,
         interaction=setup.scenario.interaction.mode,

@@ -17,8 +17,12 @@ commanded by more than `IMPOSED_SPEED`: a push is the person's doing and is coun
 some robot shape was closer to some body sphere than S_p. The robot's shapes are the
 controller's conservative envelope (`RobotEnvelope`: never farther from a point than the true
 geometry) posed from the measured joints and gripper opening, with the part the configuration
-sensor reads as held. A mode can change what the robot does, never this arithmetic: the check
-reads `safety`'s constants (T_r, C, Z_d, Z_r) and no setting of the monitor's.
+sensor reads as held. Falling short of S_p counts only where the robot moves toward the person
+faster than `safety.contact_speed` (separation and power and force limiting combined, as
+`hrc_drake.cell.ssm` says); samples inside S_p no faster are counted apart
+(`within_contact_speed`). A mode can change what the robot does, never this arithmetic: the
+check reads `safety`'s constants (T_r, C, Z_d, Z_r, the contact speed) and no setting of the
+monitor's.
 """
 
 from __future__ import annotations
@@ -27,9 +31,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hrc_drake.cell.ports import BodySpheres, CellConfiguration, PartStatus
+from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.robot_envelope import RobotEnvelope, speeds_toward
-from hrc_drake.cell.ssm import IMPOSED_SPEED, body_gaps, protective_distance, stopping_time
+from hrc_drake.cell.ssm import (
+    IMPOSED_SPEED,
+    beyond_contact_speed,
+    body_gaps,
+    protective_distance,
+    stopping_time,
+)
 from hrc_drake.scenario.schema import SafetyConfig
 
 
@@ -48,11 +58,6 @@ class SafetySample:
     body: BodySpheres
 
 
-def held_part(config: CellConfiguration) -> str | None:
-    """The part the configuration sensor reads as in the gripper (None: none)."""
-    return next((name for name, p in config.placements if p.status == PartStatus.HELD), None)
-
-
 @dataclass(frozen=True)
 class SafetyCheck:
     """The check's figures over a run (`simulate --json` `safety`: `violations`,
@@ -64,6 +69,7 @@ class SafetyCheck:
     body_contacts: int = 0  # samples where a robot shape touched a body sphere
     imposed: int = 0  # samples inside S_p while the arm was moved from outside (a push)
     worst_time: float | None = None  # when the least margin was reached [s]
+    contact_speed: int = 0  # samples inside S_p no faster toward the person than contact_speed
 
     def to_json(self) -> dict:
         """The JSON-able figures (distances in m, rounded to 0.1 mm; None: the robot never
@@ -74,6 +80,7 @@ class SafetyCheck:
             "least_margin": round(float(self.least_margin), 4) if finite else None,
             "body_contacts": self.body_contacts,
             "imposed_violations": self.imposed,
+            "within_contact_speed": self.contact_speed,
             "checked_steps": self.steps,
         }
 
@@ -121,7 +128,7 @@ def check_separation(
     joint_acceleration: float,
 ) -> SafetyCheck:
     """The check of the module docstring over a run's `samples`."""
-    violations = imposed = contacts = 0
+    violations = imposed = contacts = slow = 0
     least, worst = float("inf"), None
     for k, sample in enumerate(samples):
         body = sample.body
@@ -139,11 +146,14 @@ def check_separation(
         v_r = np.maximum(0.0, speeds_toward(velocities, pairs)[0])
         s_h = _travel_toward(samples, k, config.reaction_time + t_s, pairs.direction)
         s_p = protective_distance(s_h, v_r, t_s, config)
-        margin = float((gap - s_p).min())
+        fast = beyond_contact_speed(v_r, config, body)
+        margin = float(np.where(fast, gap - s_p, np.inf).min())
+        within = bool((gap < s_p).any()) and margin >= 0.0
         if np.abs(sample.v - sample.commanded).max(initial=0.0) > IMPOSED_SPEED:
             imposed += int(margin < 0.0)
             continue
         violations += int(margin < 0.0)
+        slow += int(within)
         if margin < least:
             least, worst = margin, sample.time
     return SafetyCheck(
@@ -153,6 +163,7 @@ def check_separation(
         body_contacts=contacts,
         imposed=imposed,
         worst_time=worst,
+        contact_speed=slow,
     )
 
 
@@ -161,5 +172,4 @@ __all__ = [
     "SafetySample",
     "SafetyTrace",
     "check_separation",
-    "held_part",
 ]

@@ -51,13 +51,14 @@ from pydrake.multibody.plant import (
 from pydrake.multibody.tree import BodyIndex, PdControllerGains
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Context, DiagramBuilder, LeafSystem
-from pydrake.systems.primitives import ConstantValueSource, Multiplexer
+from pydrake.systems.primitives import ConstantValueSource
 from pydrake.systems.sensors import CameraConfig, RgbdSensor
 
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.person import desk_of
 from hrc_drake.cell.ports import NOBODY
-from hrc_drake.cell.scenario import cell_design, plant_config, scene_graph_config
+from hrc_drake.cell.robot_envelope import RobotEnvelope
+from hrc_drake.cell.scenario import cell_design, motion_options, plant_config, scene_graph_config
 from hrc_drake.cell.station.arm_servo import GravityCompensation, servo_actuators
 from hrc_drake.cell.station.cell_station import CellStation
 from hrc_drake.cell.station.contacts import geometry_owners, owner_pairs
@@ -71,6 +72,7 @@ from hrc_drake.cell.station.obstacle import (
     mounted_obstacles,
 )
 from hrc_drake.cell.station.operator_body import BodyScript, KnowsWhenFree, OperatorBody
+from hrc_drake.cell.station.safety_function import SafetyFunction
 from hrc_drake.cell.station.sim_operator import SimulatedOperator
 from hrc_drake.cell.station.slot_monitor import SlotMonitor
 from hrc_drake.cell.station.welds import Bolts
@@ -196,17 +198,35 @@ def _add_plant(
     return plant, scene_graph, instances, bolts, frames
 
 
-def _add_arm(builder: DiagramBuilder, plant: MultibodyPlant, ur3) -> None:
-    """`ur3.position` and `ur3.velocity` into the arm's servo; `ur3.state_estimated` out."""
-    n = len(UR3_JOINTS)
-    command = builder.AddNamedSystem("ur3_command", Multiplexer([n, n]))
-    builder.Connect(command.get_output_port(), plant.get_desired_state_input_port(ur3))
-    builder.ExportInput(command.get_input_port(0), "ur3.position")
-    builder.ExportInput(command.get_input_port(1), "ur3.velocity")
+def _add_arm(
+    builder: DiagramBuilder, plant: MultibodyPlant, ur3, scenario: Scenario, design: CellDesign
+) -> SafetyFunction:
+    """`ur3.position` and `ur3.velocity` into the arm's servo through the safety function
+    (returned; its measurements are connected once the station has them,
+    `_connect_safety_function`); `ur3.state_estimated`, `safety.stop` and `safety.mode` out,
+    `safety.unlock` in."""
+    function = builder.AddNamedSystem(
+        "safety_function",
+        SafetyFunction(
+            RobotEnvelope(design),
+            scenario.safety,
+            motion_options(scenario).joint_acceleration_limit,
+            scenario.run.period,
+        ),
+    )
+    builder.Connect(
+        function.GetOutputPort("desired_state"), plant.get_desired_state_input_port(ur3)
+    )
+    builder.Connect(plant.get_state_output_port(ur3), function.GetInputPort("ur3.state"))
+    for name in ("ur3.position", "ur3.velocity", "safety.unlock"):
+        builder.ExportInput(function.GetInputPort(name), name)
+    for name in ("safety.stop", "safety.mode"):
+        builder.ExportOutput(function.GetOutputPort(name), name)
     builder.ExportOutput(plant.get_state_output_port(ur3), "ur3.state_estimated")
     weight = builder.AddNamedSystem("ur3_gravity", GravityCompensation(plant, ur3))
     builder.Connect(plant.get_state_output_port(ur3), weight.get_input_port())
     builder.Connect(weight.get_output_port(), plant.get_actuation_input_port(ur3))
+    return function
 
 
 def body_script_of(scenario: Scenario, frames: CellFrames, body_script=None):
@@ -341,7 +361,6 @@ def _add_faults(builder: DiagramBuilder, plant: MultibodyPlant, scenario: Scenar
                 faults.GetOutputPort(name),
                 plant.get_desired_state_input_port(plant.GetModelInstanceByName(name)),
             )
-    builder.ExportOutput(faults.GetOutputPort("safety.stop"), "safety.stop")
     builder.ExportOutput(faults.GetOutputPort("injected"), "sim.faults")
     builder.Connect(
         faults.GetOutputPort("torque"), plant.get_applied_generalized_force_input_port()
@@ -424,6 +443,8 @@ def make_cell_station(
     if injector is not None:  # it counts tasks from the prompts the station shows
         builder.ConnectInput("hri.prompt", injector.GetInputPort("hri.prompt"))
     _add_part_sensors(builder, plant, scene_graph, frames, parts, person)
+    if scenario.station.robot:
+        _connect_safety_function(builder)
     builder.ExportOutput(person.GetOutputPort("bolts"), "sim.welds")
     _export_sim_ports(builder, plant, scene_graph)
     visualizer = _add_viewers(builder, scene_graph, scenario, camera, meshcat)
@@ -452,10 +473,30 @@ def _add_robot(builder, plant, instances, scenario: Scenario, frames, space: Sta
     if not scenario.station.robot:
         _export_disturbance(builder, plant)
         return None
-    _add_arm(builder, plant, instances[UR3])
+    function = _add_arm(builder, plant, instances[UR3], scenario, frames.design)
     injector = _add_faults(builder, plant, scenario, SeatPositions(frames, space))
+    builder.Connect(injector.GetOutputPort("safety.stop"), function.GetInputPort("external_stop"))
     add_gripper_ports(builder, plant, instances[GRIPPER], scenario.station.rg2.kp, injector)
     return injector
+
+
+def _connect_safety_function(builder: DiagramBuilder) -> None:
+    """The safety function's measurements: the gripper's opening, the configuration sensor's
+    reading and the tracked body, as the station measures them."""
+    function = builder.GetSubsystemByName("safety_function")
+    for source, port, target in (
+        ("rg2_measure", 0, "rg2.state"),
+        ("configuration_sensor", "slot_configuration", "configuration"),
+    ):
+        system = builder.GetSubsystemByName(source)
+        out = system.get_output_port(port) if isinstance(port, int) else system.GetOutputPort(port)
+        builder.Connect(out, function.GetInputPort(target))
+    tracker = (
+        builder.GetSubsystemByName("operator_body").GetOutputPort("spheres")
+        if builder.HasSubsystemNamed("operator_body")
+        else builder.GetSubsystemByName("body_tracker").get_output_port()
+    )
+    builder.Connect(tracker, function.GetInputPort("operator.body"))
 
 
 def _add_viewers(builder, scene_graph, scenario: Scenario, camera: bool | None, meshcat):

@@ -69,6 +69,13 @@ class CellStation:
         station_context = self.diagram.GetMyContextFromRoot(context)
         return self.diagram.GetOutputPort("configuration").Eval(station_context)
 
+    def safety_function_state(self, context: Context):
+        """The safety function's `SafetyFunctionState` in the root `context` (None: no robot)."""
+        if not self.diagram.HasSubsystemNamed("safety_function"):
+            return None
+        function = self.diagram.GetSubsystemByName("safety_function")
+        return function.state(function.GetMyContextFromRoot(context))
+
     def placement_poses(self, placements: Mapping[str, str]) -> dict[str, RigidTransform]:
         """World poses of parts seated as `placements` says (part instance -> token or tray)."""
         return layout_poses(self.frames, placements)

@@ -1,0 +1,436 @@
+"""The station's separation safety function: what a safety-rated scanner and the robot's own safety
+controller do on a real cell, apart from the controller and whatever it believes.
+
+Every `period` it reads what the station measures — the arm's joint state, the gripper's opening,
+the part the configuration sensor reads as held, the tracked body — and judges the separation
+with its own robot model (`RobotEnvelope`) and the protective separation distance of
+`hrc_drake.cell.ssm`, with the person's travel S_h bounded as `safety.human_speed` says (the
+tracked speed toward the robot bounded by a hand's acceleration, or ISO 13855's constant
+speeds). Its own sampling adds one period to the reaction: S_h spans
+T_r + T_s + period and the robot's reaction travel v_r (T_r + period).
+
+It acts through the robot's stop, by gating the arm's command between the controller's
+`ur3.position`/`ur3.velocity` and the arm's servo, and reports the safety mode as a UR does
+(`SafetyMode`, `safety.mode`; `safety.stop` is 1 in either stop):
+
+- **Safeguard stop** (the separation fell short while the arm moved toward the person faster
+  than `safety.contact_speed`, `hrc_drake.cell.ssm.beyond_contact_speed`): the arm brakes along
+  its current direction of motion at the joint acceleration limit, every joint together, and
+  holds there; once it has stood still, or every body sphere has been `resume_clearance` beyond
+  the S_p of an arm at rest, for `RESTART_DELAY`, it resumes by itself (an arm at rest is
+  within the contact speed: it may go on, slowly, while the person stays near).
+- **Protective stop** (the external protective-stop input, or a robot shape touching the body
+  while moving toward it faster than the contact speed, or touching the head): the same brake,
+  then it holds until the cause has cleared and someone unlocks — the `safety.unlock` input (a
+  button, an LCM message) or the simulated operator `unlock_delay` s after the cause clears —
+  never within `UNLOCK_WAIT` of the stop, as a UR.
+- **Reduced**: nothing stopped, a body sphere within `reduced_band` of S_p.
+
+After a stop the command reaches the servo through a blend from the held posture, no faster than
+`RESUME_SPEED`, so an arm whose controller went on commanding elsewhere does not jump. While the
+function holds the arm, nothing the controller commands moves it.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, replace
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+from hrc_drake.cell.ports import NOBODY, BodySpheres, CellConfiguration, SafetyMode
+from hrc_drake.cell.robot_envelope import RobotEnvelope, speeds_toward
+from hrc_drake.cell.ssm import (
+    beyond_contact_speed,
+    body_gaps,
+    person_travel,
+    separation_constant,
+    stopping_time,
+)
+from hrc_drake.robot_names import UR3_JOINTS
+from hrc_drake.scenario.schema import SafetyConfig
+
+# A UR does not unlock a protective stop within 5 s of it (its dashboard server answers "Cannot
+# unlock protective stop until 5s after occurrence").
+UNLOCK_WAIT = 5.0  # s
+RESUME_SPEED = 0.5  # rad/s: the fastest joint of the blend back to the command (our choice)
+# A safeguard stop clears once the separation has been clear this long: a scanner's restart
+# delay, and time for the arm to come to rest and for its controller to see the stop and pause
+# its own command where the arm stands (our choice; safety scanners offer 0.1-60 s).
+RESTART_DELAY = 0.5  # s
+MIN_BLEND = 0.2  # s: the shortest blend back to the command (our choice)
+_N = len(UR3_JOINTS)
+
+
+class StopCause(enum.StrEnum):
+    """Why the safety function stopped the arm."""
+
+    SEPARATION = "separation"  # safeguard stop
+    CONTACT = "contact"  # protective stop: a robot shape touched the body while moving
+    EXTERNAL = "external input"  # protective stop: the robot's protective-stop input
+
+
+@dataclass(frozen=True)
+class SeparationVerdict:
+    """One judgement of the separation.
+
+    Attributes:
+        margin: least gap − S_p at the measured speed [m] where the robot moves toward the
+            person faster than `safety.contact_speed` (inf: nobody tracked, or none does).
+        clear: every body sphere is `resume_clearance` beyond the S_p of an arm at rest.
+        reduced: some sphere is within `reduced_band` of S_p.
+        contact: a robot shape touches a body sphere moving toward it faster than the contact
+            speed, or touches the head: a contact power and force limiting does not permit.
+        moving: a joint moves faster than `safety.moving_speed`.
+    """
+
+    margin: float = float("inf")
+    clear: bool = True
+    reduced: bool = False
+    contact: bool = False
+    moving: bool = False
+
+
+def judge_separation(
+    envelope: RobotEnvelope,
+    q: np.ndarray,
+    v: np.ndarray,
+    opening: float,
+    carrying: str | None,
+    body: BodySpheres,
+    config: SafetyConfig,
+    joint_acceleration: float,
+    period: float,
+) -> SeparationVerdict:
+    """The safety function's judgement (see the module docstring) of the arm at measured `q`,
+    `v`, the gripper at `opening` holding `carrying`, beside `body`."""
+    moving = bool(np.abs(v).max(initial=0.0) > config.moving_speed)
+    if len(body.radii) == 0:
+        return SeparationVerdict(moving=moving)
+    function = config.function
+    R_WB, p_WB, pairs, gap = body_gaps(envelope, q, opening, carrying, body)
+    v_h = -np.einsum("nj,mnj->mn", body.velocities, pairs.direction)
+    velocities = envelope.link_velocities(R_WB, p_WB, np.asarray(v, dtype=float)[None, :])
+    v_r = np.maximum(0.0, speeds_toward(velocities, pairs)[0])
+    t_r, t_s = config.reaction_time, stopping_time(v, joint_acceleration)
+    constant = separation_constant(config)
+    s_p = (
+        person_travel(v_h, gap, t_r + t_s + period, config)
+        + v_r * (t_r + period)
+        + v_r * t_s / 2
+        + constant
+    )
+    at_rest = person_travel(v_h, gap, t_r + period, config) + constant
+    short, beyond = gap - s_p, beyond_contact_speed(v_r, config, body)
+    return SeparationVerdict(
+        margin=float(np.where(beyond, short, np.inf).min()),
+        clear=bool((gap - at_rest).min() >= function.resume_clearance),
+        reduced=bool(short.min() < function.reduced_band),
+        contact=bool((beyond & (gap <= 0.0)).any()),
+        moving=moving,
+    )
+
+
+@dataclass(frozen=True)
+class Brake:
+    """A stop from joint positions `q` and velocities `v` at time `start`: every joint
+    decelerates together, the fastest at `deceleration` [rad/s²], to a standstill."""
+
+    start: float
+    q: np.ndarray
+    v: np.ndarray
+    deceleration: float
+
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(q, v) of the stop at time `t`."""
+        length = stopping_time(self.v, self.deceleration)
+        tau = min(max(t - self.start, 0.0), length)
+        if length <= 0.0:
+            return self.q, np.zeros(_N)
+        q = self.q + self.v * tau - self.v * tau * tau / (2.0 * length)
+        return q, self.v * (1.0 - tau / length)
+
+    def __deepcopy__(self, memo) -> Brake:
+        return self  # immutable once made
+
+
+@dataclass(frozen=True)
+class Blend:
+    """Back from the held posture `q` to the command, over `duration` s from `start`."""
+
+    start: float
+    q: np.ndarray
+    duration: float
+
+    def of(self, t: float, q_cmd: np.ndarray, v_cmd: np.ndarray):
+        """(q, v) of the blend at `t` toward the command `q_cmd`, `v_cmd` (a smoothstep)."""
+        x = min(max((t - self.start) / self.duration, 0.0), 1.0)
+        w, rate = x * x * (3 - 2 * x), 6 * x * (1 - x) / self.duration
+        return self.q + w * (q_cmd - self.q), w * v_cmd + rate * (q_cmd - self.q)
+
+    def __deepcopy__(self, memo) -> Blend:
+        return self
+
+
+@dataclass(frozen=True)
+class SafetyFunctionLog:
+    """What the safety function did over a run (`simulate --json` `safety.function`)."""
+
+    safeguard_stops: int = 0
+    protective_stops: int = 0
+    unlocks: int = 0
+    stopped_time: float = 0.0  # s the function held or braked the arm
+    reduced_time: float = 0.0  # s in the reduced mode
+    events: tuple[str, ...] = ()
+
+    def to_json(self) -> dict:
+        """The JSON-able figures."""
+        return {
+            "safeguard_stops": self.safeguard_stops,
+            "protective_stops": self.protective_stops,
+            "unlocks": self.unlocks,
+            "stopped_time": round(self.stopped_time, 3),
+            "reduced_time": round(self.reduced_time, 3),
+        }
+
+
+@dataclass(frozen=True)
+class SafetyFunctionState:
+    """The function's state: its mode, why and since when it stopped, the brake it follows, the
+    blend back to the command, when a protective stop's cause cleared, and its log."""
+
+    mode: SafetyMode = SafetyMode.NORMAL
+    cause: StopCause | None = None
+    since: float = 0.0
+    brake: Brake | None = None
+    blend: Blend | None = None
+    cleared_at: float | None = None  # when the stop's cause cleared (None: it has not)
+    log: SafetyFunctionLog = SafetyFunctionLog()
+
+    def __deepcopy__(self, memo) -> SafetyFunctionState:
+        return self
+
+
+def _stop(state: SafetyFunctionState, cause: StopCause, brake: Brake, now: float):
+    """`state` stopped for `cause` at `now`, braking by `brake` (an arm already braking keeps
+    its brake; a protective stop overrides a safeguard stop)."""
+    protective = cause != StopCause.SEPARATION
+    log = state.log
+    log = replace(
+        log,
+        safeguard_stops=log.safeguard_stops + int(not protective),
+        protective_stops=log.protective_stops + int(protective),
+        events=(*log.events, f"{now:.2f}: {_words(cause)}"),
+    )
+    return replace(
+        state,
+        mode=SafetyMode.PROTECTIVE_STOP if protective else SafetyMode.SAFEGUARD_STOP,
+        cause=cause,
+        since=now,
+        brake=state.brake if state.mode.stopped else brake,
+        blend=None,
+        cleared_at=None,
+        log=log,
+    )
+
+
+def _words(cause: StopCause) -> str:
+    if cause == StopCause.SEPARATION:
+        return "safeguard stop: the separation fell short"
+    return f"protective stop: {cause.value}"
+
+
+def step(
+    state: SafetyFunctionState,
+    verdict: SeparationVerdict,
+    external: bool,
+    unlock: bool,
+    brake: Brake,
+    now: float,
+    config: SafetyConfig,
+    period: float,
+) -> SafetyFunctionState:
+    """One period of the function (see the module docstring): the next state from the
+    separation `verdict`, the `external` protective-stop input, the `unlock` input, and the
+    `brake` the arm would follow if it stopped now."""
+    function = config.function
+    log = state.log
+    if state.mode.stopped:
+        log = replace(log, stopped_time=log.stopped_time + period)
+    elif state.mode == SafetyMode.REDUCED:
+        log = replace(log, reduced_time=log.reduced_time + period)
+    state = replace(state, log=log)
+    if external:
+        if state.cause != StopCause.EXTERNAL:
+            state = _stop(state, StopCause.EXTERNAL, brake, now)
+        return replace(state, cleared_at=None)
+    if verdict.contact and verdict.moving and state.mode != SafetyMode.PROTECTIVE_STOP:
+        return _stop(state, StopCause.CONTACT, brake, now)
+    if state.mode == SafetyMode.PROTECTIVE_STOP:
+        return _unlocked(state, verdict, unlock, now, function.unlock_delay)
+    if state.mode == SafetyMode.SAFEGUARD_STOP:
+        if verdict.moving and not verdict.clear:
+            return replace(state, cleared_at=None)
+        if state.cleared_at is None:
+            return replace(state, cleared_at=now)
+        if now >= state.cleared_at + RESTART_DELAY - 1e-9:
+            return _resumed(state, now, "safeguard stop cleared")
+        return state
+    if function.enabled and verdict.moving and verdict.margin < 0.0:
+        return _stop(state, StopCause.SEPARATION, brake, now)
+    reduced = function.enabled and verdict.reduced
+    return replace(state, mode=SafetyMode.REDUCED if reduced else SafetyMode.NORMAL)
+
+
+def _unlocked(state, verdict: SeparationVerdict, unlock: bool, now: float, delay: float):
+    """A protective stop after its external cause is off: it waits for its cause to clear (a
+    contact: the separation clear), then for the unlock, never within UNLOCK_WAIT."""
+    cleared = state.cleared_at
+    if cleared is None and (state.cause == StopCause.EXTERNAL or verdict.clear):
+        state = replace(state, cleared_at=now)
+        cleared = now
+    if cleared is None or now < state.since + UNLOCK_WAIT - 1e-9:
+        return state
+    operator = delay >= 0 and now >= cleared + delay - 1e-9
+    if not (unlock or operator):
+        return state
+    state = replace(state, log=replace(state.log, unlocks=state.log.unlocks + 1))
+    return _resumed(state, now, "protective stop unlocked")
+
+
+def _resumed(state: SafetyFunctionState, now: float, words: str) -> SafetyFunctionState:
+    """Back to normal at `now`, blending from where the brake holds the arm to the command."""
+    held, _ = state.brake.at(now)
+    log = replace(state.log, events=(*state.log.events, f"{now:.2f}: {words}: resumes"))
+    return replace(
+        state,
+        mode=SafetyMode.NORMAL,
+        cause=None,
+        brake=None,
+        blend=Blend(now, held, MIN_BLEND),
+        cleared_at=None,
+        log=log,
+    )
+
+
+class SafetyFunction(LeafSystem):
+    """The station's safety function (see the module docstring).
+
+    Input ports: `ur3.position`, `ur3.velocity` (the controller's command, 6 each),
+    `ur3.state` (measured, 12), `rg2.state` (measured opening and rate, 2), `configuration`
+    (CellConfiguration), `operator.body` (BodySpheres), `external_stop` (1: the robot's
+    protective-stop input), `safety.unlock` (1: unlock a protective stop; unconnected, never).
+    Output ports: `desired_state` (12, for the arm's servo), `safety.stop` (1), `safety.mode`
+    (1, the `SafetyMode` code). Updated every `period`."""
+
+    def __init__(
+        self,
+        envelope: RobotEnvelope,
+        config: SafetyConfig,
+        joint_acceleration: float,
+        period: float,
+    ):
+        super().__init__()
+        self._envelope, self._config = envelope, config
+        self._acc, self._period = joint_acceleration, period
+        self._position = self.DeclareVectorInputPort("ur3.position", _N)
+        self._velocity = self.DeclareVectorInputPort("ur3.velocity", _N)
+        self._arm = self.DeclareVectorInputPort("ur3.state", 2 * _N)
+        self._gripper = self.DeclareVectorInputPort("rg2.state", 2)
+        self._configuration = self.DeclareAbstractInputPort(
+            "configuration", AbstractValue.Make(CellConfiguration())
+        )
+        self._body = self.DeclareAbstractInputPort("operator.body", AbstractValue.Make(NOBODY))
+        self._external = self.DeclareVectorInputPort("external_stop", 1)
+        self._unlock = self.DeclareVectorInputPort("safety.unlock", 1)
+        self._state = self.DeclareAbstractState(AbstractValue.Make(SafetyFunctionState()))
+        command = {self._position.ticket(), self._velocity.ticket()}
+        ticket = {self.abstract_state_ticket(self._state), self.time_ticket()}
+        self.DeclareVectorOutputPort(
+            "desired_state",
+            BasicVector(2 * _N),
+            self._calc_desired,
+            prerequisites_of_calc=command | ticket,
+        )
+        self.DeclareVectorOutputPort(
+            "safety.stop", BasicVector(1), self._calc_stop, prerequisites_of_calc=ticket
+        )
+        self.DeclareVectorOutputPort(
+            "safety.mode", BasicVector(1), self._calc_mode, prerequisites_of_calc=ticket
+        )
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
+
+    def state(self, context) -> SafetyFunctionState:
+        """The function's state in this system's `context`."""
+        return context.get_abstract_state(self._state).get_value()
+
+    def _calc_desired(self, context, output) -> None:
+        state, now = self.state(context), context.get_time()
+        if state.brake is not None:
+            q, v = state.brake.at(now)
+        else:
+            q, v = self._position.Eval(context), self._velocity.Eval(context)
+            if state.blend is not None:
+                q, v = state.blend.of(now, q, v)
+        output.SetFromVector(np.concatenate([q, v]))
+
+    def _calc_stop(self, context, output) -> None:
+        output.SetFromVector([1.0 if self.state(context).mode.stopped else 0.0])
+
+    def _calc_mode(self, context, output) -> None:
+        output.SetFromVector([float(self.state(context).mode)])
+
+    def _update(self, context, state) -> None:
+        x = self._arm.Eval(context)
+        q, v = x[:_N], x[_N:]
+        verdict = judge_separation(
+            self._envelope,
+            q,
+            v,
+            float(self._gripper.Eval(context)[0]),
+            self._configuration.Eval(context).held(),
+            self._body.Eval(context),
+            self._config,
+            self._acc,
+            self._period,
+        )
+        unlock = self._unlock.HasValue(context) and self._unlock.Eval(context)[0] > 0.5
+        now = context.get_time()
+        new = step(
+            self.state(context),
+            verdict,
+            self._external.Eval(context)[0] > 0.5,
+            unlock,
+            Brake(now, np.array(q), np.array(v), self._acc),
+            now,
+            self._config,
+            self._period,
+        )
+        if new.blend is not None and new.blend.start == now:
+            # The smoothstep's peak rate is 1.5 times its mean.
+            far = float(np.abs(self._position.Eval(context) - new.blend.q).max(initial=0.0))
+            new = replace(
+                new, blend=replace(new.blend, duration=max(MIN_BLEND, 1.5 * far / RESUME_SPEED))
+            )
+        elif new.blend is not None and now >= new.blend.start + new.blend.duration:
+            new = replace(new, blend=None)
+        state.get_mutable_abstract_state(self._state).set_value(new)
+
+
+__all__ = [
+    "MIN_BLEND",
+    "RESTART_DELAY",
+    "RESUME_SPEED",
+    "UNLOCK_WAIT",
+    "Blend",
+    "Brake",
+    "SafetyFunction",
+    "SafetyFunctionLog",
+    "SafetyFunctionState",
+    "SeparationVerdict",
+    "StopCause",
+    "judge_separation",
+    "step",
+]
