@@ -148,7 +148,8 @@ def test_the_same_seed_is_the_same_person_and_another_seed_another():
         times, one = _samples(_timeline(3, step, task))
         _, again = _samples(_timeline(3, step, task))
         assert np.array_equal(one, again)
-        other = np.array([_timeline(4, step, task).at(t) for t in times])
+        another = _timeline(4, step, task)
+        other = np.array([another.at(t) for t in times])
         assert np.abs(other - one).max() > 0.05
     # Each indication of one person is drawn anew.
     first, second = _timeline(3, 1, "F1"), _timeline(3, 2, "F1")

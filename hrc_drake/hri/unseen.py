@@ -194,10 +194,12 @@ def _stays(person: Person, unseen: UnseenPerson, desk: Desk, task: str, rng) -> 
                 stays.append(Stay("rest", stay.where, float(rng.exponential(unseen.lag))))
         else:
             stays.append(stay)
+    # A second fetch goes back to a bin fetched from before the last one (a part dropped).
     fetches = [s for s in stays if s.what == "fetch"]
-    if fetches and rng.random() < unseen.refetch:
-        again = fetches[int(rng.integers(len(fetches)))]
-        stays.insert(len(stays) - 1, Stay("fetch", again.where, person.grab_time * timing()))
+    again = [s for s in fetches if np.linalg.norm(s.where - fetches[-1].where) > DECOY_APART]
+    if again and rng.random() < unseen.refetch:
+        where = again[int(rng.integers(len(again)))].where
+        stays.insert(len(stays) - 1, Stay("fetch", where, person.grab_time * timing()))
     return stays
 
 
@@ -206,13 +208,15 @@ def _reach(person, unseen, desk, task, here, stay: Stay, t: float, rng) -> list[
     speed = unseen.speed * float(rng.uniform(0.7, 1.0))
     goal = stay.where
     u = rng.random()
-    if stay.what != "rest" and u < unseen.change_mind:
+    # Only a reach to a stay (not back to rest), and one long enough to show it, is irregular.
+    irregular = stay.what != "rest" and np.linalg.norm(goal - here) > DECOY_APART
+    if irregular and u < unseen.change_mind:
         decoys = _decoys(person, desk, task, here, goal)
         if decoys:
             aside = decoys[int(rng.integers(len(decoys)))]
             switch = float(rng.uniform(0.3, 0.55))
             return [turning_move(t, here, aside, goal, speed, switch, stay.what)]
-    if stay.what != "rest" and u < unseen.change_mind + unseen.hesitate:
+    if irregular and u < unseen.change_mind + unseen.hesitate:
         stop = here + float(rng.uniform(0.35, 0.65)) * (goal - here)
         pause = float(rng.uniform(0.3, 0.9))
         reach = t + move_time(float(np.linalg.norm(stop - here)), speed)
