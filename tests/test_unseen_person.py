@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from hrc_drake.cell.controller.forecast import Anchor, OperatorForecast
+from hrc_drake.cell.ports import OperatorActivity
 from hrc_drake.cell.station.desk import desk_script
 from hrc_drake.hri.activity import Desk, DeskBin, HandTimeline, Person, indication_timeline
 from hrc_drake.hri.unseen import HUMAN_ACCELERATION, HUMAN_SPEED
@@ -35,8 +36,8 @@ SEEDS = range(6)
 
 def _timeline(seed: int, step: int, task: str, body: BodyConfig = BODY) -> HandTimeline:
     """The simulated operator's hand after indicating `task` at decision `step`, at t = 2 s."""
-    script = desk_script(body, seed, DESK)
-    return script._timeline(step, task, 2.0)
+    indicated = OperatorActivity(answered_step=step, answered_at=2.0, answered_task=task)
+    return desk_script(body, seed, DESK).timeline(indicated)
 
 
 def _places(timeline: HandTimeline) -> list[np.ndarray]:
