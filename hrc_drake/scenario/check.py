@@ -10,6 +10,7 @@ from hrc_drake.robot_names import UR3_JOINTS
 from hrc_drake.scenario.schema import (
     TEXT_SOURCE,
     Activity,
+    Behaviour,
     DeciderConfig,
     HumanSpeed,
     InteractionConfig,
@@ -200,6 +201,7 @@ def _check_decider(decider: DeciderConfig, fail) -> None:
 
 SEPARATION_MODES = tuple(m.value for m in Separation)
 ACTIVITIES = tuple(a.value for a in Activity)
+BEHAVIOURS = tuple(b.value for b in Behaviour)
 
 
 def _check_separation(safety: SafetyConfig, fail) -> None:
@@ -250,6 +252,15 @@ def _check_body(scenario: Scenario, fail) -> None:
         raise fail("body.hand_speed", "give a speed in (0, 2] m/s (1.6 m/s: ISO 13855)")
     if body.activity not in ACTIVITIES:
         raise fail("body.activity", f"unknown activity {body.activity!r}; use one of {ACTIVITIES}")
+    if body.behaviour not in BEHAVIOURS:
+        known = " or ".join(BEHAVIOURS)
+        raise fail("body.behaviour", f"unknown behaviour {body.behaviour!r}; use {known}")
+    if body.behaviour != Behaviour.MODELLED and body.activity != Activity.DESK:
+        raise fail(
+            "body.behaviour",
+            f"{body.behaviour!r} is a way of doing the desk activity; "
+            f"set body.activity: desk too, or leave behaviour {Behaviour.MODELLED.value!r}",
+        )
     for key in ("reach", "reach_time"):
         if getattr(body, key) <= 0:
             raise fail(f"body.{key}", f"must be > 0, got {getattr(body, key)}")
@@ -306,4 +317,4 @@ def _check_interaction(it: InteractionConfig, fail) -> None:
             raise fail(f"interaction.{key}", problem) from None
 
 
-__all__ = ["ACTIVITIES", "SEPARATION_MODES", "check_scenario"]
+__all__ = ["ACTIVITIES", "BEHAVIOURS", "SEPARATION_MODES", "check_scenario"]

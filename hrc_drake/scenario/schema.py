@@ -255,6 +255,13 @@ class Activity(StrEnum):
     DESK = "desk"  # also points at the seat and fetches bolts and nuts from the bins
 
 
+class Behaviour(StrEnum):
+    """`body.behaviour`: how the simulated desk operator does the activity."""
+
+    MODELLED = "modelled"  # as the activity model says: the forecast's own family
+    UNSEEN = "unseen"  # outside it (`hrc_drake.hri.unseen`); the forecast does not know
+
+
 @dataclass
 class SafetyFunctionConfig:
     """The station's separation safety function (`hrc_drake.cell.station.safety_function`): what a
@@ -344,6 +351,11 @@ class BodyConfig:
         activity: `bolting` (the hand reaches in only to bolt the held part: the Table 2 rows'
             operator) or `desk` (it also points at the target seat and fetches bolts and nuts
             from the layout's bins, sharing the desk with the robot).
+        behaviour: with `desk`, how the simulated operator does it: `modelled` (the activity
+            model, the family the controller's forecast is drawn from) or `unseen` (a person
+            outside it, drawn for the operator seed: other speeds and lags, hesitations, changes
+            of mind mid-reach, a second fetch; `hrc_drake.hri.unseen`). Only the simulated body
+            follows it: the forecast keeps modelling the ordinary person.
         stance: [x, y] of the operator's torso axis in world [m] (the table edge is x = 0.75).
         rest_hand: [x, y, z] of the waiting hand in world [m].
         reach_offset: [x, y, z] of the hand from the held part while bolting [m].
@@ -362,6 +374,7 @@ class BodyConfig:
 
     enabled: bool = True
     activity: str = Activity.BOLTING.value
+    behaviour: str = Behaviour.MODELLED.value
     stance: list[float] = field(default_factory=lambda: list(_PERSON.stance))
     rest_hand: list[float] = field(default_factory=lambda: list(_PERSON.rest_hand))
     reach_offset: list[float] = field(default_factory=lambda: list(_PERSON.reach_offset))

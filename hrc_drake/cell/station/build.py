@@ -62,7 +62,7 @@ from hrc_drake.cell.scenario import cell_design, motion_options, plant_config, s
 from hrc_drake.cell.station.arm_servo import GravityCompensation, servo_actuators
 from hrc_drake.cell.station.cell_station import CellStation
 from hrc_drake.cell.station.contacts import geometry_owners, owner_pairs
-from hrc_drake.cell.station.desk import DeskScript, add_bins
+from hrc_drake.cell.station.desk import add_bins, desk_script
 from hrc_drake.cell.station.faults import FaultInjector, SilentOperator
 from hrc_drake.cell.station.gripper import add_gripper_ports
 from hrc_drake.cell.station.obstacle import (
@@ -231,12 +231,12 @@ def _add_arm(
 
 def body_script_of(scenario: Scenario, frames: CellFrames, body_script=None):
     """The operator body's script: the one given, else the scenario's activity (`desk`: this
-    operator seed's person on the layout's desk, a `DeskScript`; `bolting`: `BoltingScript`,
-    as None)."""
+    operator seed's person on the layout's desk, a `DeskScript`, modelled or unseen as
+    `body.behaviour` says; `bolting`: `BoltingScript`, as None)."""
     if body_script is not None or scenario.body.activity != Activity.DESK:
         return body_script
-    person = scenario.body.person(seed=scenario.operator.seed)
-    return DeskScript(person, desk_of(frames, frames.design.layout))
+    desk = desk_of(frames, frames.design.layout)
+    return desk_script(scenario.body, scenario.operator.seed, desk)
 
 
 def _add_operator(builder, plant, scene_graph, parts, scenario: Scenario, operator, body_script):

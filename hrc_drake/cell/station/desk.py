@@ -3,7 +3,9 @@ script of an operator who uses them (`hrc_drake.hri.activity` is the model; the 
 forecast of the same body is `hrc_drake.cell.controller.forecast`).
 
 The station moves the simulated operator's body by `DeskScript` with this person's parameters
-(the controller forecasts it with the population's).
+(the controller forecasts it with the population's); with `body.behaviour: unseen`, the way a
+person outside the forecast's family does it (`hrc_drake.hri.unseen`), which the controller
+never learns of.
 """
 
 from __future__ import annotations
@@ -27,7 +29,9 @@ from hrc_drake.hri.activity import (
     bolting_hand,
     indication_timeline,
 )
+from hrc_drake.hri.unseen import UnseenPerson, unseen_person, unseen_timeline
 from hrc_drake.layout import CellLayout
+from hrc_drake.scenario.schema import Behaviour, BodyConfig
 
 BIN_COLOUR = {"bolts": Rgba(0.55, 0.55, 0.60, 1.0), "nuts": Rgba(0.75, 0.62, 0.25, 1.0)}
 
@@ -57,11 +61,12 @@ def add_bins(scene_graph, layout: CellLayout) -> None:
 
 class DeskScript:
     """The body script (`operator_body.BodyScript`) of an operator on a shared desk: after each
-    indication the hand points, fetches and rests by `indication_timeline`; it bolts the held
-    part once its hands are free (`busy_until`)."""
+    indication the hand points, fetches and rests by `indication_timeline` (with `unseen`, by
+    `unseen_timeline`: a person outside the model); it bolts the held part once its hands are
+    free (`busy_until`)."""
 
-    def __init__(self, person: Person, desk: Desk):
-        self.person, self.desk = person, desk
+    def __init__(self, person: Person, desk: Desk, unseen: UnseenPerson | None = None):
+        self.person, self.desk, self.unseen = person, desk, unseen
         self.left_handed = person.left_handed
         self._timelines: dict[tuple, HandTimeline] = {}
 
@@ -71,12 +76,13 @@ class DeskScript:
             return None
         key = (activity.answered_step, activity.answered_task, activity.answered_at)
         if key not in self._timelines:
-            self._timelines = {
-                key: indication_timeline(
-                    self.person, self.desk, activity.answered_task, activity.answered_at
-                )
-            }
+            self._timelines = {key: self._timeline(*key)}
         return self._timelines[key]
+
+    def _timeline(self, step: int, task: str, at: float) -> HandTimeline:
+        if self.unseen is None:
+            return indication_timeline(self.person, self.desk, task, at)
+        return unseen_timeline(self.person, self.unseen, self.desk, task, at, step)
 
     def busy_until(self, activity: OperatorActivity) -> float:
         """When the hands are free to bolt: the end of the fetch of the last indication."""
@@ -93,7 +99,15 @@ class DeskScript:
         return timeline.at(now)
 
 
+def desk_script(body: BodyConfig, seed: int, desk: Desk) -> DeskScript:
+    """The desk operator of operator `seed`: the person `body` draws for it, doing the activity
+    as modelled or, with `body.behaviour: unseen`, as the unseen person of that seed does."""
+    unseen = unseen_person(seed) if body.behaviour == Behaviour.UNSEEN else None
+    return DeskScript(body.person(seed=seed), desk, unseen)
+
+
 __all__ = [
     "DeskScript",
     "add_bins",
+    "desk_script",
 ]
