@@ -241,6 +241,13 @@ class Separation(StrEnum):
     REACTIVE = "reactive"  # the separation monitor alone
 
 
+class Timing(StrEnum):
+    """`safety.timing`: how predictive separation times the plan around the forecast."""
+
+    WAIT = "wait"  # a wait at each motion's start, then the plan at full speed
+    PATH_TIME = "path_time"  # each motion's speed along its path (`motion.path_time`)
+
+
 class Activity(StrEnum):
     """`body.activity`: what the operator's body does."""
 
@@ -275,6 +282,9 @@ class SafetyConfig:
         departure: m; the observed hand this far from the forecast makes the robot forecast
             again and re-time its moves.
         max_wait: the longest a move is held back for the operator [s].
+        timing: with `predictive` separation, `wait` (a wait at each motion's start) or
+            `path_time` (each motion timed along its path: slowed, stopped and going on;
+            `hrc_drake.motion.path_time`).
         forecast_spread: how much of its timing spread the forecast keeps (1: all of it; 0: it
             takes the person's modelled timing as exact, the bound that a perfect forecast of a
             person who behaves as modelled would reach;
@@ -294,6 +304,7 @@ class SafetyConfig:
     separation: str = Separation.PREDICTIVE.value
     departure: float = 0.15
     max_wait: float = 6.0
+    timing: str = Timing.WAIT.value
     forecast_spread: float = 1.0
 
 

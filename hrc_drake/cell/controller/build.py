@@ -128,7 +128,15 @@ def keep_clear_settings(
         spheres = BodySpheres(centres, radii, velocities)
         return assess(envelope, q, qdot, spheres, intent, safety, acceleration).limit
 
-    return KeepClearSettings(forecast, scale, safety.max_wait, safety.departure)
+    return KeepClearSettings(
+        forecast,
+        scale,
+        safety.max_wait,
+        safety.departure,
+        safety.timing,
+        acceleration,
+        safety.reaction_time,
+    )
 
 
 def make_controller(
