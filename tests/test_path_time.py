@@ -228,3 +228,31 @@ def test_a_hand_on_the_path_past_the_longest_wait_is_waited_for_at_most_that_lon
     (hold,) = timing.holds
     assert 1.0 < hold.until <= 3.0 + STEP
     assert SpeedCap(0.0, 1.0, 0.0, (0.5,), (0.0,)).at(-1.0) == 0.5
+
+
+def test_an_unknown_timing_is_a_one_line_error():
+    from hrc_drake.scenario.load import load_scenario
+    from hrc_drake.scenario.schema import ScenarioError
+
+    with pytest.raises(ScenarioError) as err:
+        load_scenario("shared-desk", "{safety: {timing: sometimes}}")
+    assert "safety.timing: unknown timing 'sometimes'; use wait or path_time" in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+def test_the_shared_desk_timed_along_its_paths_keeps_separation_and_stands_on_its_way():
+    """A lean shared desk (the operator who follows, seed 0) with `timing: path_time`: the
+    arm stands still on its way for the forecast hand (wait timing stands only at rest points:
+    no stopped time), and the run's own check finds no violation."""
+    from hrc_drake.cell.run.run import run_scenario
+    from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+
+    text = (
+        "{safety: {separation: predictive, timing: path_time}, "
+        "operator: {model: follows, seed: 0}, interaction: {mode: anticipate}}"
+    )
+    result = run_scenario(load_cell_scenario("shared-desk", [text, LEAN]))
+    assert result.done and not result.collisions
+    assert result.safety.stopped_time > 1.0
+    assert result.safety.body_contacts == 0 and result.safety.violations == 0
+    assert result.safety_check.violations == 0 and result.safety_check.body_contacts == 0
