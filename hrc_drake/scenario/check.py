@@ -19,6 +19,7 @@ from hrc_drake.scenario.schema import (
     Scenario,
     ScenarioError,
     Separation,
+    Timing,
 )
 from hrc_drake.tasks.interaction import (
     INTERFACES,
@@ -200,6 +201,7 @@ def _check_decider(decider: DeciderConfig, fail) -> None:
 
 
 SEPARATION_MODES = tuple(m.value for m in Separation)
+TIMINGS = tuple(t.value for t in Timing)
 ACTIVITIES = tuple(a.value for a in Activity)
 BEHAVIOURS = tuple(b.value for b in Behaviour)
 
@@ -211,6 +213,8 @@ def _check_separation(safety: SafetyConfig, fail) -> None:
             "safety.separation",
             f"unknown mode {safety.separation!r}; use {' or '.join(SEPARATION_MODES)}",
         )
+    if safety.timing not in TIMINGS:
+        raise fail("safety.timing", f"unknown timing {safety.timing!r}; use {' or '.join(TIMINGS)}")
     if safety.departure <= 0:
         raise fail("safety.departure", f"give a distance > 0 m, got {safety.departure}")
     if safety.max_wait < 0:

@@ -242,10 +242,17 @@ class Separation(StrEnum):
 
 
 class HumanSpeed(StrEnum):
-    """`safety.function.human_speed`: the person's speed the station's safety function assumes."""
+    """`safety.human_speed`: how far the person can come while the robot reacts and stops."""
 
     TRACKED = "tracked"  # the tracked speed, bounded by what a hand can reach (an acceleration)
     CONSTANT = "constant"  # ISO 13855's 1.6 m/s (2.0 m/s within 0.5 m) throughout
+
+
+class Timing(StrEnum):
+    """`safety.timing`: how predictive separation times the plan around the forecast."""
+
+    WAIT = "wait"  # a wait at each motion's start, then the plan at full speed
+    PATH_TIME = "path_time"  # each motion's speed along its path (`motion.path_time`)
 
 
 class Activity(StrEnum):
@@ -313,6 +320,9 @@ class SafetyConfig:
         departure: m; the observed hand this far from the forecast makes the robot forecast
             again and re-time its moves.
         max_wait: the longest a move is held back for the operator [s].
+        timing: with `predictive` separation, `wait` (a wait at each motion's start) or
+            `path_time` (each motion timed along its path: slowed, stopped and going on;
+            `hrc_drake.motion.path_time`).
         forecast_spread: how much of its timing spread the forecast keeps (1: all of it; 0: it
             takes the person's modelled timing as exact, the bound that a perfect forecast of a
             person who behaves as modelled would reach;
@@ -334,6 +344,7 @@ class SafetyConfig:
     separation: str = Separation.PREDICTIVE.value
     departure: float = 0.15
     max_wait: float = 6.0
+    timing: str = Timing.WAIT.value
     forecast_spread: float = 1.0
     function: SafetyFunctionConfig = field(default_factory=SafetyFunctionConfig)
 

@@ -130,7 +130,15 @@ def keep_clear_settings(
         reading = assess(envelope, q, qdot, spheres, intent, safety, acceleration, None, period)
         return reading.limit
 
-    return KeepClearSettings(forecast, scale, safety.max_wait, safety.departure)
+    return KeepClearSettings(
+        forecast,
+        scale,
+        safety.max_wait,
+        safety.departure,
+        safety.timing,
+        acceleration,
+        safety.reaction_time,
+    )
 
 
 def make_controller(

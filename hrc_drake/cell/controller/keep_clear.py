@@ -17,9 +17,16 @@ monitoring is forecast never to slow it. It times the plan again
   observed hand (a person running late or early), and if none does, the observed body is taken
   to stay where it is for `STAY` seconds (counted in `replans`).
 
+With `safety.timing: path_time` it times each motion along its path instead
+(`hrc_drake.motion.path_time`): a wait at the motion's start and the speed the arm keeps under
+along it, which may slow it down or stop it mid-path for the forecast body and go on when the
+body has left. A motion under way is timed from where the arm is, at its speed; and when the
+arm has fallen more than `SLIP` seconds of plan time off its timing (the monitor slowed it for
+a body unlike the forecast), the plan is timed again from there (counted in `slips`).
+
 Once the tracker shows the hand in the last bin of its fetch, from where it only goes back to
-rest, away from the robot, each wait is the cheapest one: the arm may go on slowed beside the
-hand instead of waiting until it has left.
+rest, away from the robot, each wait (`wait` timing) is the cheapest one: the arm may go on
+slowed beside the hand instead of waiting until it has left.
 
 Before the first task it fits the forecast to the person the tracker shows at rest: the hand
 they work with and where it rests.
@@ -40,11 +47,16 @@ from hrc_drake.cell.controller.supervisor_state import Mode, SupervisorStatus
 from hrc_drake.cell.person import ARM_SPHERES
 from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.motion.clearance import Occupancy, ScaleFn, time_around
+from hrc_drake.motion.path_time import path_time_around, slip
+from hrc_drake.scenario.schema import Timing
 from hrc_drake.tasks.tokens import UNDO
 
 CHECK_PERIOD = 0.1  # s between comparisons of the tracked body with the forecast
 RETIME_PERIOD = 1.0  # s: a departure re-times the plan at most this often
 STAY = 1.0  # s an unexplained body is forecast to stay where it is seen
+# s of plan time the arm may be off its path timing before it is timed again: the Supervisor
+# follows a timing's speeds within the ramp, up to a step (0.1 s) behind it (our choice).
+SLIP = 0.2
 STILL = 0.02  # m/s: a hand this slow is at rest
 VISIT, LEAVE = 0.06, 0.10  # m: the hand is at a stay within VISIT of it, and left past LEAVE
 VIEW_TIMES = np.arange(0.0, 3.01, 0.25)  # s ahead at which the forecast hand is drawn
@@ -53,13 +65,17 @@ VIEW_TIMES = np.arange(0.0, 3.01, 0.25)  # s ahead at which the forecast hand is
 @dataclass(frozen=True)
 class KeepClearSettings:
     """What predictive separation needs: the operator's forecast and the speed scale the
-    monitor would allow (`ScaleFn`); both None: reactive (monitoring alone). `max_wait` and
-    `departure` are `SafetyConfig`'s."""
+    monitor would allow (`ScaleFn`); both None: reactive (monitoring alone). `max_wait`,
+    `departure`, `timing` and `reaction_time` (T_r) are `SafetyConfig`'s; `acceleration`, the
+    arm's joint acceleration limit [rad/s²] (the ramp of a path timing)."""
 
     forecast: OperatorForecast | None = None
     scale: ScaleFn | None = None
     max_wait: float = 6.0
     departure: float = 0.15
+    timing: str = Timing.WAIT.value
+    acceleration: float = 5.0
+    reaction_time: float = 0.1
 
 
 class KeepClear:
@@ -73,6 +89,8 @@ class KeepClear:
         # learned once per run (a Supervisor runs one simulation).
         self._fitted: OperatorForecast | None = None
         self._max_wait, self._departure = settings.max_wait, settings.departure
+        self._path_time = settings.timing == Timing.PATH_TIME
+        self._acceleration, self._reaction = settings.acceleration, settings.reaction_time
 
     def _anchor(self, s: SupervisorStatus) -> Anchor | None:
         """The indication the forecast starts from: the operator's, or the one predicted."""
@@ -146,6 +164,10 @@ class KeepClear:
             return self._retime(s, key, now, None)
         if now - clear.checked_at < CHECK_PERIOD:
             return s
+        late = now - clear.timed_at >= RETIME_PERIOD
+        if late and slip(s.clock.caps, now, s.plan_time(now)) > SLIP:
+            s = replace(s, clear=replace(clear, slips=clear.slips + 1))
+            return self._retime(s, key, now, None)
         body = tracked_body()
         anchor = self._anchor(s)
         if len(body.radii) == 0 or anchor is None:
@@ -178,26 +200,48 @@ class KeepClear:
         occupancy = self._forecast.occupancy(anchor, now, now + horizon, self._offsets(s))
         if unexplained is not None:
             occupancy = _staying(occupancy, unexplained, now + STAY)
-        holds, spent = (), None
-        held_since = s.clock.held_since
-        if held_since is not None:
-            spent = (held_since.tau, now - held_since.since)
-        if tau < end_tau:
-            holds = time_around(
-                plan,
-                tau,
-                now,
-                occupancy,
-                self._scale,
-                self._max_wait,
-                end_tau,
-                spent=spent,
-                slowing_ok=self._at_last_bin(s),
-            )
+        holds, caps = self._timed(s, now, tau, end_tau, occupancy) if tau < end_tau else ((), ())
         timeline = self._forecast.timeline(anchor)
         view = tuple(tuple(float(x) for x in timeline.at(now + d)) for d in VIEW_TIMES)
         clear = replace(s.clear, clear_key=key, timed_at=now, checked_at=now, forecast_view=view)
-        return replace(s, clock=replace(s.clock, holds=holds), clear=clear)
+        return replace(s, clock=replace(s.clock, holds=holds, caps=caps), clear=clear)
+
+    def _timed(self, s, now: float, tau: float, end_tau: float, occupancy: Occupancy):
+        """(holds, speed caps) of the plan from plan time `tau` at `now` to `end_tau`: waits
+        at the motions' starts (`time_around`), or each motion's path timing
+        (`path_time_around`)."""
+        spent = None
+        held_since = s.clock.held_since
+        if held_since is not None:
+            spent = (held_since.tau, now - held_since.since)
+        plan = s.plan
+        if self._path_time:
+            timing = path_time_around(
+                plan,
+                tau,
+                now,
+                s.clock.speed,
+                occupancy,
+                self._scale,
+                self._max_wait,
+                self._acceleration,
+                end_tau,
+                spent=spent,
+                reaction=self._reaction,
+            )
+            return timing.holds, timing.caps
+        holds = time_around(
+            plan,
+            tau,
+            now,
+            occupancy,
+            self._scale,
+            self._max_wait,
+            end_tau,
+            spent=spent,
+            slowing_ok=self._at_last_bin(s),
+        )
+        return holds, ()
 
 
 def _staying(occupancy: Occupancy, body: BodySpheres, until: float) -> Occupancy:

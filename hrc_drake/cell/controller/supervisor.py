@@ -88,6 +88,7 @@ from hrc_drake.cell.controller.supervisor_state import (
 )
 from hrc_drake.cell.ports import CellConfiguration, PartStatus
 from hrc_drake.hri.messages import Prompt, PromptKind
+from hrc_drake.motion.path_time import speed_cap
 from hrc_drake.motion.plan import Plan
 from hrc_drake.motion.plan_request import PlanFailure
 from hrc_drake.motion.service import PlanService
@@ -316,6 +317,7 @@ class Supervisor(LeafSystem):
                 return self._clocked(s, tau=above, tau_time=now, speed=0.0, rate=0.0)
         if s.holding_for_bolts(tau):
             return self._clocked(s, tau=plan.t_in_place, tau_time=now, speed=limit, rate=0.0)
+        limit = min(limit, speed_cap(clock.caps, now, tau))  # the motion's path timing
         qdot = np.abs(plan.trajectory.EvalDerivative(min(tau, plan.duration), 1)).max()
         step = self._limits.joint_acceleration * self._limits.period / max(qdot, 1e-9)
         speed = float(np.clip(limit, clock.speed - step, clock.speed + step))
@@ -453,6 +455,7 @@ class Supervisor(LeafSystem):
                 tau_time=now,
                 rate=s.clock.speed,
                 holds=(),
+                caps=(),
                 held_since=None,
             ),
             task=replace(s.task, part=plan.instance),

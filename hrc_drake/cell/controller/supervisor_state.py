@@ -11,6 +11,7 @@ import numpy as np
 from hrc_drake.cell.controller.forecast import Anchor
 from hrc_drake.hri.messages import Prompt
 from hrc_drake.motion.clearance import Hold
+from hrc_drake.motion.path_time import SpeedCap
 from hrc_drake.motion.plan import Plan
 from hrc_drake.motion.plan_request import PlanRequest
 from hrc_drake.robot_names import UR3_JOINTS
@@ -165,6 +166,9 @@ class PlanClock:
     holds: tuple[Hold, ...] = ()
     held_since: HeldWait | None = None
     waited: float = 0.0
+    # With `safety.timing: path_time`, the speed the arm keeps under along its timed motions
+    # (the monitor's limit still applies beneath it).
+    caps: tuple[SpeedCap, ...] = ()
 
     def hold_at(self, now: float) -> Hold | None:
         """The planned wait the arm is in, or comes to, at `now` (None: none ahead)."""
@@ -203,6 +207,7 @@ class KeepClearState:
     visiting: int | None = None  # the stay of the activity the hand is seen at
     checked_at: float = float("-inf")  # when the tracked body was last held against it
     replans: int = 0  # re-timed because the body departed from the forecast
+    slips: int = 0  # re-timed because the arm fell off its path timing (`path_time`)
     forecast_view: tuple[tuple[float, float, float], ...] = ()  # forecast hand, for drawing
 
 

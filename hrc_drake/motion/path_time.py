@@ -1,0 +1,407 @@
+"""Time a motion along its path against a forecast of the operator: a path–time search.
+
+Path–velocity decomposition (Kant & Zucker 1986): the plan fixes each motion's path (its plan
+time τ ∈ [τ0, τ1] at full speed gives q(τ), q̇(τ)); here only its timing is chosen. The arm runs
+the path at a speed scale s = dτ/dt ∈ [0, 1], which may change by at most Δs per step of STEP
+seconds, Δs = a STEP / max_j |q̇_j(τ)| with `a` the joint acceleration limit (every joint
+speeding up or braking together along the path, as the Supervisor ramps its speed and as the
+monitor's stopping arithmetic in `hrc_drake.cell.ssm` assumes). At every step s must be at
+most the scale that speed-and-separation monitoring allows against the forecast body at that
+moment (`ScaleFn` on `Occupancy`), or the arm brakes as hard as it may (what the monitor makes
+it do when it cannot keep to the limit).
+
+`time_path` searches that (τ, s, t) lattice breadth-first in time: s on LEVELS levels, τ in
+cells of STEP / LEVELS, so that a step at level j moves exactly j cells. The first step at which
+a state reaches τ1 is the earliest arrival; the profile is traced back from it. It may wait at
+the start, slow down, stop mid-path and go on. Monitoring alone's timing (`reactive_profile`:
+s follows the allowed scale within the ramp) and a wait at the start followed by it are
+profiles of the same lattice, so the search's arrival is never later than theirs against the
+same forecast (on the lattice; with LEVELS = 20 levels the quantised allowed scale is at most
+1/20 below the monitor's own).
+
+`path_time_around` times each motion of a plan that way, one after the other, and returns what
+the Supervisor follows: a `Hold` for a wait at a motion's start (a rest point) and a `SpeedCap`
+for the speed along it. Monitoring stays underneath and acts on the body as measured.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hrc_drake.motion.clearance import Hold, Occupancy, ScaleFn
+from hrc_drake.motion.plan import Plan
+
+STEP = 0.1  # s per step of the search: the forecast's own sampling (OperatorForecast.SAMPLE)
+LEVELS = 20  # speed levels above 0: s ∈ {0, 1/20, ..., 1}
+POSE_STEP = 0.1  # s of plan time between the poses the monitor is asked about
+_EPS = 1e-6
+_REST = 1e-6  # rad/s: a path this slow is at rest (the speed may jump there)
+
+
+@dataclass(frozen=True)
+class MotionPath:
+    """The part of a motion still to go: plan times `taus` (evenly spaced, from where the arm
+    is to the motion's end), with q and q̇ at full speed and the part carried at each."""
+
+    taus: np.ndarray
+    q: np.ndarray
+    qdot: np.ndarray
+    carrying: tuple[str | None, ...]
+
+
+def motion_path(plan: Plan, start: float, end: float) -> MotionPath:
+    """The path of `plan` over plan times [start, end], sampled every POSE_STEP or finer."""
+    count = max(2, int(np.ceil((end - start) / POSE_STEP)) + 1)
+    taus = np.linspace(start, end, count)
+    q = np.array([plan.trajectory.value(t).ravel() for t in taus])
+    qdot = np.array([plan.trajectory.EvalDerivative(t, 1).ravel() for t in taus])
+    return MotionPath(taus, q, qdot, tuple(plan.carrying(t) for t in taus))
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A timing of a path: at `times` (every STEP from the start) the plan time `taus` and the
+    speed scale `speeds` held over the next step; `arrival`: when the path's end is reached."""
+
+    times: np.ndarray
+    taus: np.ndarray
+    speeds: np.ndarray
+    arrival: float
+
+    @property
+    def wait(self) -> float:
+        """Seconds it stands at its start before it moves."""
+        moving = np.nonzero(self.speeds > 0)[0]
+        return float(moving[0] * STEP) if len(moving) else 0.0
+
+
+class _Lattice:
+    """The (τ, s) lattice of a path from `begin` (absolute [s]), and the allowed speed levels
+    on it, asked of the forecast monitor only where the search goes (memoised). With a
+    `reaction` time T_r, the level allowed at a step is the least the monitor allows the pose
+    over the next T_r + T_s (T_s its stopping time at full speed): the forecast body's travel
+    over that window counts, as the run's own check counts the person's (the monitor itself
+    knows only their speed now)."""
+
+    def __init__(self, path, begin, occupancy, scale, acceleration, reaction=None):
+        self.path, self.begin, self.occupancy, self.scale = path, begin, occupancy, scale
+        h = STEP / LEVELS
+        self.length = max(1, int(np.ceil((path.taus[-1] - path.taus[0]) / h - _EPS)))
+        taus = path.taus[0] + np.arange(self.length + 1) * h
+        # Each cell's pose: the nearest sample; its ramp from the faster of the two around it.
+        pose = np.clip(np.searchsorted(path.taus, taus), 0, len(path.taus) - 1)
+        fast = np.abs(path.qdot).max(axis=1)
+        around = np.maximum(fast[pose], fast[np.maximum(pose - 1, 0)])
+        with np.errstate(divide="ignore"):
+            ramp = np.floor(acceleration * STEP / around * LEVELS + _EPS)
+        # At least a level a step, so that no path is frozen at its speed (approximate there).
+        self.ramp = np.clip(np.nan_to_num(ramp, posinf=LEVELS), 1, LEVELS).astype(int)
+        self.ramp[around <= _REST] = LEVELS
+        self.nearest = np.argmin(np.abs(path.taus[:, None] - taus[None, :]), axis=0)
+        window = 0.0 if reaction is None else reaction + fast / acceleration
+        self.window = np.ceil(np.broadcast_to(window, fast.shape) / STEP - _EPS).astype(int)
+        self._allowed: dict[int, np.ndarray] = {}
+        self._raw: dict[tuple[int, int], int] = {}
+
+    def tau(self, cell: int) -> float:
+        """The plan time of a cell."""
+        return float(self.path.taus[0] + cell * STEP / LEVELS)
+
+    def allowed(self, cells: np.ndarray, k: int) -> np.ndarray:
+        """The highest speed level allowed at `cells` at step `k` (see the class docstring)."""
+        column = self._allowed.get(k)
+        if column is None:
+            column = np.full(len(self.path.taus), -1, dtype=int)
+            self._allowed[k] = column
+        poses = self.nearest[cells]
+        for p in np.unique(poses[column[poses] < 0]):
+            p = int(p)
+            column[p] = min(self._level(p, k + d) for d in range(self.window[p] + 1))
+        return column[poses]
+
+    def _level(self, p: int, k: int) -> int:
+        """The level the monitor allows pose `p` against the forecast body at step `k`."""
+        level = self._raw.get((p, k))
+        if level is not None:
+            return level
+        path, occupancy = self.path, self.occupancy
+        i = occupancy.at(self.begin + k * STEP)
+        level = LEVELS
+        if i is not None:  # asked at rest too: the monitor holds an arm a body is too near
+            s = self.scale(
+                path.q[p],
+                path.qdot[p],
+                path.carrying[p],
+                occupancy.centres[i],
+                occupancy.radii,
+                occupancy.velocities[i],
+            )
+            level = int(np.floor(float(np.clip(s, 0.0, 1.0)) * LEVELS + _EPS))
+        self._raw[(p, k)] = level
+        return level
+
+    def admissible(self, cells: np.ndarray, before: int, k: int, late: bool) -> np.ndarray:
+        """(len(cells), LEVELS + 1): the levels the arm may take at `cells` at step `k` coming
+        at level `before`: within the ramp, and allowed by the monitor or braking as hard as it
+        may. `late`: past the longest wait, the arm at its start goes as soon as it may."""
+        ramp = self.ramp[cells][:, None]
+        lo = np.maximum(0, before - ramp)
+        hi = np.minimum(LEVELS, before + ramp)
+        cap = self.allowed(cells, k)[:, None]
+        j = np.arange(LEVELS + 1)[None, :]
+        ok = (j >= lo) & (j <= hi) & ((j <= cap) | (j == lo))
+        if late:
+            start = cells == 0
+            ok[start, 0] = cap[start, 0] == 0
+        return ok
+
+
+def _arrivals(lattice: _Lattice, states: np.ndarray) -> tuple[int, int, float] | None:
+    """(cell, level, fraction of the step) of the state that reaches the end soonest within
+    its step, None if none does."""
+    best = None
+    for j in range(1, LEVELS + 1):
+        cells = np.nonzero(states[:, j])[0]
+        cells = cells[cells + j >= lattice.length]
+        if len(cells):
+            cell = int(cells.max())
+            fraction = (lattice.length - cell) / j
+            if best is None or fraction < best[2]:
+                best = (cell, j, fraction)
+    return best
+
+
+def _step(lattice: _Lattice, states: np.ndarray, k: int, late: bool) -> np.ndarray:
+    """The states at step k + 1 from those at step k."""
+    n = lattice.length
+    nxt = np.zeros_like(states)
+    for j in range(LEVELS + 1):
+        cells = np.nonzero(states[:, j])[0] + j
+        cells = cells[cells < n]
+        if len(cells):
+            nxt[cells] |= lattice.admissible(cells, j, k + 1, late)
+    return nxt
+
+
+def time_path(
+    path: MotionPath,
+    begin: float,
+    occupancy: Occupancy,
+    scale: ScaleFn,
+    acceleration: float,
+    speed: float = 0.0,
+    longest: float = np.inf,
+    reaction: float | None = None,
+) -> Profile | None:
+    """The earliest timing of `path` from `begin` (absolute [s]), the arm at its start at speed
+    scale `speed`, against the forecast `occupancy` (see the module docstring). It waits at
+    its start at most `longest` seconds unless the monitor holds it there; `reaction`: T_r for
+    the window over which the body's forecast travel counts (`_Lattice`; None: the monitor's
+    own limit at each step). None if it cannot
+    arrive within the forecast and the time to run the path after it (it always can: past the
+    forecast nothing limits it)."""
+    lattice = _Lattice(path, begin, occupancy, scale, acceleration, reaction)
+    end = occupancy.times[-1] if len(occupancy.times) else begin
+    steps = int(np.ceil((max(end - begin, 0.0) + path.taus[-1] - path.taus[0]) / STEP))
+    steps += 2 * LEVELS + 2
+    before = int(np.floor(np.clip(speed, 0.0, 1.0) * LEVELS + _EPS))
+    first = np.zeros((lattice.length, LEVELS + 1), dtype=bool)
+    first[0] = lattice.admissible(np.array([0]), before, 0, longest < 0)[0]
+    reached = [first]
+    for k in range(steps):
+        found = _arrivals(lattice, reached[-1])
+        if found is not None:
+            return _traced(lattice, reached, found, longest)
+        reached.append(_step(lattice, reached[-1], k, (k + 1) * STEP > longest + _EPS))
+    return None
+
+
+def _traced(lattice: _Lattice, reached: list, found: tuple, longest: float) -> Profile:
+    """The profile that ends in `found` at the last of `reached`, traced back step by step."""
+    cell, level, fraction = found
+    cells, levels = [cell], [level]
+    for k in range(len(reached) - 1, 0, -1):
+        # Of equal timings, the one that stays back longest (the fastest predecessor, the
+        # farthest back): it waits at the motion's start, away from the body, rather than on
+        # its way, wherever that is as soon.
+        for before in range(LEVELS, -1, -1):
+            prev = cell - before
+            late = k * STEP > longest + _EPS
+            if (
+                prev >= 0
+                and reached[k - 1][prev, before]
+                and lattice.admissible(np.array([cell]), before, k, late)[0, level]
+            ):
+                cell, level = prev, before
+                break
+        cells.append(cell)
+        levels.append(level)
+    count = len(cells)
+    times = lattice.begin + np.arange(count) * STEP
+    taus = np.array([lattice.tau(c) for c in reversed(cells)])
+    speeds = np.array(levels[::-1], dtype=float) / LEVELS
+    return Profile(times, taus, speeds, float(times[-1] + fraction * STEP))
+
+
+def reactive_profile(
+    path: MotionPath,
+    begin: float,
+    occupancy: Occupancy,
+    scale: ScaleFn,
+    acceleration: float,
+    speed: float = 0.0,
+    wait: float = 0.0,
+    reaction: float | None = None,
+) -> Profile:
+    """Monitoring alone's timing of `path` on the same lattice (the same `reaction`), after a
+    `wait` at its start: each step the speed goes toward the level allowed, within the ramp."""
+    lattice = _Lattice(path, begin, occupancy, scale, acceleration, reaction)
+    level = int(np.floor(np.clip(speed, 0.0, 1.0) * LEVELS + _EPS))
+    cell, k = 0, 0
+    cells, levels = [], []
+    while True:  # ends: past the forecast the monitor allows full speed
+        ramp = int(lattice.ramp[cell])
+        cap = 0 if k * STEP < wait - _EPS else int(lattice.allowed(np.array([cell]), k)[0])
+        level = int(np.clip(cap, max(0, level - ramp), min(LEVELS, level + ramp)))
+        cells.append(cell)
+        levels.append(level)
+        if cell + level >= lattice.length:
+            fraction = (lattice.length - cell) / level
+            break
+        cell, k = cell + level, k + 1
+    times = begin + np.arange(len(cells)) * STEP
+    taus = np.array([lattice.tau(c) for c in cells])
+    return Profile(times, taus, np.array(levels, dtype=float) / LEVELS, times[-1] + fraction * STEP)
+
+
+@dataclass(frozen=True)
+class SpeedCap:
+    """The speed scale the arm keeps under along a motion's plan times [tau0, tau1): from
+    `start` [s], `speeds[k]` over the k-th STEP, where it was timed to be at plan time
+    `taus[k]`; past them, none."""
+
+    tau0: float
+    tau1: float
+    start: float
+    speeds: tuple[float, ...]
+    taus: tuple[float, ...]
+
+    def at(self, now: float) -> float:
+        """The cap at `now`: the lower of this step's speed and the next one's, so that the
+        arm brakes within the step before a lower speed, never after it (1 past the end)."""
+        k = max(0, int(np.floor((now - self.start) / STEP + _EPS)))
+        if k >= len(self.speeds):
+            return 1.0
+        return min(self.speeds[k], self.speeds[k + 1] if k + 1 < len(self.speeds) else 1.0)
+
+    def tau_at(self, now: float) -> float | None:
+        """Where the timing has the arm at `now` (None outside the timed steps)."""
+        times = self.start + STEP * np.arange(len(self.taus))
+        if len(times) < 2 or not times[0] <= now <= times[-1]:
+            return None
+        return float(np.interp(now, times, self.taus))
+
+
+def speed_cap(caps: tuple[SpeedCap, ...], now: float, tau: float) -> float:
+    """The cap of the timed motion the arm is on at plan time `tau` (1 on none)."""
+    for cap in caps:
+        if cap.tau0 - _EPS <= tau < cap.tau1:
+            return cap.at(now)
+    return 1.0
+
+
+def slip(caps: tuple[SpeedCap, ...], now: float, tau: float) -> float:
+    """How far [s of plan time] the arm at `tau` is from where its timing has it at `now`
+    (0 off the timed motions)."""
+    for cap in caps:
+        if cap.tau0 - _EPS <= tau < cap.tau1:
+            timed = cap.tau_at(now)
+            return 0.0 if timed is None else abs(tau - timed)
+    return 0.0
+
+
+@dataclass(frozen=True)
+class PathTiming:
+    """What the Supervisor follows: the waits at motions' starts and the speed along them."""
+
+    holds: tuple[Hold, ...] = ()
+    caps: tuple[SpeedCap, ...] = ()
+
+
+def path_time_around(
+    plan: Plan,
+    tau: float,
+    now: float,
+    speed: float,
+    occupancy: Occupancy,
+    scale: ScaleFn,
+    max_wait: float,
+    acceleration: float,
+    end_tau: float | None = None,
+    spent: tuple[float, float] | None = None,
+    reaction: float | None = None,
+) -> PathTiming:
+    """The motions of `plan` from plan time `tau` (the arm there at `now`, at speed scale
+    `speed`) to `end_tau` (None: the plan's end), each timed by `time_path` after the one
+    before as timed; the still parts between them at full speed. A motion under way is timed
+    from where the arm is; one to come may wait at its start at most `max_wait` in all
+    (`spent`: (plan time, seconds) waited there already); `reaction`: as `time_path`'s. A
+    motion the forecast does not reach is left to the monitor."""
+    end_tau = plan.duration if end_tau is None else end_tau
+    holds: list[Hold] = []
+    caps: list[SpeedCap] = []
+    t, at = now, tau  # the arm at plan time `at` at `t`, as timed so far
+    for motion in plan.motions:
+        stop = motion.start + motion.duration
+        if stop <= tau + _EPS or motion.start >= end_tau - _EPS:
+            continue
+        start = max(motion.start, tau)
+        begin = t + (start - at)
+        t, at = begin + (stop - start), stop  # as planned, unless timed below
+        if not occupancy.overlaps(begin, begin + (stop - start) + max_wait):
+            continue
+        under_way = start > motion.start + _EPS
+        longest = max_wait
+        if spent is not None and abs(spent[0] - motion.start) < _EPS:
+            longest = max(0.0, max_wait - spent[1])
+        path = motion_path(plan, start, stop)
+        profile = time_path(
+            path,
+            begin,
+            occupancy,
+            scale,
+            acceleration,
+            speed if under_way else 0.0,
+            np.inf if under_way else longest,
+            reaction,
+        )
+        if profile is None:
+            continue
+        wait = 0.0 if under_way else profile.wait
+        if wait > 0.0:
+            holds.append(Hold(motion.start, begin + wait))
+        first = round(wait / STEP)
+        speeds = profile.speeds[first:]
+        if len(speeds) and speeds.min() < 1.0 - _EPS:
+            taus = tuple(float(x) for x in profile.taus[first:])
+            caps.append(SpeedCap(start, stop, begin + wait, tuple(map(float, speeds)), taus))
+        t = profile.arrival
+    return PathTiming(tuple(holds), tuple(caps))
+
+
+__all__ = [
+    "LEVELS",
+    "STEP",
+    "MotionPath",
+    "PathTiming",
+    "Profile",
+    "SpeedCap",
+    "motion_path",
+    "path_time_around",
+    "reactive_profile",
+    "slip",
+    "speed_cap",
+    "time_path",
+]

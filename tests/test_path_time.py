@@ -1,0 +1,258 @@
+"""The path–time timing of a motion against a forecast (`hrc_drake.motion.path_time`)."""
+
+import numpy as np
+import pytest
+from pydrake.trajectories import PiecewisePolynomial
+
+from hrc_drake.motion.clearance import Occupancy, time_around
+from hrc_drake.motion.path_time import (
+    LEVELS,
+    STEP,
+    SpeedCap,
+    motion_path,
+    path_time_around,
+    reactive_profile,
+    slip,
+    speed_cap,
+    time_path,
+)
+from hrc_drake.motion.plan import MotionTiming, Plan, Segment, Stage
+
+ACCELERATION = 5.0  # rad/s²
+DURATION = 3.0  # s: the one motion's time at full speed
+
+
+def _plan(duration: float = DURATION, reach: float = 1.0) -> Plan:
+    """One motion from rest to rest: joint 0 goes 0 → `reach` over [0, duration] (read as the
+    robot's x by the scale functions below)."""
+    knots = np.zeros((6, 2))
+    knots[0, 1] = reach
+    trajectory = PiecewisePolynomial.CubicHermite([0.0, duration], knots, np.zeros((6, 2)))
+    gripper = PiecewisePolynomial.ZeroOrderHold([0.0, duration], np.zeros((1, 2)))
+    segments = (
+        Segment(Stage.APPROACH, 0.0, 0.0),
+        Segment(Stage.GRASP, 0.0, 0.0),
+        Segment(Stage.CARRY, 0.0, duration),
+    )
+    motions = (MotionTiming("only", 0.0, duration, duration),)
+    return Plan(
+        "F1", "part", frozenset(), trajectory, gripper, duration, duration, duration, segments,
+        (), motions,
+    )  # fmt: skip
+
+
+def _graded(q, qdot, carrying, centres, radii, velocities) -> float:
+    """Monitoring's stand-in: a stop within 0.15 m of a body sphere, full speed past 0.45 m,
+    in between in proportion."""
+    robot = np.array([q[0], 0.0, 0.0])
+    gap = (np.linalg.norm(centres - robot, axis=1) - radii).min()
+    return float(np.clip((gap - 0.15) / 0.3, 0.0, 1.0))
+
+
+def _stops_near(q, qdot, carrying, centres, radii, velocities) -> float:
+    """A monitor that only stops: within 0.3 m of a body sphere, else full speed."""
+    return 0.0 if _graded(q, qdot, carrying, centres, radii, velocities) < 0.5 else 1.0
+
+
+def _sits(at: float, until: float, start: float = 0.0, end: float = 12.0) -> Occupancy:
+    """A hand at x = `at` on the path until `until`, then far away."""
+    times = np.arange(start, end, STEP)
+    centres = np.array([[[at if t < until else 5.0, 0.0, 0.0]] for t in times])
+    return Occupancy(times, centres, np.array([0.05]), np.zeros_like(centres))
+
+
+def _empty() -> Occupancy:
+    return Occupancy(np.zeros(0), np.zeros((0, 1, 3)), np.array([0.05]), np.zeros((0, 1, 3)))
+
+
+def _arrival_after_wait(plan: Plan, occupancy: Occupancy) -> float:
+    """When the arm arrives if it waits as `time_around` times it, then follows the plan with
+    the monitor underneath (monitoring alone after the wait)."""
+    holds = time_around(plan, 0.0, 0.0, occupancy, _graded, max_wait=6.0)
+    wait = holds[0].until if holds else 0.0
+    path = motion_path(plan, 0.0, plan.duration)
+    return reactive_profile(path, 0.0, occupancy, _graded, ACCELERATION, wait=wait).arrival
+
+
+def test_a_hand_that_sits_on_the_path_for_2_s_is_passed_sooner_than_by_waiting_or_reacting():
+    plan = _plan()
+    path = motion_path(plan, 0.0, plan.duration)
+    sits = _sits(at=0.6, until=2.0)
+    profile = time_path(path, 0.0, sits, _graded, ACCELERATION, longest=6.0)
+    assert profile is not None
+    reactive = reactive_profile(path, 0.0, sits, _graded, ACCELERATION)
+    waiting = _arrival_after_wait(plan, sits)
+    assert profile.arrival <= reactive.arrival + 1e-9
+    assert profile.arrival <= waiting + 1e-9
+    # The hand costs it something, and it is strictly better than waiting here.
+    assert profile.arrival > DURATION
+    assert profile.arrival < waiting - STEP
+    # It sets off at once and slows mid-path for the hand instead of waiting at the start.
+    assert profile.wait == 0.0
+    on_the_way = (profile.taus > 0.1) & (profile.taus < DURATION - 0.1)
+    assert profile.speeds[on_the_way].min() < 0.5
+    # It keeps to the monitor's limit against the forecast at every step.
+    for t, tau, s in zip(profile.times, profile.taus, profile.speeds, strict=True):
+        i = sits.at(t)
+        q = plan.trajectory.value(tau).ravel()
+        qdot = plan.trajectory.EvalDerivative(tau, 1).ravel()
+        allowed = _graded(q, qdot, None, sits.centres[i], sits.radii, sits.velocities[i])
+        assert s <= allowed + 0.1  # the pose is the nearest sampled one (0.1 s of plan time)
+
+
+def test_between_two_hands_it_stops_mid_path_and_goes_on_when_the_one_ahead_leaves():
+    plan = _plan()
+    path = motion_path(plan, 0.0, plan.duration)
+    # One hand sits near the path's end until 3 s, another comes to its start at 1.5 s: the
+    # arm must leave at once and stand between them until the one ahead has left.
+    ahead, behind = _sits(at=1.0, until=3.0), _sits(at=0.0, until=12.0, start=1.5)
+    times = np.arange(0.0, 12.0, STEP)
+    centres = np.concatenate([ahead.centres, np.full((len(times), 1, 3), [5.0, 0.0, 0.0])], axis=1)
+    centres[15:, 1] = behind.centres[:, 0]
+    both = Occupancy(times, centres, np.array([0.05, 0.05]), np.zeros_like(centres))
+    profile = time_path(path, 0.0, both, _stops_near, ACCELERATION, longest=6.0)
+    assert profile.wait < 1.0  # it leaves before the hand behind comes
+    between = (profile.taus > 1.0) & (profile.taus < 2.0)
+    assert profile.speeds[between].min() == 0.0  # stops mid-path
+    stopped = between & (profile.speeds == 0.0)
+    assert profile.times[stopped].max() < 3.0 <= profile.arrival  # and goes on
+    assert profile.arrival < 3.0 + DURATION
+    # Monitoring alone gets there too here, never sooner; waiting at the start is held by
+    # the hand that comes there.
+    alone = reactive_profile(path, 0.0, both, _stops_near, ACCELERATION)
+    assert profile.arrival <= alone.arrival + 1e-9
+    holds = time_around(plan, 0.0, 0.0, both, _stops_near, max_wait=6.0)
+    assert not holds or profile.arrival < holds[0].until + DURATION
+
+
+@pytest.mark.parametrize("reaction", [None, 0.1])
+@pytest.mark.parametrize("at", [0.2, 0.5, 0.8, 1.0])
+@pytest.mark.parametrize("until", [0.5, 1.5, 2.5, 4.0])
+def test_never_later_than_monitoring_alone_after_any_wait_against_an_exact_forecast(
+    at, until, reaction
+):
+    """Monitoring alone, after any wait at the start up to the longest, is a timing the search
+    considers: its arrival is never later (with the monitor's own limit, and with the limit
+    held over the reaction and stopping window)."""
+    plan = _plan()
+    path = motion_path(plan, 0.0, plan.duration)
+    sits = _sits(at, until)
+    profile = time_path(path, 0.0, sits, _graded, ACCELERATION, longest=6.0, reaction=reaction)
+    for wait in np.arange(0.0, 6.0 + 1e-9, 0.5):
+        alone = reactive_profile(path, 0.0, sits, _graded, ACCELERATION, wait=wait, **{
+            "reaction": reaction
+        })  # fmt: skip
+        assert profile.arrival <= alone.arrival + 1e-9
+
+
+def test_with_a_reaction_time_it_keeps_below_the_limit_while_it_could_still_be_stopping():
+    """A hand far off that comes onto the path at 2 s: with T_r the arm keeps below the limit
+    the monitor will set over the next T_r + T_s, not only the one it sets now."""
+    plan = _plan()
+    path = motion_path(plan, 0.0, plan.duration)
+    times = np.arange(0.0, 12.0, STEP)
+    centres = np.array([[[0.6 if 2.0 <= t < 4.0 else 5.0, 0.0, 0.0]] for t in times])
+    comes = Occupancy(times, centres, np.array([0.05]), np.zeros_like(centres))
+    reaction = 0.1
+    profile = time_path(path, 0.0, comes, _graded, ACCELERATION, longest=6.0, reaction=reaction)
+    for t, tau, s in zip(profile.times, profile.taus, profile.speeds, strict=True):
+        q = plan.trajectory.value(tau).ravel()
+        qdot = plan.trajectory.EvalDerivative(tau, 1).ravel()
+        window = reaction + np.abs(qdot).max() / ACCELERATION
+        ahead = [comes.at(t + d) for d in np.arange(0.0, window + STEP, STEP)]
+        allowed = min(
+            _graded(q, qdot, None, comes.centres[i], comes.radii, comes.velocities[i])
+            for i in ahead
+            if i is not None
+        )
+        assert s <= allowed + 0.1  # to the pose sampling (0.1 s of plan time)
+    # Without it, the arm is still moving fast when the hand arrives.
+    bare = time_path(path, 0.0, comes, _graded, ACCELERATION, longest=6.0)
+    at_two = np.searchsorted(bare.times, 1.9)
+    assert bare.speeds[at_two] > profile.speeds[at_two]
+
+
+def test_with_nothing_forecast_it_runs_the_plan_at_full_speed():
+    plan = _plan()
+    path = motion_path(plan, 0.0, plan.duration)
+    profile = time_path(path, 2.0, _empty(), _graded, ACCELERATION)
+    assert np.all(profile.speeds == 1.0)
+    assert profile.arrival == pytest.approx(2.0 + DURATION, abs=STEP / LEVELS)
+    assert path_time_around(plan, 0.0, 2.0, 0.0, _empty(), _graded, 6.0, ACCELERATION).caps == ()
+
+
+def test_the_speed_changes_within_the_joint_acceleration_limit():
+    # A slow arm limit, so that the ramp binds: Δs ≤ a STEP / max |q̇| per step.
+    acceleration = 0.5
+    plan = _plan(reach=1.5)
+    path = motion_path(plan, 0.0, plan.duration)
+    sits = _sits(at=0.9, until=2.5)
+    profile = time_path(path, 0.0, sits, _graded, acceleration, longest=6.0)
+    changes = np.abs(np.diff(profile.speeds))
+    assert changes.max() > 0.0
+    for k, change in enumerate(changes):
+        fast = np.abs(plan.trajectory.EvalDerivative(profile.taus[k + 1], 1)).max()
+        bound = acceleration * STEP / max(fast, 1e-9)
+        # The ramp is floored to a level and taken at the faster of the poses about it; at
+        # least one level a step (1/LEVELS) is always allowed.
+        assert change <= max(bound * 1.05, 1.0 / LEVELS) + 1e-9
+
+
+def test_the_plan_timing_waits_at_the_start_or_caps_the_speed_along_the_motion():
+    plan = _plan()
+    timing = path_time_around(
+        plan, 0.0, 0.0, 0.0, _sits(0.6, 2.0), _graded, max_wait=6.0, acceleration=ACCELERATION
+    )
+    assert timing.holds == ()  # it sets off at once (see above)
+    (cap,) = timing.caps
+    assert (cap.tau0, cap.tau1, cap.start) == (0.0, DURATION, 0.0)
+    assert min(cap.speeds) < 0.5
+    # The cap is the lower of this step's speed and the next one's, 1 past the timing.
+    k = int(np.argmin(cap.speeds))
+    assert speed_cap(timing.caps, (k - 1) * STEP + 0.01, 1.0) == min(cap.speeds[k - 1 : k + 1])
+    assert speed_cap(timing.caps, 100.0, 1.0) == 1.0
+    assert speed_cap(timing.caps, 0.0, DURATION + 1.0) == 1.0  # off the motion
+    # An arm behind its timing slips; on time it does not.
+    now = (k + 0.5) * STEP
+    assert slip(timing.caps, now, cap.tau_at(now)) == pytest.approx(0.0)
+    assert slip(timing.caps, now, cap.tau_at(now) - 0.3) == pytest.approx(0.3)
+
+
+def test_a_hand_on_the_path_past_the_longest_wait_is_waited_for_at_most_that_long():
+    plan = _plan()
+    # The hand sits where the arm starts: it may not move until the hand leaves at 3 s.
+    sits = _sits(at=0.0, until=3.0)
+    timing = path_time_around(plan, 0.0, 0.0, 0.0, sits, _graded, 1.0, ACCELERATION)
+    # The monitor holds it, so it waits there past the longest wait all the same, and goes
+    # as soon as the monitor lets it.
+    (hold,) = timing.holds
+    assert 1.0 < hold.until <= 3.0 + STEP
+    assert SpeedCap(0.0, 1.0, 0.0, (0.5,), (0.0,)).at(-1.0) == 0.5
+
+
+def test_an_unknown_timing_is_a_one_line_error():
+    from hrc_drake.scenario.load import load_scenario
+    from hrc_drake.scenario.schema import ScenarioError
+
+    with pytest.raises(ScenarioError) as err:
+        load_scenario("shared-desk", "{safety: {timing: sometimes}}")
+    assert "safety.timing: unknown timing 'sometimes'; use wait or path_time" in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+def test_the_shared_desk_timed_along_its_paths_keeps_separation_and_stands_on_its_way():
+    """A lean shared desk (the operator who follows, seed 0) with `timing: path_time`: the
+    arm stands still on its way for the forecast hand (wait timing stands only at rest points:
+    no stopped time), and the run's own check finds no violation."""
+    from hrc_drake.cell.run.run import run_scenario
+    from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+
+    text = (
+        "{safety: {separation: predictive, timing: path_time}, "
+        "operator: {model: follows, seed: 0}, interaction: {mode: anticipate}}"
+    )
+    result = run_scenario(load_cell_scenario("shared-desk", [text, LEAN]))
+    assert result.done and not result.collisions
+    assert result.safety.stopped_time > 1.0
+    assert result.safety.body_contacts == 0 and result.safety.violations == 0
+    assert result.safety_check.violations == 0 and result.safety_check.body_contacts == 0
