@@ -41,7 +41,12 @@ from pydrake.geometry import Role
 from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from hrc_drake.cell.controller.separation import CONTACT_SHARE, SafetyLog, SeparationReading
+from hrc_drake.cell.controller.separation import (
+    CONTACT_SHARE,
+    SafetyLog,
+    SeparationReading,
+    planned_scales,
+)
 from hrc_drake.cell.controller.supervisor import Mode, SupervisorStatus
 from hrc_drake.cell.person import CHAIN_GAP
 from hrc_drake.cell.ports import NOBODY, BodySpheres
@@ -179,16 +184,9 @@ class SeparationMonitor(LeafSystem):
         # added to the reaction), or no faster toward the body than the contact speed.
         t_s1 = np.abs(qdot_nom).max(initial=0.0) / self._acc
         v_r1 = np.maximum(0.0, np.sum(v_nom * toward, 1))
-        v_plan = person_travel(v_h, gap, t_rp + t_s1, cfg) / (t_rp + t_s1)
-        a0, a1, a2 = v_plan * t_rp + const, v_plan * t_s1 + v_r1 * t_rp, v_r1 * t_s1 / 2
+        separated = planned_scales(v_h, gap, v_r1, t_rp, t_s1, cfg, gap - cfg.slow_band)
         slow = np.minimum(CONTACT_SHARE * cfg.contact_speed / np.maximum(v_r1, 1e-9), 1.0)
-        separated = [
-            allowed_scale(
-                gap[k : k + 1] - cfg.slow_band, a0[k : k + 1], a1[k : k + 1], a2[k : k + 1]
-            )
-            for k in range(n)
-        ]
-        return s_p, np.maximum(np.array(separated), slow)
+        return s_p, np.maximum(separated, slow)
 
     def _calc_reading(self, context, output) -> None:
         cfg, plant = self._config, self._plant

@@ -270,14 +270,17 @@ def test_a_body_far_away_allows_full_speed_and_one_on_the_path_stops_the_robot(c
     q, qdot = np.array(POSTURES[0]), np.array([0.6, 0.3, 0.0, 0.0, 0.0, 0.0])
     p, v = _tcp_motion(envelope, q, qdot)
     intent = MotionIntent(qdot=qdot, moving=True)
-    config = SafetyConfig()
+    config = SafetyConfig(contact_speed=0.0)  # separation alone
     away = _one_sphere(p + np.array([2.0, 2.0, 1.0]))
     far = assess(envelope, q, qdot, away, intent, config, 3.0, 0.05)
     assert far.limit == 1.0 and far.separation > 1.5 and far.margin > 1.0 and far.moving
     # The hand 8 cm ahead of the tcp along its motion: within S_p at any speed.
     ahead = p + 0.08 * v / np.linalg.norm(v)
     near = assess(envelope, q, qdot, _one_sphere(ahead, radius=0.05), intent, config, 3.0, 0.05)
-    assert near.limit == 0.0 and near.separation < 0.05 and near.margin < 0.0
+    assert near.limit == 0.0 and near.separation < 0.05 and near.margin < 0.0 and near.short
+    # With the contact speed the arm may go on toward the hand, at 80 % of it at most.
+    slow = assess(envelope, q, qdot, _one_sphere(ahead, radius=0.05), intent, SafetyConfig(), 3.0)
+    assert slow.limit * np.linalg.norm(v) <= 0.8 * 0.25 + 1e-9 and slow.limit > 0.0
     # The arm at rest with no plan: not moving, and the hand still within S_p's constant terms.
     still = MotionIntent()
     rest = assess(envelope, q, np.zeros(6), _one_sphere(ahead, radius=0.05), still, config, 3.0)
@@ -294,15 +297,15 @@ def test_the_allowed_scale_keeps_the_protective_separation(cell):
     q, qdot = np.array(POSTURES[0]), np.array([0.6, 0.3, 0.0, 0.0, 0.0, 0.0])
     p, v = _tcp_motion(envelope, q, qdot)
     direction = v / np.linalg.norm(v)
-    config = SafetyConfig()
-    hand = _one_sphere(p + 0.25 * direction, velocity=-0.3 * direction, radius=0.05)
+    config = SafetyConfig(contact_speed=0.0)  # separation alone
+    hand = _one_sphere(p + 0.45 * direction, velocity=-0.3 * direction, radius=0.05)
     s = assess(envelope, q, qdot, hand, MotionIntent(qdot=qdot), config, 3.0, 0.05).limit
     assert 0.05 < s < 0.95
     at_s = assess(envelope, q, s * qdot, hand, MotionIntent(qdot=s * qdot), config, 3.0, 0.05)
     assert at_s.limit == pytest.approx(1.0, abs=1e-9)
     assert at_s.margin >= config.slow_band - 1e-9
     faster = MotionIntent(qdot=1.1 * s * qdot)
-    assert assess(envelope, q, qdot, hand, faster, config, 3.0, 0.05).limit < 0.95
+    assert assess(envelope, q, 1.1 * s * qdot, hand, faster, config, 3.0, 0.05).limit < 0.95
 
 
 def test_allowed_scale_vectorised_matches_each_entrys_root():
@@ -357,8 +360,8 @@ def test_the_log_counts_time_stopped_or_slowed_only_where_the_plan_would_move():
     """A stop of the monitor (rate 0 mid-motion) counts as stopped; holding still for bolts
     (rate 0, no plan velocity) does not; a slowed plan counts as slowed; margins and violations
     count only while the arm measurably moves."""
-    still = SeparationReading(separation=0.3, margin=-0.1, limit=0.0, moving=False)
-    moving = SeparationReading(separation=0.2, margin=-0.05, limit=0.4, moving=True)
+    still = SeparationReading(separation=0.3, margin=-0.1, short=True, limit=0.0, moving=False)
+    moving = SeparationReading(separation=0.2, margin=-0.05, short=True, limit=0.4, moving=True)
     qdot = np.array([0.2, 0.0, 0.0, 0.0, 0.0, 0.0])
     steps = [
         (still, MotionIntent(qdot=qdot, moving=False, rate=0.0)),  # stopped by the monitor
@@ -382,7 +385,7 @@ def test_an_arm_moved_from_outside_is_counted_apart_from_the_robots_violations(c
     q, qdot = np.array(POSTURES[0]), np.array([0.6, 0.3, 0.0, 0.0, 0.0, 0.0])
     p, v = _tcp_motion(envelope, q, qdot)
     hand = _one_sphere(p + 0.08 * v / np.linalg.norm(v), radius=0.05)
-    config = SafetyConfig()
+    config = SafetyConfig(contact_speed=0.0)  # separation alone
     intent = MotionIntent(qdot=qdot, moving=True)
     own = assess(envelope, q, qdot, hand, intent, config, 3.0, 0.05)
     push = np.array([0.5, 0.0, 0.0, 0.0, 0.0, 0.0])

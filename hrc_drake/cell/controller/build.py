@@ -54,6 +54,8 @@ MEASURED = (
     "hri.indication",
 )
 COMMANDED = (*ARM_PORTS, "hri.prompt")
+# What the robot takes from a person rather than from its controller (a UR's pendant).
+PENDANT = ("safety.unlock",)
 
 
 @dataclass(frozen=True)
@@ -203,4 +205,11 @@ def connect_controller(builder: DiagramBuilder, station, controller) -> None:
         builder.Connect(controller.GetOutputPort(name), station.GetInputPort(name))
 
 
-__all__ = ["COMMANDED", "MEASURED", "Controller", "connect_controller", "make_controller"]
+__all__ = [
+    "COMMANDED",
+    "MEASURED",
+    "PENDANT",
+    "Controller",
+    "connect_controller",
+    "make_controller",
+]

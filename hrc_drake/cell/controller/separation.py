@@ -53,7 +53,6 @@ from hrc_drake.cell.ssm import (
     NEAR_DISTANCE,
     beyond_contact_speed,
     body_gaps,
-    entry_scales,
     person_travel,
     protective_distance,
     separation_constant,
@@ -71,6 +70,7 @@ CONTACT_SHARE = 0.8
 # S_h steps up there, and the arm needs time to slow (our choice).
 NEAR_AHEAD = 0.1  # m
 _SLOWEST = 1e-9  # m/s: a point this slow toward the person never limits the plan
+_BISECTIONS = 14  # halvings of the speed scale: within 1e-4 of the largest that keeps S_p
 
 
 @dataclass(frozen=True)
@@ -135,14 +135,26 @@ class SafetyLog:
         }
 
 
-def _human_travel(v_h, gap, config: SafetyConfig, now: float, longest: float):
-    """(S_h over the window `now`, the speed v̄ with v̄ w ≥ S_h(w) for every window w up to
-    `longest`): the person's travel of `person_travel`. The hand's speed only rises within a
-    window, so S_h(w) / w grows with w and the longest window's average bounds the rest. The
-    plan takes the near speed `NEAR_AHEAD` sooner, so that it slows before the safety
-    function's S_h steps up at 0.5 m."""
-    planned = person_travel(v_h, gap, longest, config, NEAR_DISTANCE + NEAR_AHEAD)
-    return person_travel(v_h, gap, now, config), planned / max(longest, 1e-9)
+def planned_scales(v_h, gap, v_r1, t_rp: float, t_s1: float, config: SafetyConfig, room):
+    """Per pair, the largest speed scale s ∈ [0, 1] of the plan at which S_p(s) ≤ `room`, by
+    bisection (S_p grows with s): the person's travel over T_r + sampling + T_s(s), T_s(s) =
+    s `t_s1`, from their tracked speed toward the robot `v_h`, the robot's speed toward them
+    s `v_r1` over T_r + sampling (`t_rp`) and its stopping distance. The plan takes ISO
+    13855's near speed `NEAR_AHEAD` sooner than 0.5 m, so that it slows before the safety
+    function's S_h steps up there."""
+    near, const = NEAR_DISTANCE + NEAR_AHEAD, separation_constant(config)
+
+    def s_p(s):
+        travel = person_travel(v_h, gap, t_rp + t_s1 * s, config, near)
+        return travel + v_r1 * s * t_rp + v_r1 * s * s * t_s1 / 2 + const
+
+    lo, hi = np.zeros(np.shape(gap)), np.ones(np.shape(gap))
+    full, blocked = s_p(hi) <= room, s_p(lo) > room
+    for _ in range(_BISECTIONS):
+        mid = (lo + hi) / 2
+        fits = s_p(mid) <= room
+        lo, hi = np.where(fits, mid, lo), np.where(fits, hi, mid)
+    return np.where(full, 1.0, np.where(blocked, 0.0, lo))
 
 
 def assess(
@@ -173,17 +185,15 @@ def assess(
     speeds = speeds_toward(envelope.link_velocities(R_WB, p_WB, np.stack([v, qdot])), pairs)
     v_h = -np.einsum("nj,mnj->mn", body.velocities, pairs.direction)
     v_r, v_r1 = np.maximum(0.0, speeds)
-    const = separation_constant(config)
     t_r = config.reaction_time
     # Measured: the S_p the standard asks to keep.
     t_s = stopping_time(v, joint_acceleration)
     t_s1 = stopping_time(qdot, joint_acceleration)
-    t_rp = t_r + sampling
-    s_h, v_plan = _human_travel(v_h, gap, config, t_r + t_s, t_rp + t_s1)
-    s_p = protective_distance(s_h, v_r, t_s, config)
-    # Planned at scale s: S_p(s) = a0 + a1 s + a2 s^2, or no faster than the contact speed.
-    a0, a1, a2 = v_plan * t_rp + const, v_plan * t_s1 + v_r1 * t_rp, v_r1 * t_s1 / 2
-    separated = entry_scales(gap - config.slow_band, a0, a1, a2)
+    s_p = protective_distance(person_travel(v_h, gap, t_r + t_s, config), v_r, t_s, config)
+    # Planned: the plan at scale s keeps S_p(s) + slow_band, or moves no faster than the
+    # contact speed toward the person.
+    room = gap - config.slow_band
+    separated = planned_scales(v_h, gap, v_r1, t_r + sampling, t_s1, config, room)
     slow = CONTACT_SHARE * config.contact_speed / np.maximum(v_r1, _SLOWEST)
     slow = np.where(touchable(body)[None, :], slow, 0.0)  # the head: separation alone
     limit = float(np.maximum(separated, np.minimum(slow, 1.0)).min()) if config.enabled else 1.0
@@ -318,4 +328,5 @@ __all__ = [
     "assess",
     "log_step",
     "plan_moves",
+    "planned_scales",
 ]
