@@ -2,15 +2,15 @@
 safety_check.md.
 
 The separation monitor counts a violation when the separation falls below the S_p it computes
-from what it knows (the hand's speed now); the run's own check (`hrc_drake.cell.run.safety_check`)
-counts one when it falls below the S_p of the person's actual travel over the next T_r + T_s,
-the same for every mode and setting. This benchmark runs `shared-desk` (the operator points and
-fetches beside the carry path) with the `follows` population, anticipating, on a few operator
-seeds, in seven configurations: monitoring off, monitoring alone and predictive with the
-tracked hand speed held over the window, with the constant 1.6 m/s of a person whose speed is
-not monitored, and with the tracked speed bounded by the hand's acceleration. Per
-configuration: the assembly's simulated seconds, `ssm_delay`, both counts and both least margins,
-body contacts.
+from what it knows (the hand's speed now, and how fast a hand can speed up); the run's own
+check (`hrc_drake.cell.run.safety_check`) counts one when it falls below the S_p of the
+person's actual travel over the next T_r + T_s, the same for every mode and setting. This
+benchmark runs `shared-desk` (the operator points and fetches beside the carry path) with the
+`follows` population, anticipating, on a few operator seeds, in the configurations of
+`CONFIGURATIONS`: monitoring off, the controller's planning monitor without the station's safety
+function, and monitoring alone and predictive with the tracked speed (bounded by the hand's
+acceleration) and with ISO 13855's constant speeds. Per configuration: the assembly's simulated
+seconds, `ssm_delay`, both counts and both least margins, body contacts.
 
 Full settings (5 s holds). Usage:
 ``python benchmarks/bench_safety_check.py [--seeds 3] [--workers 2] [--lean]`` (with ``--lean``
@@ -27,17 +27,18 @@ from pathlib import Path
 from cell_pool import pooled_loop, publish, run_pool
 
 CONFIGURATIONS = {
-    "monitoring off": "{safety: {enabled: false, separation: reactive}}",
+    # The controller's monitor and the station's safety function both off.
+    "monitoring off": (
+        "{safety: {enabled: false, separation: reactive, function: {enabled: false}}}"
+    ),
+    # The controller's planning monitor alone, without the station's safety function.
+    "planning monitor only, tracked": (
+        "{safety: {separation: reactive, function: {enabled: false}}}"
+    ),
     "monitoring alone, tracked": "{safety: {separation: reactive}}",
     "predictive, tracked": "{safety: {separation: predictive}}",
-    "monitoring alone, 1.6 m/s": "{safety: {separation: reactive, track_human_speed: false}}",
-    "predictive, 1.6 m/s": "{safety: {separation: predictive, track_human_speed: false}}",
-    # The tracked speed bounded by what a hand can reach (`safety.hand_acceleration`): 30 m/s²
-    # covers the simulated hands' 24-29 m/s² (measured on these runs' samples).
-    "monitoring alone, bounded 30 m/s²": (
-        "{safety: {separation: reactive, hand_acceleration: 30.0}}"
-    ),
-    "predictive, bounded 30 m/s²": "{safety: {separation: predictive, hand_acceleration: 30.0}}",
+    "monitoring alone, constant": "{safety: {separation: reactive, human_speed: constant}}",
+    "predictive, constant": "{safety: {separation: predictive, human_speed: constant}}",
 }
 POPULATION, INTERACTION = "follows", "anticipate"
 REPORT = Path(__file__).parent / "reports" / "safety_check.md"

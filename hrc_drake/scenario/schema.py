@@ -281,7 +281,8 @@ class SafetyFunctionConfig:
             and the arm resumes by itself.
         reduced_band: m beyond S_p within which the safety mode reads `reduced`.
         unlock_delay: s after a protective stop's cause clears until the simulated operator
-            presses unlock (a negative value: never; the `safety.unlock` input alone unlocks).
+            presses unlock (negative: never); with the station's `safety.unlock` input
+            connected (a pendant's button, `--live`), only that input unlocks.
     """
 
     enabled: bool = True

@@ -251,10 +251,12 @@ def step(
     now: float,
     config: SafetyConfig,
     period: float,
+    simulated_unlock: bool = True,
 ) -> SafetyFunctionState:
     """One period of the function (see the module docstring): the next state from the
     separation `verdict`, the `external` protective-stop input, the `unlock` input, and the
-    `brake` the arm would follow if it stopped now."""
+    `brake` the arm would follow if it stopped now; with `simulated_unlock` the simulated
+    operator also unlocks, `safety.function.unlock_delay` after the cause clears."""
     function = config.function
     log = state.log
     if state.mode.stopped:
@@ -269,7 +271,8 @@ def step(
     if verdict.contact and verdict.moving and state.mode != SafetyMode.PROTECTIVE_STOP:
         return _stop(state, StopCause.CONTACT, brake, now)
     if state.mode == SafetyMode.PROTECTIVE_STOP:
-        return _unlocked(state, verdict, unlock, now, function.unlock_delay)
+        delay = function.unlock_delay if simulated_unlock else -1.0
+        return _unlocked(state, verdict, unlock, now, delay)
     if state.mode == SafetyMode.SAFEGUARD_STOP:
         if verdict.moving and not verdict.clear:
             return replace(state, cleared_at=None)
@@ -321,7 +324,8 @@ class SafetyFunction(LeafSystem):
     Input ports: `ur3.position`, `ur3.velocity` (the controller's command, 6 each),
     `ur3.state` (measured, 12), `rg2.state` (measured opening and rate, 2), `configuration`
     (CellConfiguration), `operator.body` (BodySpheres), `external_stop` (1: the robot's
-    protective-stop input), `safety.unlock` (1: unlock a protective stop; unconnected, never).
+    protective-stop input), `safety.unlock` (1: unlock a protective stop; connected, a person
+    unlocks there and only there; unconnected, the simulated operator does).
     Output ports: `desired_state` (12, for the arm's servo), `safety.stop` (1), `safety.mode`
     (1, the `SafetyMode` code). Updated every `period`."""
 
@@ -396,7 +400,10 @@ class SafetyFunction(LeafSystem):
             self._acc,
             self._period,
         )
-        unlock = self._unlock.HasValue(context) and self._unlock.Eval(context)[0] > 0.5
+        # A person at the unlock input (a pendant's button) unlocks; without one, the simulated
+        # operator does, after `unlock_delay`.
+        pendant = self._unlock.HasValue(context)
+        unlock = pendant and self._unlock.Eval(context)[0] > 0.5
         now = context.get_time()
         new = step(
             self.state(context),
@@ -407,6 +414,7 @@ class SafetyFunction(LeafSystem):
             now,
             self._config,
             self._period,
+            simulated_unlock=not pendant,
         )
         if new.blend is not None and new.blend.start == now:
             # The smoothstep's peak rate is 1.5 times its mean.

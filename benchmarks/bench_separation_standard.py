@@ -1,0 +1,212 @@
+"""Separation the standard accepts, and what predictive motion buys -> benchmarks/reports/
+separation_standard.md.
+
+`shared-desk` (the operator points at the seat and fetches bolts and nuts beside the carry path),
+every operator population, both interaction modes, the same operator seeds, in each separation
+configuration below; then monitoring alone and predictive against a person the forecast has not
+seen (`body.behaviour: unseen`). Every run is judged by the run's own check
+(`hrc_drake.cell.run.safety_check`): violations and body contacts. The report gives, per
+configuration, the check's counts and the mean time, then the ratios the issue asks for:
+predictive's mean time over the fastest monitoring-alone configuration with 0 violations, over
+monitoring alone at constant speed, and the price of safety (predictive over monitoring off) per
+population and interaction mode.
+
+Usage: ``python benchmarks/bench_separation_standard.py [--seeds 4] [--workers 2] [--lean]
+[--out PATH]``. The report is written (with ``--lean`` too: the settings are stated in it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import statistics
+import sys
+from pathlib import Path
+
+from cell_pool import pooled_loop, run_pool
+
+from hrc_drake.atomic import atomic_write_text
+
+POPULATIONS = ("follows", "habitual", "mistake-prone", "change-of-mind")
+INTERACTIONS = ("anticipate", "wait")
+OFF = "monitoring off"
+CONFIGURATIONS = {
+    # The baseline: the controller's monitor and the station's safety function both off.
+    OFF: "{safety: {enabled: false, separation: reactive, function: {enabled: false}}}",
+    "monitoring alone, tracked": "{safety: {separation: reactive}}",
+    "monitoring alone, constant": "{safety: {separation: reactive, human_speed: constant}}",
+    "predictive (waits), tracked": "{safety: {separation: predictive}}",
+    "predictive (path-time), tracked": ("{safety: {separation: predictive, timing: path_time}}"),
+    "predictive (waits), constant": ("{safety: {separation: predictive, human_speed: constant}}"),
+    "monitoring alone, tracked, unseen person": (
+        "{safety: {separation: reactive}, body: {behaviour: unseen}}"
+    ),
+    "predictive (waits), tracked, unseen person": (
+        "{safety: {separation: predictive}, body: {behaviour: unseen}}"
+    ),
+}
+MONITORING_ALONE = [
+    c for c in CONFIGURATIONS if c.startswith("monitoring alone") and "unseen" not in c
+]
+PREDICTIVE = [c for c in CONFIGURATIONS if c.startswith("predictive") and "unseen" not in c]
+REPORT = Path(__file__).parent / "reports" / "separation_standard.md"
+
+
+def one_run(job: tuple) -> dict:
+    """One run of (configuration, population, interaction, seed, lean): its figures."""
+    from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+
+    configuration, population, interaction, seed, lean = job
+    operator = (
+        f"{{operator: {{model: {population}, seed: {seed}}}, interaction: {{mode: {interaction}}}}}"
+    )
+    texts = [operator, CONFIGURATIONS[configuration], *([LEAN] if lean else [])]
+    scenario = load_cell_scenario("shared-desk", texts)
+    result = pooled_loop(scenario, scenario.assembly).run()
+    check = result.safety_check
+    function = result.safety_function
+    return {
+        "job": job,
+        "terminal": result.done,
+        "seconds": result.sim_time,
+        "violations": check.violations,
+        "body_contacts": check.body_contacts,
+        "least_margin": check.least_margin,
+        "within_contact_speed": check.contact_speed,
+        "stops": 0 if function is None else function.safeguard_stops + function.protective_stops,
+        "error": result.error,
+    }
+
+
+def _mean(runs: list[dict]) -> float:
+    return statistics.fmean(r["seconds"] for r in runs)
+
+
+def _of(runs: list[dict], configuration: str, population=None, interaction=None) -> list[dict]:
+    return [
+        r
+        for r in runs
+        if r["job"][0] == configuration
+        and population in (None, r["job"][1])
+        and interaction in (None, r["job"][2])
+    ]
+
+
+def configuration_rows(runs: list[dict]) -> list[str]:
+    """Per configuration: the check's counts, the function's stops, the times."""
+    lines = [
+        "| configuration | runs | terminal | violations (runs with any) | body contacts | "
+        "least margin [m] | safety function stops | mean time [s] |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for configuration in CONFIGURATIONS:
+        rows = _of(runs, configuration)
+        violating = sum(1 for r in rows if r["violations"])
+        margin = min(r["least_margin"] for r in rows)
+        lines.append(
+            f"| {configuration} | {len(rows)} | {sum(r['terminal'] for r in rows)} | "
+            f"{sum(r['violations'] for r in rows)} ({violating}) | "
+            f"{sum(r['body_contacts'] for r in rows)} | "
+            f"{'—' if margin == float('inf') else f'{margin:+.3f}'} | "
+            f"{sum(r['stops'] for r in rows)} | {_mean(rows):.2f} |"
+        )
+    return lines
+
+
+def ratio_lines(runs: list[dict]) -> list[str]:
+    """Predictive against the fastest compliant monitoring alone and against constant speed."""
+    compliant = [c for c in MONITORING_ALONE if not any(r["violations"] for r in _of(runs, c))]
+    lines = []
+    if compliant:
+        fastest = min(compliant, key=lambda c: _mean(_of(runs, c)))
+        lines.append(
+            f"The fastest monitoring-alone configuration with 0 violations: **{fastest}**, "
+            f"{_mean(_of(runs, fastest)):.2f} s."
+        )
+        for c in PREDICTIVE:
+            ratio = _mean(_of(runs, c)) / _mean(_of(runs, fastest))
+            lines.append(f"- {c} ÷ {fastest}: **{ratio:.3f}** (goal ≤ 0.80)")
+    else:
+        lines.append("No monitoring-alone configuration had 0 violations.")
+    constant = "monitoring alone, constant"
+    for c in PREDICTIVE:
+        ratio = _mean(_of(runs, c)) / _mean(_of(runs, constant))
+        lines.append(f"- {c} ÷ {constant}: **{ratio:.3f}** (do no harm: ≤ 1.00)")
+    return lines
+
+
+def price_rows(runs: list[dict]) -> list[str]:
+    """The price of safety, per population and interaction mode: each predictive configuration
+    (and monitoring alone) over monitoring off."""
+    shown = ["monitoring alone, tracked", *PREDICTIVE]
+    lines = [
+        "| population | mode | " + " | ".join(shown) + " |",
+        "|---|---|" + "---|" * len(shown),
+    ]
+    for population in POPULATIONS:
+        for interaction in INTERACTIONS:
+            off = _mean(_of(runs, OFF, population, interaction))
+            cells = [f"{_mean(_of(runs, c, population, interaction)) / off:.3f}" for c in shown]
+            lines.append(f"| {population} | {interaction} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def report(runs: list[dict], args, wall: float) -> str:
+    """The markdown report."""
+    failed = [r for r in runs if not r["terminal"]]
+    lines = [
+        "# Separation the standard accepts, and predictive motion",
+        "",
+        f"`shared-desk`, populations {', '.join(POPULATIONS)}, interaction "
+        f"{' and '.join(INTERACTIONS)}, operator seeds 0–{args.seeds - 1}; one run each, "
+        f"{'lean settings (`--lean`: 0.5 s holds)' if args.lean else 'full settings'}. "
+        f"`python benchmarks/bench_separation_standard.py --seeds {args.seeds}"
+        f"{' --lean' if args.lean else ''}` on {platform.machine()}, {len(runs)} runs, "
+        f"{wall:.0f} s wall.",
+        "",
+        "Violations and body contacts are the run's own check's (S_h: the person's actual "
+        "travel; falling short of S_p counts where the robot moves toward the person faster "
+        "than `safety.contact_speed`, or toward the head). Safety function stops: the "
+        "station's safeguard and protective stops.",
+        "",
+        *configuration_rows(runs),
+        "",
+        "## Ratios (mean assembly time)",
+        "",
+        *ratio_lines(runs),
+        "",
+        "## The price of safety (÷ monitoring off), per population and mode",
+        "",
+        *price_rows(runs),
+        "",
+    ]
+    if failed:
+        lines += ["## Runs that did not end terminal", ""]
+        lines += [f"- {r['job'][:4]}: {r['error']}" for r in failed]
+        lines.append("")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    """Run every configuration on every population, mode and seed; write the report."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=4)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--lean", action="store_true")
+    parser.add_argument("--out", type=Path, default=REPORT)
+    args = parser.parse_args(argv)
+    jobs = [
+        (c, p, i, s, args.lean)
+        for c in CONFIGURATIONS
+        for p in POPULATIONS
+        for i in INTERACTIONS
+        for s in range(args.seeds)
+    ]
+    runs, wall = run_pool(one_run, jobs, args.workers)
+    atomic_write_text(args.out, report(runs, args, wall))
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
