@@ -233,8 +233,7 @@ class Supervisor(LeafSystem):
         if stop or self._anticipation.stopping_to_turn(status, now):
             limit = 0.0  # decelerate along the path, as for the separation monitor's stop
         try:
-            if not stop:  # the robot's safety system holds the arm, not its command
-                self._check_tracking(status, cell, now)
+            self._check_tracking(status, cell, now)
             status = self._advance(status, float(np.clip(limit, 0.0, 1.0)), now)
             status = self._step(status, cell, now)
             status = self._keep_clear.update(status, cell.body, now)
