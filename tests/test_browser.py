@@ -457,3 +457,100 @@ def test_a_person_does_a_task_the_robot_hands_over(chromium, tmp_path):
     assert data["names"] == ["1", "2", "7", "10"]
     assert data["handovers"] == 1
     assert [bool(s["handed_over"]) for s in data["steps"]] == [True, False, False]
+
+
+def _arm_in_scene(page: Page) -> list[list[float]]:
+    """Where the page draws the UR3: every mesh's world position under the arm's model."""
+    return page.page.evaluate(
+        """() => {
+            const out = [];
+            viewer.scene_tree.find(["drake", "visualizer", "ur3"]).object.traverse((o) => {
+                if (!o.isMesh) return;
+                const p = new MeshCat.THREE.Vector3();
+                o.getWorldPosition(p);
+                out.push([p.x, p.y, p.z]);
+            });
+            return out;
+        }"""
+    )
+
+
+def _arm_held_in_page(page: Page, timeout: float = STEP_TIMEOUT) -> list[list[float]]:
+    """The arm where the page draws it once two looks 1 s apart find it still (a page on a
+    loaded machine may draw the run seconds late: this waits until it draws the hold)."""
+    deadline = time.monotonic() + timeout
+    before = _arm_in_scene(page)
+    while True:
+        time.sleep(1.0)
+        now = _arm_in_scene(page)
+        if _moved(before, now) < 1e-4:
+            return now
+        assert time.monotonic() < deadline, "the page never shows the arm still"
+        before = now
+
+
+def _moved(before: list[list[float]], after: list[list[float]]) -> float:
+    """The largest change of a coordinate between two looks at the arm [m] (the servo holds a
+    stopped arm to ~1e-13 m; a task moves it by centimetres a second)."""
+    assert len(before) == len(after) > 5, (len(before), len(after))
+    pairs = zip(before, after, strict=True)
+    return max(abs(a - b) for p, q in pairs for a, b in zip(p, q, strict=True))
+
+
+def test_a_person_unlocks_a_protective_stop(chromium, tmp_path):
+    """Row 1 by hand with a protective stop 1 s into task 1 (the input on for 0.5 s): the panel
+    shows "Unlock protective stop" and the run holds, the arm still in the page and no unlock
+    in the terminal, for 3 s after the stop's 5 s unlock wait (the simulated operator would
+    have unlocked 1 s after the cause cleared, long before); the person clicks it, and the run
+    goes on to its terminal state, its JSON counting the stop and the unlock."""
+    from hrc_drake.hri.pendant import UNLOCK_LABEL
+
+    # SLOW_PAGE's indication timeout, with the fault.
+    text = (
+        "{run: {indication_timeout: 60.0}, "
+        "faults: [!ProtectiveStop {task: 1, after: 1.0, duration: 0.5}]}"
+    )
+    port = free_port()
+    args = ["--live", "--lean", "--scenario", "row1-optimal", "--port", str(port)]
+    run = SimulateProcess(*args, "--scenario-text", text, "--json")
+    try:
+        url = run.wait_for_line(r"live: open (http://\S+) in a web browser", STEP_TIMEOUT)[1]
+        page = Page(chromium)
+        page.open_live(url)
+        run.wait_for_line(r"^step 1: the robot proposes F1\b", STEP_TIMEOUT)
+        page.click(page.wait_for_panel(first="F1 - robot proposal" + ON_ITS_WAY)[0])
+        # The stop comes 1 s into task 1, which the robot starts on before the click
+        # (anticipating): the person may click F1 during the stop or before it.
+        run.wait_for_line(r"^protective stop at \d+\.\d+ s: the robot holds", STEP_TIMEOUT)
+        run.wait_for_line(r"^protective stop: 5 s have passed", STEP_TIMEOUT)
+        # Once the page draws what the run did until now (the F1 buttons gone, the unlock up,
+        # the arm still), the run must not go on by itself: 3 s more, the arm stays where it
+        # is, the unlock stays up, and the terminal says nothing.
+        assert page.wait_for_panel(first=UNLOCK_LABEL) == [UNLOCK_LABEL]
+        held, lines = _arm_held_in_page(page), len(run.stderr_lines)
+        time.sleep(3.0)
+        assert _moved(held, _arm_in_scene(page)) < 1e-4
+        assert run.stderr_lines[lines:] == [] and run.proc.poll() is None
+        assert page.panel() == [UNLOCK_LABEL] and page.buttons_out_of_view() == []
+        page.screenshot(tmp_path, "live_unlock.png")
+        page.click(UNLOCK_LABEL)
+        run.wait_for_line(r"^protective stop unlocked at", STEP_TIMEOUT, start=lines)
+        for step, proposal in ((2, "S23"), (3, "F03")):
+            run.wait_for_line(f"^step {step}: the robot proposes {proposal}\\b", STEP_TIMEOUT)
+            page.click(page.wait_for_panel(first=f"{proposal} - robot proposal{ON_ITS_WAY}")[0])
+        code, out, err = run.finish(STEP_TIMEOUT)
+    finally:
+        run.kill()
+    assert code == 0, err[-5:]
+    assert page.errors == [], page.errors
+    assert not any("still in the protective stop" in line for line in err), err
+    data = json.loads(out)
+    assert data["terminal"] and data["error"] is None and not data["interrupted"]
+    assert data["names"] == ["1", "2", "7", "10"]
+    function = data["safety"]["function"]
+    assert (function["protective_stops"], function["unlocks"]) == (1, 1), function
+    assert function["stopped_time"] > 8.0, function  # 5 s wait, 3 s held beyond it, the click
+    (fault,) = data["faults"]
+    assert fault["kind"] == "protective-stop" and fault["task"] == 1, fault
+    assert fault["detected_at"] is not None and fault["recovered"], fault
+    assert fault["recovery"] == "resume" and fault["seconds_lost"] > 8.0, fault

@@ -305,3 +305,149 @@ def test_a_live_run_goes_on_once_the_person_says_they_did_the_task_handed_over(m
     assert "slipped out of the gripper 1 time;" in result.tasks[0].handed_over
     handover = next(p for p in shown if list(p.buttons) == ["I did F1"])
     assert handover.step == 1 and result.to_json()["handovers"] == 1
+
+
+class _Pendant:
+    """The unlock button alone in a diagram, its `safety.mode` input exported (fixed by the
+    test), sampled half a period after each update."""
+
+    PERIOD = 0.02
+    WAIT = 0.1  # s: the stop's unlock wait, said in the terminal
+
+    def __init__(self, mode_connected: bool = True):
+        from pydrake.systems.analysis import Simulator
+        from pydrake.systems.framework import DiagramBuilder
+
+        from hrc_drake.hri.pendant import UnlockButton
+
+        self.meshcat, self.said = Meshcat(), []
+        builder = DiagramBuilder()
+        self.button = builder.AddSystem(
+            UnlockButton(self.meshcat, self.PERIOD, self.WAIT, say=self.said.append)
+        )
+        builder.ExportOutput(self.button.GetOutputPort("safety.unlock"), "safety.unlock")
+        if mode_connected:
+            builder.ExportInput(self.button.GetInputPort("safety.mode"), "safety.mode")
+        self.diagram = builder.Build()
+        self.simulator = Simulator(self.diagram)
+        self.context = self.simulator.get_mutable_context()
+        self.k = 0
+        if mode_connected:
+            self.set_mode(1)
+
+    def set_mode(self, mode: int) -> None:
+        self.diagram.GetInputPort("safety.mode").FixValue(self.context, [float(mode)])
+
+    def run(self, periods: int) -> list[float]:
+        """The pulse output over the next `periods` updates."""
+        out = []
+        for _ in range(periods):
+            self.simulator.AdvanceTo((self.k + 0.5) * self.PERIOD)
+            self.k += 1
+            out.append(self.diagram.GetOutputPort("safety.unlock").Eval(self.context)[0])
+        return out
+
+
+def test_the_unlock_button_is_up_only_in_a_protective_stop_and_pulses_once_per_click():
+    """With the station's `safety.mode` connected: no button (and no pulse for a click on a
+    name left over) outside a protective stop; in one, the button is up, the terminal says what
+    to do, and each click is one pulse of one period, two quick clicks two pulses with a 0
+    between; the end of the stop's unlock wait and a pulse that did not unlock are said; once
+    the stop ends the button goes."""
+    from hrc_drake.hri.pendant import UNLOCK_LABEL
+
+    pendant = _Pendant()
+    meshcat = pendant.meshcat
+    assert is_safe_control_name(UNLOCK_LABEL) and UNLOCK_LABEL == "Unlock protective stop"
+    assert pendant.run(5) == [0.0] * 5 and meshcat.GetButtonNames() == []
+    meshcat.AddButton(UNLOCK_LABEL)  # a click before the stop is no unlock in it
+    _press(meshcat, UNLOCK_LABEL)
+    pendant.set_mode(3)
+    assert pendant.run(3) == [0.0] * 3
+    assert meshcat.GetButtonNames() == [UNLOCK_LABEL]
+    assert pendant.said[-1].startswith("protective stop at 0.1")
+    assert f'click "{UNLOCK_LABEL}" under "Open Controls"' in pendant.said[-1]
+    _press(meshcat, UNLOCK_LABEL)
+    assert pendant.run(6) == [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    assert "still in the protective stop" in pendant.said[-1]  # the stop went on
+    assert 'protective stop: 0.1 s have passed; click "Unlock protective stop"' in pendant.said[-2]
+    _press(meshcat, UNLOCK_LABEL)
+    _press(meshcat, UNLOCK_LABEL)
+    assert pendant.run(6) == [1.0, 0.0, 1.0, 0.0, 0.0, 0.0]
+    assert pendant.button.state(pendant.button.GetMyContextFromRoot(pendant.context)).pulses == 3
+    pendant.set_mode(1)  # unlocked
+    assert pendant.run(2) == [0.0, 0.0]
+    assert pendant.said[-1].startswith("protective stop unlocked at")
+    assert meshcat.GetButtonNames() == []
+
+
+def test_the_unlock_button_without_the_mode_is_always_up_and_goes_when_closed():
+    """Unconnected `safety.mode`: the button is up from the first update and every click is a
+    pulse; `close` (the end of a run) takes it out of the panel."""
+    from hrc_drake.hri.pendant import UNLOCK_LABEL
+
+    pendant = _Pendant(mode_connected=False)
+    assert pendant.run(2) == [0.0, 0.0]
+    assert pendant.meshcat.GetButtonNames() == [UNLOCK_LABEL]
+    _press(pendant.meshcat, UNLOCK_LABEL)
+    assert pendant.run(4) == [1.0, 0.0, 0.0, 0.0]
+    pendant.meshcat.DeleteButton(UNLOCK_LABEL)  # gone by another hand: up again, no pulse
+    assert pendant.run(2) == [0.0, 0.0] and pendant.meshcat.GetButtonNames() == [UNLOCK_LABEL]
+    _press(pendant.meshcat, UNLOCK_LABEL)
+    assert pendant.run(3) == [1.0, 0.0, 0.0]
+    pendant.button.close()
+    assert pendant.meshcat.GetButtonNames() == [] and pendant.said == []
+
+
+@pytest.mark.slow
+def test_a_live_closed_loop_holds_a_protective_stop_until_the_unlock_click():
+    """Row 1 live with a protective stop 1 s into task 1, simulated as fast as it goes (the
+    loop stepped by hand, not paced): the station's `safety.unlock` is the button's, so the
+    simulated operator does not unlock; the stop holds well past its 5 s wait with the button
+    up, one click unlocks it, and the run ends terminal. A run that is not live leaves the
+    input unconnected."""
+    from hrc_drake.cell.run.run import build_closed_loop
+    from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+    from hrc_drake.hri.pendant import UNLOCK_LABEL
+
+    text = "{faults: [!ProtectiveStop {task: 1, after: 1.0, duration: 0.5}]}"
+    row = load_cell_scenario("row1-optimal", [LEAN, text])
+    meshcat = Meshcat()
+
+    def agree(prompt):
+        _press(prompt.meshcat, next(iter(prompt.buttons)))
+
+    loop = build_closed_loop(row, meshcat=meshcat, live=True, on_prompt=agree)
+    station = loop.cell.diagram
+    station_context = station.GetMyContextFromRoot(loop.root_context)
+
+    def mode() -> int:
+        return round(station.GetOutputPort("safety.mode").Eval(station_context)[0])
+
+    loop.start()
+    assert station.GetInputPort("safety.unlock").HasValue(station_context)
+    while mode() != 3:
+        assert loop.root_context.get_time() < 20.0, "no protective stop"
+        loop.advance_to(loop.root_context.get_time() + 0.1)
+    stopped_at = loop.root_context.get_time()
+    loop.advance_to(stopped_at + 8.0)  # past the 5 s wait and the simulated operator's 1 s
+    assert mode() == 3 and meshcat.GetButtonNames() == [UNLOCK_LABEL]
+    _press(meshcat, UNLOCK_LABEL)
+    loop.advance_to(loop.root_context.get_time() + 0.1)
+    assert mode() != 3 and UNLOCK_LABEL not in meshcat.GetButtonNames()
+    loop.advance_to(row.run.max_sim_time)
+    result = loop.result()
+    assert result.done and result.error is None, result.error
+    function = result.safety_function
+    assert (function.protective_stops, function.unlocks) == (1, 1)
+    fault = result.to_json()["faults"][0]
+    assert fault["kind"] == "protective-stop" and fault["recovered"], fault
+    assert fault["seconds_lost"] > 8.0, fault
+
+    quiet = build_closed_loop(row, meshcat=Meshcat())
+    quiet.start()
+    side = quiet.cell.diagram
+    assert quiet.pendant is None
+    assert not side.GetInputPort("safety.unlock").HasValue(
+        side.GetMyContextFromRoot(quiet.root_context)
+    )

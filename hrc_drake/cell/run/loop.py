@@ -50,6 +50,7 @@ from hrc_drake.cell.station.contacts import Owner, geometry_owners, owner_pairs
 from hrc_drake.cell.station.safety_function import SafetyFunctionLog
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.hri.faults import FaultRecord
+from hrc_drake.hri.pendant import UnlockButton
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.service import PlanService
 from hrc_drake.progress import ProgressLine
@@ -299,12 +300,22 @@ class ClosedLoop:
     simulation between them (`root_context`). `hrc_drake.cell.run.run.build_closed_loop` builds one
     from a scenario."""
 
-    def __init__(self, setup: Setup, cell: CellSide, controller: Controller, still=None):
+    def __init__(
+        self,
+        setup: Setup,
+        cell: CellSide,
+        controller: Controller,
+        still=None,
+        pendant: UnlockButton | None = None,
+    ):
         self.setup, self.cell, self.controller = setup, cell, controller
+        self.pendant = pendant
         builder = DiagramBuilder()
         side = builder.AddNamedSystem("station", cell.diagram)
         brain = builder.AddNamedSystem("controller", controller.diagram)
         connect_controller(builder, side, brain)
+        if pendant is not None:  # a person at the pendant: the station's `safety.unlock` is theirs
+            pendant.connect(builder, side)
         for index in range(side.num_input_ports()):
             port = side.get_input_port(index)
             if port.get_name().startswith("sim."):
@@ -376,7 +387,11 @@ class ClosedLoop:
             self.simulator.set_target_realtime_rate(1.0)
             _announce_live(meshcat)
         start = time.perf_counter()
-        finished = self._run_to_end(progress)
+        try:
+            finished = self._run_to_end(progress)
+        finally:
+            if self.pendant is not None:
+                self.pendant.close()
         wall = time.perf_counter() - start
         self.cell.finish(self.simulator.get_context())
         path = None

@@ -19,7 +19,9 @@ from hrc_drake.cell.run.loop import ClosedLoop, LocalCell, RunResult, Setup
 from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
 from hrc_drake.cell.station.build import make_cell_station
 from hrc_drake.cell.station.cell_station import CellStation
+from hrc_drake.cell.station.safety_function import UNLOCK_WAIT
 from hrc_drake.cell_models import CellDesign
+from hrc_drake.hri.pendant import UnlockButton
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.planner import MotionPlanner
 from hrc_drake.motion.reach_check import check_reach
@@ -148,7 +150,11 @@ def build_closed_loop(
     if live:
         operator = _live_operator(meshcat, setup.space, on_prompt, bound)
     station = station_of_run(setup, meshcat, operator, body_script)
-    bound.append(ClosedLoop(setup, LocalCell(station), controller_of(setup, on_task), still))
+    # A person in the browser also unlocks a protective stop there (non-live runs leave the
+    # station's `safety.unlock` unconnected: its simulated operator unlocks).
+    pendant = UnlockButton(meshcat, scenario.run.period, UNLOCK_WAIT) if live else None
+    controller = controller_of(setup, on_task)
+    bound.append(ClosedLoop(setup, LocalCell(station), controller, still, pendant))
     return bound[0]
 
 
@@ -180,7 +186,8 @@ def run_scenario(
     camera image at simulated time t. `operator` (`(step, state, proposal) -> task`) replaces
     the scenario's; `body_script` the operator body's (`hrc_drake.cell.station.operator_body`).
     `live`: a person is the operator, through Meshcat buttons (`hrc_drake.hri.live`), served on
-    `port`; the run paces itself to the wall clock; `on_prompt` is handed to the `LiveOperator`
+    `port`, and unlocks a protective stop there (`hrc_drake.hri.pendant`); the run paces itself
+    to the wall clock; `on_prompt` is handed to the `LiveOperator`
     (tests inject clicks from it). `on_task(record)` hears every task as the cell observed it.
     While the operator bolts, the controller plans the tasks the policy predicts next (its
     `predicted_tasks(state)` if it has one, else its `next_task(state)`). `space`: the state
