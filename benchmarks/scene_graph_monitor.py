@@ -52,7 +52,7 @@ from hrc_drake.cell.person import CHAIN_GAP
 from hrc_drake.cell.ports import NOBODY, BodySpheres
 from hrc_drake.cell.ssm import allowed_scale, person_travel
 from hrc_drake.motion.plan import Stage
-from hrc_drake.scenario.schema import SafetyConfig
+from hrc_drake.scenario.safety import SafetyConfig
 
 REACH = 0.8  # m; farther than S_p can be here (v_h ≤ 2 m/s, T_s ≤ 0.2 s at 0.25 m/s TCP)
 EXACT = 0.25  # m; the least separation is exact below this, a lower bound above

@@ -24,7 +24,8 @@ from hrc_drake.cell.station.operator_body import ReachInto
 from hrc_drake.motion.plan import Stage
 from hrc_drake.motion.poses import part_pose
 from hrc_drake.robot_models import RG2_FINGER_JOINTS
-from hrc_drake.scenario.schema import BodyConfig, SafetyConfig, Scenario, ScenarioError
+from hrc_drake.scenario.safety import SafetyConfig
+from hrc_drake.scenario.schema import BodyConfig, Scenario, ScenarioError
 
 
 def test_allowed_scale_is_the_largest_speed_that_keeps_the_separation():

@@ -19,7 +19,8 @@ from hrc_drake.cell.run.safety_check import (
 )
 from hrc_drake.cell.ssm import bounded_travel
 from hrc_drake.cell_models import CellDesign
-from hrc_drake.scenario.schema import SafetyConfig, Scenario
+from hrc_drake.scenario.safety import SafetyConfig
+from hrc_drake.scenario.schema import Scenario
 from hrc_drake.tasks.spec import load_spec
 
 PERIOD = 0.02  # s between samples (the monitor's)

@@ -28,7 +28,8 @@ from hrc_drake.hri.activity import min_jerk
 from hrc_drake.hri.messages import Prompt, PromptKind
 from hrc_drake.motion.scene import TCP
 from hrc_drake.robot_names import GRIPPER, UR3
-from hrc_drake.scenario.schema import SafetyConfig, SafetyFunctionConfig, ScenarioError
+from hrc_drake.scenario.safety import SafetyConfig, SafetyFunctionConfig
+from hrc_drake.scenario.schema import ScenarioError
 
 PERIOD = 0.02
 CONFIG = SafetyConfig()

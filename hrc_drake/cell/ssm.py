@@ -26,7 +26,7 @@ import numpy as np
 from hrc_drake.cell.person import CHAIN_GAP, touchable
 from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.robot_envelope import RobotEnvelope, nearest_points
-from hrc_drake.scenario.schema import HumanSpeed, SafetyConfig
+from hrc_drake.scenario.safety import HumanSpeed, SafetyConfig
 
 # A joint this much faster than commanded is moved from outside [rad/s] (our choice: the
 # servo tracks its command to a few hundredths of a rad/s; an 80 N·m push on the shoulder

@@ -7,19 +7,21 @@ import math
 
 from hrc_drake.hri.faults import FaultError, check_faults
 from hrc_drake.robot_names import UR3_JOINTS
+from hrc_drake.scenario.safety import (
+    HumanSpeed,
+    SafetyConfig,
+    SafetyFunctionConfig,
+    Separation,
+    Timing,
+)
 from hrc_drake.scenario.schema import (
     TEXT_SOURCE,
     Activity,
     Behaviour,
     DeciderConfig,
-    HumanSpeed,
     InteractionConfig,
-    SafetyConfig,
-    SafetyFunctionConfig,
     Scenario,
     ScenarioError,
-    Separation,
-    Timing,
 )
 from hrc_drake.tasks.interaction import (
     INTERFACES,

@@ -32,6 +32,9 @@ from hrc_drake.hri.operator import ScriptedOperator, StochasticOperator
 from hrc_drake.layout import CellLayout
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.resources import models_dir
+from hrc_drake.scenario.safety import (
+    SafetyConfig,
+)
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.interaction import (
     DEFAULT_DELAYS,
@@ -234,27 +237,6 @@ class RunConfig:
     path_timeout: float = 10.0
 
 
-class Separation(StrEnum):
-    """`safety.separation`: how the robot keeps clear of the operator."""
-
-    PREDICTIVE = "predictive"  # times its moves around the forecast body; monitoring underneath
-    REACTIVE = "reactive"  # the separation monitor alone
-
-
-class HumanSpeed(StrEnum):
-    """`safety.human_speed`: how far the person can come while the robot reacts and stops."""
-
-    TRACKED = "tracked"  # the tracked speed, bounded by what a hand can reach (an acceleration)
-    CONSTANT = "constant"  # ISO 13855's 1.6 m/s (2.0 m/s within 0.5 m) throughout
-
-
-class Timing(StrEnum):
-    """`safety.timing`: how predictive separation times the plan around the forecast."""
-
-    WAIT = "wait"  # a wait at each motion's start, then the plan at full speed
-    PATH_TIME = "path_time"  # each motion's speed along its path (`motion.path_time`)
-
-
 class Activity(StrEnum):
     """`body.activity`: what the operator's body does."""
 
@@ -267,87 +249,6 @@ class Behaviour(StrEnum):
 
     MODELLED = "modelled"  # as the activity model says: the forecast's own family
     UNSEEN = "unseen"  # outside it (`hrc_drake.hri.unseen`); the forecast does not know
-
-
-@dataclass
-class SafetyFunctionConfig:
-    """The station's separation safety function (`hrc_drake.cell.station.safety_function`): what a
-    safety-rated scanner and the robot's safety controller would run, apart from the controller.
-
-    Attributes:
-        enabled: the station stops the arm itself when the separation falls short (off: the
-            command reaches the arm as the controller gives it; the run's check still counts).
-        resume_clearance: m beyond the S_p of a robot at rest at which a safeguard stop clears
-            and the arm resumes by itself.
-        reduced_band: m beyond S_p within which the safety mode reads `reduced`.
-        unlock_delay: s after a protective stop's cause clears until the simulated operator
-            presses unlock (negative: never); with the station's `safety.unlock` input
-            connected (a pendant's button, `--live`), only that input unlocks.
-    """
-
-    enabled: bool = True
-    resume_clearance: float = 0.05
-    reduced_band: float = 0.15
-    unlock_delay: float = 1.0
-
-
-@dataclass
-class SafetyConfig:
-    """Speed and separation monitoring (ISO/TS 15066 5.5.4): S_p = v_h (T_r + T_s) + v_r T_r +
-    S_s + C + Z_d + Z_r, at every Supervisor update.
-
-    Attributes:
-        enabled: monitor the separation and scale the robot's speed (off: the robot ignores the
-            operator's body, which is still drawn and measured).
-        human_speed: how far the person can come while the robot reacts and stops (S_h), for
-            the planning monitor and the station's safety function alike: `tracked` (from the
-            body's tracked speed toward the robot, speeding up at most at `hand_acceleration`
-            up to ISO 13855's 1.6 m/s, 2.0 m/s within 0.5 m; ISO/TS 15066 5.5.4.2.3 allows a
-            monitored speed) or `constant` (those speeds throughout, as for a person whose
-            speed is not monitored).
-        hand_acceleration: m/s², the bound of `tracked` (the simulated hands reach 24-29 m/s²,
-            `benchmarks/reports/safety_check.md`).
-        contact_speed: m/s; closer than S_p the robot may still move toward the person this
-            fast, as power and force limiting permits a contact (ISO/TS 15066 §5.5.5, Annex A);
-            0.25 m/s is ISO 10218-1's reduced speed; 0: separation alone.
-        reaction_time: T_r [s], the robot's reaction time (0.1 s is a common assumption).
-        intrusion: C [m]; 0 when the distance is taken to the body itself.
-        human_uncertainty: Z_d [m], the body's position uncertainty (a tracked hand).
-        robot_uncertainty: Z_r [m]; 0 for the simulated robot.
-        slow_band: m above S_p within which the robot already slows down.
-        moving_speed: rad/s; a robot joint faster than this counts as moving (violations).
-        separation: `predictive` (the robot times its moves around where it forecasts the
-            operator's body, monitoring underneath) or `reactive` (monitoring alone).
-        departure: m; the observed hand this far from the forecast makes the robot forecast
-            again and re-time its moves.
-        max_wait: the longest a move is held back for the operator [s].
-        timing: with `predictive` separation, `wait` (a wait at each motion's start) or
-            `path_time` (each motion timed along its path: slowed, stopped and going on;
-            `hrc_drake.motion.path_time`).
-        forecast_spread: how much of its timing spread the forecast keeps (1: all of it; 0: it
-            takes the person's modelled timing as exact, the bound that a perfect forecast of a
-            person who behaves as modelled would reach;
-            `hrc_drake.cell.controller.forecast.OperatorForecast`).
-        function: the station's safety function (`SafetyFunctionConfig`); the settings above
-            but T_r, C, Z_d and Z_r, which it shares, are the controller's.
-    """
-
-    enabled: bool = True
-    human_speed: str = HumanSpeed.TRACKED.value
-    hand_acceleration: float = 30.0
-    contact_speed: float = 0.25
-    reaction_time: float = 0.1
-    intrusion: float = 0.0
-    human_uncertainty: float = 0.05
-    robot_uncertainty: float = 0.0
-    slow_band: float = 0.05
-    moving_speed: float = 0.01
-    separation: str = Separation.PREDICTIVE.value
-    departure: float = 0.15
-    max_wait: float = 6.0
-    timing: str = Timing.WAIT.value
-    forecast_spread: float = 1.0
-    function: SafetyFunctionConfig = field(default_factory=SafetyFunctionConfig)
 
 
 _PERSON = Person()  # the defaults live there (Drake-free module)

@@ -39,7 +39,8 @@ from hrc_drake.cell_models import CellDesign
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.scene import load_cell_frames
 from hrc_drake.motion.service import PlanService
-from hrc_drake.scenario.schema import Activity, Scenario, Separation
+from hrc_drake.scenario.safety import Separation
+from hrc_drake.scenario.schema import Activity, Scenario
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.policy import Policy
 

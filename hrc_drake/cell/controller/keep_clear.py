@@ -48,7 +48,7 @@ from hrc_drake.cell.person import ARM_SPHERES
 from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.motion.clearance import Occupancy, ScaleFn, time_around
 from hrc_drake.motion.path_time import path_time_around, slip
-from hrc_drake.scenario.schema import Timing
+from hrc_drake.scenario.safety import Timing
 from hrc_drake.tasks.tokens import UNDO
 
 CHECK_PERIOD = 0.1  # s between comparisons of the tracked body with the forecast

@@ -60,7 +60,7 @@ from hrc_drake.cell.ssm import (
 )
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.robot_names import UR3_JOINTS
-from hrc_drake.scenario.schema import SafetyConfig
+from hrc_drake.scenario.safety import SafetyConfig
 
 # The plan moves toward a person closer than S_p at this share of `safety.contact_speed` at
 # most: the servo lags its command and a point's speed is not linear in the joints' (our

@@ -27,7 +27,8 @@ from hrc_drake.cell.link.lockstep import (
 )
 from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
 from hrc_drake.cell.link.station_server import serve_cell_station
-from hrc_drake.cell.run.loop import ClosedLoop, RunResult
+from hrc_drake.cell.run.loop import ClosedLoop
+from hrc_drake.cell.run.result import RunResult
 from hrc_drake.cell.run.run import controller_of, prepare_run, station_of_run
 from hrc_drake.cell.scenario import (
     LEAN,

@@ -15,7 +15,8 @@ import numpy as np
 from pydrake.geometry import Meshcat, MeshcatParams
 
 from hrc_drake.cell.controller.build import make_controller
-from hrc_drake.cell.run.loop import ClosedLoop, LocalCell, RunResult, Setup
+from hrc_drake.cell.run.loop import ClosedLoop, LocalCell, Setup
+from hrc_drake.cell.run.result import RunResult
 from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
 from hrc_drake.cell.station.build import make_cell_station
 from hrc_drake.cell.station.cell_station import CellStation

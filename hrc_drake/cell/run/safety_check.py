@@ -40,7 +40,7 @@ from hrc_drake.cell.ssm import (
     protective_distance,
     stopping_time,
 )
-from hrc_drake.scenario.schema import SafetyConfig
+from hrc_drake.scenario.safety import SafetyConfig
 
 
 @dataclass(frozen=True)

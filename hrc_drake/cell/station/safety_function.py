@@ -50,7 +50,7 @@ from hrc_drake.cell.ssm import (
     stopping_time,
 )
 from hrc_drake.robot_names import UR3_JOINTS
-from hrc_drake.scenario.schema import SafetyConfig
+from hrc_drake.scenario.safety import SafetyConfig
 
 # A UR does not unlock a protective stop within 5 s of it (its dashboard server answers "Cannot
 # unlock protective stop until 5s after occurrence").
