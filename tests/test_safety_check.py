@@ -86,15 +86,16 @@ def test_a_hand_that_sets_off_toward_the_moving_arm_is_a_violation(envelope):
     assert result.body_contacts == 0
 
 
-def test_a_slow_robot_may_come_closer_than_s_p_but_not_to_the_head(envelope):
-    """Power and force limiting: the gripper passing the hand slower than `contact_speed`
-    toward it is no violation (counted apart); the same pass by the head is one."""
+def test_a_shortfall_beyond_the_contact_speed_or_at_the_head_is_counted_apart(envelope):
+    """The gripper passes the hand slower than 0.25 m/s toward it: a violation of S_p, which
+    power and force limiting would permit (not beyond the contact speed); the same pass by the
+    head is beyond it: Annex A permits no contact there."""
     q, probe, direction, distance = _start(envelope)
     centres = _approach(probe, direction, distance - 0.07)
     trace = _trace(q, MOVING, MOVING, centres)
     slow = check_separation(trace, envelope, SafetyConfig(), ACCELERATION)
-    assert slow.violations == 0 and slow.contact_speed >= 1
-    assert slow.to_json()["within_contact_speed"] == slow.contact_speed
+    assert slow.violations >= 1 and slow.beyond_contact_speed == 0
+    assert slow.to_json()["violations_beyond_contact_speed"] == 0
     # The probe as the head of a body (the last of its five parts).
     head = [
         dataclasses.replace(
@@ -108,7 +109,8 @@ def test_a_slow_robot_may_come_closer_than_s_p_but_not_to_the_head(envelope):
         )
         for sample in trace
     ]
-    assert check_separation(head, envelope, SafetyConfig(), ACCELERATION).violations >= 1
+    at_head = check_separation(head, envelope, SafetyConfig(), ACCELERATION)
+    assert at_head.beyond_contact_speed == at_head.violations >= 1
 
 
 def test_a_hand_that_stays_or_moves_away_is_no_violation(envelope):
@@ -131,6 +133,7 @@ def test_the_check_is_the_same_whatever_the_monitor_is_set_to(envelope):
         {"enabled": False},
         {"human_speed": "constant"},
         {"hand_acceleration": 5.0},
+        {"contact_speed": 2.0},
         {"slow_band": 0.5},
         {"separation": "reactive"},
     ):

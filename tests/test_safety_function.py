@@ -235,8 +235,9 @@ def test_a_hand_that_accelerates_toward_the_moving_arm_stops_it_before_s_p(enabl
     """The arm reaches toward the operator at 1.5 rad/s; the hand sets off toward it from rest
     (minimum jerk, 0.4 s: up to 15 m/s² and 1.9 m/s), stays 1.5 s and goes back. The station's
     function stops the arm: by the run's own check it never moves inside S_p faster than the
-    contact speed, and it resumes by itself and reaches the commanded end. Without the function
-    the same commands break S_p."""
+    contact speed (it comes inside S_p, by under 2 cm, only at that speed, resuming), and it
+    resumes by itself and reaches the commanded end. Without the function the same commands
+    break S_p faster."""
     offset = np.array([0, 0.5, -0.8, 0, 0, 0])
     scenario = load_cell_scenario("row1-optimal", [LEAN])
     q0 = np.array(scenario.station.ur3.ready, float)
@@ -255,9 +256,10 @@ def test_a_hand_that_accelerates_toward_the_moving_arm_stops_it_before_s_p(enabl
     check = cell.check()
     assert check.body_contacts == 0
     if not enabled:
-        assert check.violations > 0 and cell.log().safeguard_stops == 0
+        assert check.beyond_contact_speed > 0 and cell.log().safeguard_stops == 0
         return
-    assert check.violations == 0
+    # Inside S_p only ever at the contact speed, which power and force limiting permits.
+    assert check.beyond_contact_speed == 0 and check.least_margin > -0.02
     assert cell.log().safeguard_stops >= 1 and SafetyMode.SAFEGUARD_STOP in cell.modes
     assert cell.modes[-1] != SafetyMode.SAFEGUARD_STOP
     assert cell.samples[-1].q == pytest.approx(q0 + offset, abs=0.005)

@@ -37,6 +37,9 @@ _TINY = 1e-12  # keeps `allowed_scale`'s division finite where its root vanishes
 # not monitored (shared/reference/collaboration.md): 1.6 m/s, 2.0 m/s closer than 0.5 m. A
 # tracked hand bounded by `SafetyConfig.hand_acceleration` speeds up to them, no further.
 FAR_SPEED, NEAR_SPEED, NEAR_DISTANCE = 1.6, 2.0, 0.5  # m/s, m/s, m
+# ISO 10218-1's reduced speed: the run's check counts apart the shortfalls where the robot
+# moved toward the person faster than this (shared/reference/collaboration.md).
+REDUCED_SPEED = 0.25  # m/s
 
 
 def entry_scales(gap, a0, a1, a2) -> np.ndarray:
@@ -100,15 +103,14 @@ def person_travel(
     return np.maximum(travel, 0.0)
 
 
-def beyond_contact_speed(v_r, config: SafetyConfig, body: BodySpheres):
-    """Per (shape, sphere) pair, where the robot moves toward the person faster than
-    `safety.contact_speed` [m/s], or toward the head at all: only there does falling short of
-    S_p count. Slower, a contact is one that power and force limiting permits (ISO/TS 15066
-    §5.5.5 with Annex A, which permits none with the face or skull, `touchable`). A contact
-    speed of 0 is separation alone: every pair counts."""
-    if config.contact_speed <= 0.0:
+def beyond_contact_speed(v_r, speed: float, body: BodySpheres):
+    """Per (shape, sphere) pair, where the robot moves toward the person faster than `speed`
+    [m/s], or toward the head at all: where falling short of S_p is not a contact that power
+    and force limiting permits (ISO/TS 15066 §5.5.5 with Annex A, which permits none with the
+    face or skull, `touchable`). A speed of 0 is separation alone: every pair."""
+    if speed <= 0.0:
         return np.ones(np.shape(v_r), dtype=bool)
-    return (np.asarray(v_r) > config.contact_speed) | ~touchable(body)[None, :]
+    return (np.asarray(v_r) > speed) | ~touchable(body)[None, :]
 
 
 def stopping_time(v: np.ndarray, joint_acceleration: float) -> float:
@@ -133,6 +135,7 @@ __all__ = [
     "IMPOSED_SPEED",
     "NEAR_DISTANCE",
     "NEAR_SPEED",
+    "REDUCED_SPEED",
     "allowed_scale",
     "beyond_contact_speed",
     "body_gaps",

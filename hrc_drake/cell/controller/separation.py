@@ -200,7 +200,7 @@ def assess(
     return SeparationReading(
         separation=float(gap.min()),
         margin=float((gap - s_p).min()),
-        short=bool(((gap < s_p) & beyond_contact_speed(v_r, config, body)).any()),
+        short=bool(((gap < s_p) & beyond_contact_speed(v_r, config.contact_speed, body)).any()),
         limit=limit,
         moving=moving,
         imposed=imposed,

@@ -17,12 +17,12 @@ commanded by more than `IMPOSED_SPEED`: a push is the person's doing and is coun
 some robot shape was closer to some body sphere than S_p. The robot's shapes are the
 controller's conservative envelope (`RobotEnvelope`: never farther from a point than the true
 geometry) posed from the measured joints and gripper opening, with the part the configuration
-sensor reads as held. Falling short of S_p counts only where the robot moves toward the person
-faster than `safety.contact_speed` (separation and power and force limiting combined, as
-`hrc_drake.cell.ssm` says); samples inside S_p no faster are counted apart
-(`within_contact_speed`). A mode can change what the robot does, never this arithmetic: the
-check reads `safety`'s constants (T_r, C, Z_d, Z_r, the contact speed) and no setting of the
-monitor's.
+sensor reads as held. Of the violations, those where the robot also moved toward the person
+faster than ISO 10218-1's reduced speed (0.25 m/s, `REDUCED_SPEED`), or toward the head at all,
+are counted apart (`beyond_contact_speed`): the ones power and force limiting would not permit
+either (`hrc_drake.cell.ssm`). A mode can change what the robot does, never this arithmetic: the
+check reads `safety`'s constants (T_r, C, Z_d, Z_r) and no setting of the monitor's or the
+safety function's (not `safety.contact_speed`).
 """
 
 from __future__ import annotations
@@ -35,6 +35,7 @@ from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.robot_envelope import RobotEnvelope, speeds_toward
 from hrc_drake.cell.ssm import (
     IMPOSED_SPEED,
+    REDUCED_SPEED,
     beyond_contact_speed,
     body_gaps,
     protective_distance,
@@ -69,7 +70,9 @@ class SafetyCheck:
     body_contacts: int = 0  # samples where a robot shape touched a body sphere
     imposed: int = 0  # samples inside S_p while the arm was moved from outside (a push)
     worst_time: float | None = None  # when the least margin was reached [s]
-    contact_speed: int = 0  # samples inside S_p no faster toward the person than contact_speed
+    # violations where the robot also moved toward the person faster than REDUCED_SPEED (or
+    # toward the head): what power and force limiting would not permit either
+    beyond_contact_speed: int = 0
 
     def to_json(self) -> dict:
         """The JSON-able figures (distances in m, rounded to 0.1 mm; None: the robot never
@@ -80,7 +83,7 @@ class SafetyCheck:
             "least_margin": round(float(self.least_margin), 4) if finite else None,
             "body_contacts": self.body_contacts,
             "imposed_violations": self.imposed,
-            "within_contact_speed": self.contact_speed,
+            "violations_beyond_contact_speed": self.beyond_contact_speed,
             "checked_steps": self.steps,
         }
 
@@ -128,7 +131,7 @@ def check_separation(
     joint_acceleration: float,
 ) -> SafetyCheck:
     """The check of the module docstring over a run's `samples`."""
-    violations = imposed = contacts = slow = 0
+    violations = imposed = contacts = beyond = 0
     least, worst = float("inf"), None
     for k, sample in enumerate(samples):
         body = sample.body
@@ -146,14 +149,13 @@ def check_separation(
         v_r = np.maximum(0.0, speeds_toward(velocities, pairs)[0])
         s_h = _travel_toward(samples, k, config.reaction_time + t_s, pairs.direction)
         s_p = protective_distance(s_h, v_r, t_s, config)
-        fast = beyond_contact_speed(v_r, config, body)
-        margin = float(np.where(fast, gap - s_p, np.inf).min())
-        within = bool((gap < s_p).any()) and margin >= 0.0
+        margin = float((gap - s_p).min())
+        fast = bool(((gap < s_p) & beyond_contact_speed(v_r, REDUCED_SPEED, body)).any())
         if np.abs(sample.v - sample.commanded).max(initial=0.0) > IMPOSED_SPEED:
             imposed += int(margin < 0.0)
             continue
         violations += int(margin < 0.0)
-        slow += int(within)
+        beyond += int(fast)
         if margin < least:
             least, worst = margin, sample.time
     return SafetyCheck(
@@ -163,7 +165,7 @@ def check_separation(
         body_contacts=contacts,
         imposed=imposed,
         worst_time=worst,
-        contact_speed=slow,
+        beyond_contact_speed=beyond,
     )
 
 

@@ -123,7 +123,7 @@ def judge_separation(
         + constant
     )
     at_rest = person_travel(v_h, gap, t_r + period, config) + constant
-    short, beyond = gap - s_p, beyond_contact_speed(v_r, config, body)
+    short, beyond = gap - s_p, beyond_contact_speed(v_r, config.contact_speed, body)
     return SeparationVerdict(
         margin=float(np.where(beyond, short, np.inf).min()),
         clear=bool((gap - at_rest).min() >= function.resume_clearance),
