@@ -53,6 +53,7 @@ from hrc_drake.cell.ssm import (
     NEAR_DISTANCE,
     beyond_contact_speed,
     body_gaps,
+    entry_scales,
     person_travel,
     protective_distance,
     separation_constant,
@@ -195,7 +196,11 @@ def assess(
     room = gap - config.slow_band
     separated = planned_scales(v_h, gap, v_r1, t_r + sampling, t_s1, config, room)
     slow = CONTACT_SHARE * config.contact_speed / np.maximum(v_r1, _SLOWEST)
-    slow = np.where(touchable(body)[None, :], slow, 0.0)  # the head: separation alone
+    # ... and only as fast as lets it stop short of the person where they are now: power and
+    # force limiting permits a person coming into the robot, not the robot driving into them.
+    t_rp = t_r + sampling
+    short_of = entry_scales(gap, separation_constant(config), v_r1 * t_rp, v_r1 * t_s1 / 2)
+    slow = np.where(touchable(body)[None, :], np.minimum(slow, short_of), 0.0)  # head: none
     limit = float(np.maximum(separated, np.minimum(slow, 1.0)).min()) if config.enabled else 1.0
     return SeparationReading(
         separation=float(gap.min()),

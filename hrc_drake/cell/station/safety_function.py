@@ -14,7 +14,8 @@ It acts through the robot's stop, by gating the arm's command between the contro
 (`SafetyMode`, `safety.mode`; `safety.stop` is 1 in either stop):
 
 - **Safeguard stop** (the separation fell short while the arm moved toward the person faster
-  than `safety.contact_speed`, `hrc_drake.cell.ssm.beyond_contact_speed`): the arm brakes along
+  than `safety.contact_speed`, `hrc_drake.cell.ssm.beyond_contact_speed`, or too fast to stop
+  short of where the person is): the arm brakes along
   its current direction of motion at the joint acceleration limit, every joint together, and
   holds there; once it has stood still, or every body sphere has been `resume_clearance` beyond
   the S_p of an arm at rest, for `RESTART_DELAY`, it resumes by itself (an arm at rest is
@@ -124,6 +125,10 @@ def judge_separation(
     )
     at_rest = person_travel(v_h, gap, t_r + period, config) + constant
     short, beyond = gap - s_p, beyond_contact_speed(v_r, config.contact_speed, body)
+    # Slow enough is not enough: the arm must also be able to stop short of the person where
+    # they are now (power and force limiting permits them coming into it, not it into them).
+    unstoppable = gap - constant < v_r * (t_r + period) + v_r * t_s / 2
+    beyond = beyond | unstoppable
     return SeparationVerdict(
         margin=float(np.where(beyond, short, np.inf).min()),
         clear=bool((gap - at_rest).min() >= function.resume_clearance),
