@@ -124,10 +124,12 @@ def separation_constant(config: SafetyConfig) -> float:
     return config.intrusion + config.human_uncertainty + config.robot_uncertainty
 
 
-def protective_distance(s_h, v_r, t_s: float, config: SafetyConfig):
+def protective_distance(s_h, v_r, t_s: float, config: SafetyConfig, sampling: float = 0.0):
     """S_p [m] from the person's travel `s_h` [m] and the robot's speed toward them `v_r`
-    [m/s] with stopping time `t_s` [s]: S_h + v_r T_r + v_r T_s / 2 + C + Z_d + Z_r."""
-    return s_h + v_r * config.reaction_time + v_r * t_s / 2 + separation_constant(config)
+    [m/s] with stopping time `t_s` [s]: S_h + v_r (T_r + `sampling`) + v_r T_s / 2 + C + Z_d +
+    Z_r, the reaction lengthened by a sampling monitor's period."""
+    reaction = config.reaction_time + sampling
+    return s_h + v_r * reaction + v_r * t_s / 2 + separation_constant(config)
 
 
 __all__ = [

@@ -47,6 +47,7 @@ from hrc_drake.cell.ssm import (
     beyond_contact_speed,
     body_gaps,
     person_travel,
+    protective_distance,
     separation_constant,
     stopping_time,
 )
@@ -116,18 +117,13 @@ def judge_separation(
     velocities = envelope.link_velocities(R_WB, p_WB, np.asarray(v, dtype=float)[None, :])
     v_r = np.maximum(0.0, speeds_toward(velocities, pairs)[0])
     t_r, t_s = config.reaction_time, stopping_time(v, joint_acceleration)
-    constant = separation_constant(config)
-    s_p = (
-        person_travel(v_h, gap, t_r + t_s + period, config)
-        + v_r * (t_r + period)
-        + v_r * t_s / 2
-        + constant
-    )
-    at_rest = person_travel(v_h, gap, t_r + period, config) + constant
+    travel = person_travel(v_h, gap, t_r + t_s + period, config)
+    s_p = protective_distance(travel, v_r, t_s, config, period)
+    at_rest = person_travel(v_h, gap, t_r + period, config) + separation_constant(config)
     short, beyond = gap - s_p, beyond_contact_speed(v_r, config.contact_speed, body)
     # Slow enough is not enough: the arm must also be able to stop short of the person where
     # they are now (power and force limiting permits them coming into it, not it into them).
-    unstoppable = gap - constant < v_r * (t_r + period) + v_r * t_s / 2
+    unstoppable = gap < protective_distance(0.0, v_r, t_s, config, period)
     beyond = beyond | unstoppable
     return SeparationVerdict(
         margin=float(np.where(beyond, short, np.inf).min()),
