@@ -132,9 +132,18 @@ class Page:
 
     def open_live(self, url: str) -> None:
         """Open a live run's page and its controls ("Open Controls"), as a person does."""
+        from playwright.sync_api import Error as PlaywrightError
+
         self.url = url
-        self.page.goto(url)
-        self.page.get_by_text("Open Controls", exact=True).click()
+        # The long timeouts: a page drawing the cell on a loaded machine may not take the click
+        # within Playwright's 30 s (seen once in CI, the click "performing" for 30 s).
+        self.page.goto(url, timeout=STEP_TIMEOUT * 1000)
+        try:
+            self.page.get_by_text("Open Controls", exact=True).click(timeout=STEP_TIMEOUT * 1000)
+        except PlaywrightError as error:
+            if not self.crashed:
+                raise AssertionError(f"{error}; page events: {self.events}") from error
+            self._reopen_after_crash()
 
     def _reopen_after_crash(self) -> None:
         """A renderer that crashed (seen once on a loaded CI machine: the page went blank) is
