@@ -20,6 +20,11 @@ from hrc_drake.robot_names import GRIPPER, UR3
 UR3_VELOCITY_LIMITS: tuple[float, ...] = (math.pi,) * 3 + (2 * math.pi,) * 3
 UR3_EFFORT_LIMITS: tuple[float, ...] = (56.0, 56.0, 28.0, 12.0, 12.0, 12.0)
 RG2_MAX_OPENING = 0.110
+# The RG2's gripping force range (OnRobot RG driver message definitions and product quick
+# reference; shared/reference/ur3-rg2.md): the simulated gripper clips its command to it, the
+# Modbus driver refuses a command outside it.
+RG2_MIN_FORCE = 3.0  # N
+RG2_MAX_FORCE = 40.0  # N
 # Pad centre from the RG2's mounting face at a 45 mm opening (the oval flanges' width), by
 # forward kinematics of OnRobot/onrobot-ros2 onrobot_rg2.urdf; our fixed tcp stands there.
 RG2_PAD_CENTRE_AT_45_MM = 0.2105

@@ -15,13 +15,9 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import MatrixGain, Saturation
 
-from hrc_drake.robot_models import RG2_MAX_OPENING
-
-# The RG2's gripping force range (OnRobot RG driver message definitions and product quick
-# reference; shared/reference/ur3-rg2.md). A command outside it is clipped to it, as the
-# opening is clipped to the stroke.
-RG2_MIN_FORCE = 3.0  # N
-RG2_MAX_FORCE = 40.0  # N
+# The RG2's gripping force range (hrc_drake.robot_models): a command outside it is clipped to
+# it, as the opening is clipped to the stroke.
+from hrc_drake.robot_models import RG2_MAX_FORCE, RG2_MAX_OPENING, RG2_MIN_FORCE
 
 # Fingers held this far outside the commanded opening have stopped on something before their
 # target (the RG2 reports its width to 0.1 mm; while the fingers close freely they follow the

@@ -1,0 +1,1 @@
+"""Drivers for the real devices behind the station's ports (docs/hardware.md)."""
