@@ -1,1 +1,1 @@
-"""Drivers for the real devices behind the station's ports (docs/hardware.md)."""
+"""Drivers for the real devices behind the station's LCM channels (docs/hardware.md)."""
