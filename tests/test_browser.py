@@ -15,11 +15,13 @@ screenshots the README shows (`live_panel.png`, `recording.png`) in DIR.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
 import time
 from pathlib import Path
+from typing import ClassVar
 
 import pytest
 from simulate_process import SimulateProcess, free_port
@@ -82,6 +84,21 @@ def chromium():
         browser.close()
 
 
+@pytest.fixture(autouse=True)
+def _close_pages():
+    """Close the pages a test opened. A Meshcat page left open goes on drawing its scene:
+    Chromium renders WebGL in software here, and a handful of pages kept its GPU process at a
+    whole core through the rest of the suite (seen in `ps`), slowing every later test."""
+    yield
+    from playwright.sync_api import Error as PlaywrightError
+
+    while Page.opened:
+        page = Page.opened.pop()
+        # a crashed page, or its browser gone with the module, closes with an error
+        with contextlib.suppress(PlaywrightError):
+            page.close()
+
+
 @pytest.fixture(scope="module")
 def flange_frames():
     """The flange cell's frames (plate seats, tray homes), from the models without the robot."""
@@ -106,8 +123,12 @@ class Page:
         self.url = ""
         self.page = self._new_page()
 
+    # Every Playwright page opened, closed after each test (`_close_pages`).
+    opened: ClassVar[list] = []
+
     def _new_page(self):
         page = self.browser.new_page(viewport=VIEW)
+        Page.opened.append(page)
         page.on("console", lambda m: self.errors.append(m.text) if m.type == "error" else None)
         page.on("pageerror", lambda e: self.errors.append(f"page error: {e}"))
         page.on("request", lambda r: self.requests.append(r.url))
