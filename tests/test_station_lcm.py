@@ -36,6 +36,8 @@ from hrc_drake.cell.link.interface import end_station_session, make_cell_station
 from hrc_drake.cell.link.lcm_struct import Field, LcmDecodeError, struct_hash
 from hrc_drake.cell.link.lockstep import LockstepTimeouts, StationLinkError, exchange_period
 from hrc_drake.cell.link.remote import RemoteCell, run_over_lcm, station_of
+from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
+from hrc_drake.cell.link.station_record import StationRecord
 from hrc_drake.cell.link.station_server import CellStationServer, cell_station_hooks
 from hrc_drake.cell.ports import (
     BodySpheres,
@@ -50,6 +52,8 @@ from hrc_drake.cell.run.loop import ClosedLoop
 from hrc_drake.cell.run.run import build_closed_loop, controller_of, run_scenario
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 from hrc_drake.cell.station.contacts import Owner, geometry_owners, owner_pairs
+from hrc_drake.cell.station.faults import Injection
+from hrc_drake.cell.station.safety_function import SafetyFunctionLog
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
 from hrc_drake.scenario.schema import Scenario, ScenarioError
 
@@ -209,6 +213,29 @@ def test_defaults_and_session_round_trip():
     assert lm.indication_value(lm.lcmt_hri_indication.decode(message.encode())) == (Indication(),)
     report = lm.session_message(7, "report", {"sim_time": 1.5})
     assert lm.lcmt_station_session.decode(report.encode()) == report
+
+
+def test_station_record_round_trips_through_the_report():
+    """The fault record and the safety function's log, as JSON in the station's report, come
+    back as the same values; a report without them (a station that keeps none) has none, and
+    one that cannot be read stops the run with one line."""
+    record = StationRecord(
+        (
+            Injection("no-path", 2, 3.07, 3.07, None, 4.1, False, (0.41, -0.2, 0.013)),
+            Injection("grip-lost", 1, 1.0, 2.5300000000000002, 2.01, None, True),
+            Injection("pushed", 3),
+        ),
+        SafetyFunctionLog(1, 2, 2, 10.5, 0.25, ("1.00: protective stop: external input",)),
+    )
+    text = lm.session_message(5, "report", {"sim_time": 9.0, "exchanges": 900, **record.to_json()})
+    report = json.loads(lm.lcmt_station_session.decode(text.encode()).text)
+    assert StationRecord.from_report(report) == record
+    bare = {"sim_time": 9.0, "exchanges": 900}
+    assert StationRecord.from_report(bare) is None
+    assert StationRecord.from_report({**bare, **StationRecord().to_json()}) == StationRecord()
+    report["injected"][0]["colour"] = "red"
+    with pytest.raises(StationLinkError, match="the cell station's report has a fault record"):
+        StationRecord.from_report(report)
 
 
 def test_ur3_status_leaves_what_a_simulation_does_not_measure_unknown():
@@ -445,10 +472,16 @@ def test_cell_station_over_memq_equals_one_diagram():
         assert repr(remote.status.history) == repr(loop.status.history)
 
 
+# A protective stop 1 s into task 1: the station's injector and safety function both act.
+STOP = "{faults: [!ProtectiveStop {task: 1, after: 1.0, duration: 0.5}]}"
+
+
 @pytest.mark.slow
 def test_cell_station_in_another_process_equals_one_process(tmp_path):
-    """`hrc-drake station` in one process, the controller in this one: the same states,
-    terminal, final configuration, collisions and simulated time as the one-process run."""
+    """`hrc-drake station` in one process, the controller in this one, row 1 with a protective
+    stop: the same states, terminal, final configuration, collisions and simulated time as the
+    one-process run, and the station's fault record and safety function's log, which only the
+    station keeps, reach the run's JSON (`faults`, `safety.function`) as in one process."""
     url = _udpm_url()
     station = subprocess.Popen(
         [
@@ -459,6 +492,8 @@ def test_cell_station_in_another_process_equals_one_process(tmp_path):
             "--scenario",
             "row1-optimal",
             "--lean",
+            "--scenario-text",
+            STOP,
             "--lcm",
             url,
             "--json",
@@ -469,21 +504,31 @@ def test_cell_station_in_another_process_equals_one_process(tmp_path):
         stderr=subprocess.PIPE,
         text=True,
     )
+    scenario = load_cell_scenario("row1-optimal", [LEAN, STOP])
+    identity = ScenarioIdentity.of(scenario, ["--lean", "--scenario-text", STOP])
     try:
-        remote = run_over_lcm("row1-optimal", url, scenario_text=LEAN)
+        remote = run_over_lcm(scenario, url, identity=identity)
         out, err = station.communicate(timeout=60)
     finally:
         station.kill()
     assert station.returncode == 0, err
-    here = run_scenario("row1-optimal", scenario_text=LEAN)
+    here = run_scenario(scenario)
     assert here.done and remote.done
     assert remote.states == here.states
     assert remote.final_tokens == here.final_tokens
     assert remote.collisions == here.collisions
     assert remote.sim_time == here.sim_time
     assert remote.events == here.events
+    ours, theirs = here.to_json(), remote.to_json()
+    (fault,) = ours["faults"]
+    assert fault["injected_at"] is not None and fault["recovery"] == "resume", fault
+    assert theirs["faults"] == ours["faults"]
+    function = ours["safety"]["function"]
+    assert (function["protective_stops"], function["unlocks"]) == (1, 1), function
+    assert theirs["safety"]["function"] == function
     report = json.loads(out)
     assert report["sim_time"] == pytest.approx(here.sim_time)
+    assert report["safety_function"] == function
 
 
 def test_station_command_without_a_controller_ends_with_one_line():

@@ -282,5 +282,6 @@ def make_cell_station_interface(
 
 def end_station_session(interface: Diagram, timeout: float | None = None) -> dict:
     """End the session of a `make_cell_station_interface` diagram: the station stops serving
-    and its report (simulated time, exchanges) is returned."""
+    and its report (simulated time, exchanges, and from a simulated station its fault record
+    and safety function's log: `hrc_drake.cell.link.station_record`) is returned."""
     return interface.GetSubsystemByName("station_client").end_session(timeout)

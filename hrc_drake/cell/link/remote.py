@@ -5,9 +5,11 @@
 (`run_over_lcm`). Both sides build what a one-process run (`hrc_drake.cell.run.run`) builds from
 the same scenario (the station with the arm at the motion planner's home; the controller with
 its policy and planner), and the lockstep keeps the order of its events: the two-process run
-has the same states, terminal and collisions as the one-process run. Before the first step the
-two compare the scenarios they were started with (`hrc_drake.cell.link.scenario_identity`) and
-refuse, on both sides, a pair that differs (`ScenarioMismatch`).
+has the same states, terminal and collisions as the one-process run, and, from the station's
+session report (`hrc_drake.cell.link.station_record`), the same `faults` and `safety.function`.
+Before the first step the two compare the scenarios they were started with
+(`hrc_drake.cell.link.scenario_identity`) and refuse, on both sides, a pair that differs
+(`ScenarioMismatch`).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from hrc_drake.cell.link.lockstep import (
     exchange_period,
 )
 from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
+from hrc_drake.cell.link.station_record import StationRecord
 from hrc_drake.cell.link.station_server import serve_cell_station
 from hrc_drake.cell.run.loop import ClosedLoop
 from hrc_drake.cell.run.result import RunResult
@@ -37,6 +40,7 @@ from hrc_drake.cell.scenario import (
     motion_options,
 )
 from hrc_drake.cell.station.cell_station import CellStation
+from hrc_drake.cell.station.safety_function import SafetyFunctionLog
 from hrc_drake.motion.planner import MotionPlanner
 from hrc_drake.paths import UsageError
 from hrc_drake.scenario.schema import Scenario
@@ -89,12 +93,15 @@ def serve_scenario(
 class RemoteCell:
     """A station served over LCM, reached through its interface, as a closed loop's cell side
     (`hrc_drake.cell.run.loop.CellSide`): no welds or stills here (the station applies its own), the
-    touching pairs the station sends, and the session ended at the end of the run."""
+    touching pairs the station sends, and the session ended at the end of the run, whose
+    report (`report`) brings the station's fault record and safety function's log."""
 
     meshcat = None
 
     def __init__(self, interface: Diagram):
         self.diagram = interface
+        self.report: dict | None = None  # the station's session report (after `finish`)
+        self._record: StationRecord | None = None
 
     def _context(self, root):
         return self.diagram.GetMyContextFromRoot(root)
@@ -112,14 +119,14 @@ class RemoteCell:
         return frozenset()
 
     def injected(self, root) -> tuple:
-        """The station keeps its fault record to itself over LCM: none reads as injected (the
-        controller's detections are still in the run's events)."""
-        return ()
+        """The station's fault record as its session report brought it at the end of the run
+        (`finish`); before that, or from a station that keeps none: none injected."""
+        return () if self._record is None else self._record.injected
 
-    def safety_function(self, root) -> None:
-        """The station keeps its safety function's log to itself over LCM (its stops reach the
-        controller as the robot's safety mode)."""
-        return None
+    def safety_function(self, root) -> SafetyFunctionLog | None:
+        """The station's safety function's log as its session report brought it (None before
+        `finish`, or from a station that keeps none)."""
+        return None if self._record is None else self._record.safety_function
 
     def configuration(self, root):
         """The configuration the station measured last."""
@@ -130,8 +137,9 @@ class RemoteCell:
         raise StationLinkError("a still needs the station in this process")
 
     def finish(self, root) -> None:
-        """End the station's session."""
-        end_station_session(self.diagram)
+        """End the station's session and keep its report: the run's result is read after."""
+        self.report = end_station_session(self.diagram)
+        self._record = StationRecord.from_report(self.report)
 
 
 def run_over_lcm(

@@ -5,8 +5,10 @@ station's inputs, advances the station, and publishes its measured outputs, in t
 
 `CellStationServer` does it for any diagram with the station's ports (a real cell's stand-in, a
 test's fake); `cell_station_hooks` adds what a simulated `CellStation` needs besides its ports
-(weld switching, the touching pairs). Apart from the controller's side because the two run in
-different processes and share only the protocol and the messages.
+(weld switching, the touching pairs) and what it tells besides them (its fault record and safety
+function's log, in the session's report: `hrc_drake.cell.link.station_record`). Apart from
+the controller's side because the two run in different processes and share only the protocol
+and the messages.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import shlex
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -50,6 +53,9 @@ from hrc_drake.cell.link.lockstep import (
     their_identity,
 )
 from hrc_drake.cell.link.scenario_identity import ScenarioIdentity, mismatch
+
+if TYPE_CHECKING:
+    from hrc_drake.cell.link.station_record import StationRecord
 
 
 def _default_commands() -> dict[str, object]:
@@ -114,12 +120,14 @@ class CommandHold(LeafSystem):
 @dataclass(frozen=True)
 class StationHooks:
     """What a simulated station needs besides its ports: weld switching through the
-    `Simulator` monitor (`welds_changed(root)`, then `apply_welds(root)`), and the touching
-    pairs for a run's collision watch (`contacts(root)`)."""
+    `Simulator` monitor (`welds_changed(root)`, then `apply_welds(root)`), the touching
+    pairs for a run's collision watch (`contacts(root)`), and its fault record and safety
+    function's log for the session's report (`record(root)`)."""
 
     welds_changed: Callable[[Context], bool] | None = None
     apply_welds: Callable[[Context], None] | None = None
     contacts: Callable[[Context], Contacts] | None = None
+    record: Callable[[Context], StationRecord] | None = None
 
 
 def _check_station_ports(diagram: Diagram) -> None:
@@ -315,7 +323,12 @@ class CellStationServer:
         self._sent = sent
 
     def _end(self) -> None:
-        self.report = {"sim_time": self._root.get_time(), "exchanges": self._k}
+        # The station stands where the controller's run ended (it waits for the commands of
+        # that time's updates): its record is the one a one-process run reads at its end.
+        report = {"sim_time": self._root.get_time(), "exchanges": self._k}
+        if self._hooks.record is not None:
+            report.update(self._hooks.record(self._root).to_json())
+        self.report = report
         stamp = utime(self._root.get_time())
         publish(self._lcm, REPORT_CHANNEL, session_message(stamp, "report", self.report))
 
@@ -348,8 +361,9 @@ class CellStationServer:
 
 
 def cell_station_hooks(station) -> StationHooks:
-    """The hooks of a `CellStation` (`hrc_drake.cell.station.build`): its welds, and the touching
-    pairs of `sim.contact_results` by owner."""
+    """The hooks of a `CellStation` (`hrc_drake.cell.station.build`): its welds, the touching
+    pairs of `sim.contact_results` by owner, and its `StationRecord`."""
+    from hrc_drake.cell.link.station_record import StationRecord
     from hrc_drake.cell.station.contacts import geometry_owners, owner_pairs
 
     owners = geometry_owners(station.plant)
@@ -367,7 +381,10 @@ def cell_station_hooks(station) -> StationHooks:
     def apply_welds(root: Context) -> None:
         applied[0] = station.apply_welds(root)
 
-    return StationHooks(welds_changed, apply_welds, contacts)
+    def record(root: Context) -> StationRecord:
+        return StationRecord.of(station, root)
+
+    return StationHooks(welds_changed, apply_welds, contacts, record)
 
 
 def serve_cell_station(

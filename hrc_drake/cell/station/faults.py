@@ -75,6 +75,26 @@ class Injection:
     def __deepcopy__(self, memo) -> Injection:
         return self
 
+    def to_json(self) -> dict:
+        """The JSON-able record, every field (the station's session report carries it over LCM,
+        `hrc_drake.cell.link.station_record`); floats as they are, so `from_json` gives it back
+        exactly."""
+        return {
+            "kind": self.kind,
+            "task": self.task,
+            "task_start": self.task_start,
+            "injected_at": self.injected_at,
+            "since": self.since,
+            "ended_at": self.ended_at,
+            "shifted": self.shifted,
+            "target": list(self.target),
+        }
+
+    @classmethod
+    def from_json(cls, data: dict) -> Injection:
+        """The record `to_json` gave (KeyError or TypeError for a field missing or unknown)."""
+        return cls(**{**data, "target": tuple(float(v) for v in data["target"])})
+
 
 def _window(fault: ProtectiveStop | Pushed, injection: Injection, now: float) -> bool:
     """Whether a timed fault (stop, push) acts at `now`."""

@@ -187,14 +187,21 @@ class SafetyFunctionLog:
     events: tuple[str, ...] = ()
 
     def to_json(self) -> dict:
-        """The JSON-able figures."""
+        """The JSON-able figures and events (the times in s, to the millisecond)."""
         return {
             "safeguard_stops": self.safeguard_stops,
             "protective_stops": self.protective_stops,
             "unlocks": self.unlocks,
             "stopped_time": round(self.stopped_time, 3),
             "reduced_time": round(self.reduced_time, 3),
+            "events": list(self.events),
         }
+
+    @classmethod
+    def from_json(cls, data: dict) -> SafetyFunctionLog:
+        """The log `to_json` gave, its times to the millisecond as `to_json` rounds them
+        (KeyError or TypeError for a field missing or unknown)."""
+        return cls(**{**data, "events": tuple(data["events"])})
 
 
 @dataclass(frozen=True)
