@@ -6,18 +6,17 @@ manual v3.13) and OnRobot's RG2 data, as collected in the models' source comment
 
 from __future__ import annotations
 
-import math
-
 from pydrake.multibody.parsing import LoadModelDirectives, Parser, ProcessModelDirectives
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex
 
 from hrc_drake.resources import models_dir, package_uri
 
-# The names (model instances, joints) live in a Drake-free module: the scenario check needs them.
+# The names (model instances, joints) live in a Drake-free module: the scenario check needs them;
+# so do the UR3's joint speed limits (`robot_names.UR3_VELOCITY_LIMITS`), which the UR3
+# driver's settings hold and a scenario's `drivers:` section with them.
 from hrc_drake.robot_names import GRIPPER, UR3
 
-UR3_VELOCITY_LIMITS: tuple[float, ...] = (math.pi,) * 3 + (2 * math.pi,) * 3
 UR3_EFFORT_LIMITS: tuple[float, ...] = (56.0, 56.0, 28.0, 12.0, 12.0, 12.0)
 RG2_MAX_OPENING = 0.110
 # The RG2's gripping force range (OnRobot RG driver message definitions and product quick

@@ -209,6 +209,10 @@ def _variant(value: Any, members: list[type], key: str, default: Any) -> Any:
         raise TypedYamlError(
             f"{key}: unknown tag !{value.name}{hint}; the tags are {_tags(members)}"
         )
+    if value.value == "":  # `rg2: !Simulated` alone, which Drake's loader refuses too
+        raise TypedYamlError(
+            f"{key}: !{value.name} takes a mapping, even an empty one: write !{value.name} {{}}"
+        )
     base = default if isinstance(default, chosen) else None
     return _merge(value.value, chosen, key, base)
 

@@ -18,6 +18,8 @@ DRAKE_FREE = [
     "hrc_drake.tasks.profile",
     "hrc_drake.scenario.schema",
     "hrc_drake.scenario.safety",
+    "hrc_drake.scenario.drivers",
+    "hrc_drake.drivers.settings",
     "hrc_drake.scenario.check",
     "hrc_drake.scenario.load",
     "hrc_drake.hri.populations",

@@ -19,11 +19,10 @@ from hrc_drake.robot_models import (
     RG2_PAD_CENTRE_AT_45_MM,
     UR3_EFFORT_LIMITS,
     UR3_SURFACE_RADII,
-    UR3_VELOCITY_LIMITS,
     add_robot,
     make_parser,
 )
-from hrc_drake.robot_names import UR3_JOINTS
+from hrc_drake.robot_names import UR3_JOINTS, UR3_VELOCITY_LIMITS
 
 # Standard DH of the UR3 (CB3), Universal Robots' DH article: (a, d, alpha) per joint.
 UR3_DH = (

@@ -28,7 +28,7 @@ from hrc_drake.drivers.ur3_rtde import (
     Ur3RtdeSettings,
     station_safety_mode,
 )
-from hrc_drake.robot_models import UR3_VELOCITY_LIMITS
+from hrc_drake.robot_names import UR3_VELOCITY_LIMITS
 
 HOME = [0.0, -1.5, 1.2, -1.3, -1.57, 0.3]
 

@@ -147,6 +147,13 @@ def cmd_station(args) -> int:
         return EXIT_USAGE
 
 
+def cmd_drivers(args) -> int:
+    """Serve the scenario's real devices (its `drivers:` section) on LCM until Ctrl-C."""
+    from hrc_drake.cli.drivers import drivers_command
+
+    return drivers_command(args)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of `hrc-drake`."""
     parser = argparse.ArgumentParser(prog="hrc-drake", description=DESCRIPTION)
@@ -161,6 +168,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_task_commands(add)
     _add_simulate(add("simulate", cmd_simulate, "run a scenario in the Drake cell"))
     _add_station(add("station", cmd_station, "serve a scenario's simulated station over LCM"))
+    _add_drivers(add("drivers", cmd_drivers, "serve a scenario's real UR3 and RG2 over LCM"))
     add_evaluate_parser(add)
     return parser
 
@@ -322,6 +330,27 @@ def _add_station(p) -> None:
         help="seconds to wait for the controller to come, and for each of its later messages",
     )
     p.set_defaults(policy=None)
+
+
+def _add_drivers(p) -> None:
+    """`drivers`' flags."""
+    p.add_argument(
+        "--scenario",
+        default=None,
+        help="scenario name in scenarios/ or a path, whose `drivers:` section puts the UR3 "
+        "(!UrRtde) or the RG2 (!Rg2Modbus) on real hardware",
+    )
+    p.add_argument(
+        "--scenario-text",
+        default=None,
+        help='YAML merged over the scenario, e.g. "{drivers: {rg2: !Rg2Modbus {host: 10.0.0.9}}}"',
+    )
+    p.add_argument(
+        "--lcm",
+        metavar="URL",
+        default=None,
+        help="LCM URL to serve on (default udpm://239.241.129.92:20185?ttl=0: this machine only)",
+    )
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -15,6 +15,7 @@ from hrc_drake.cell.link.lockstep import (
 )
 from hrc_drake.cell.link.remote import check_lcm_url, serve_scenario
 from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
+from hrc_drake.cli.drivers import refuse_real_devices
 from hrc_drake.cli.scenario_args import scenario_argv, scenario_from_args, scenario_options
 from hrc_drake.paths import UsageError
 
@@ -30,15 +31,24 @@ def controller_hint(args, url: str) -> str:
     return shlex.join(argv)
 
 
+def drivers_argv(args) -> list[str]:
+    """The scenario options of `args` that `hrc-drake drivers` takes (`--scenario`,
+    `--scenario-text`): the drivers read only the scenario's `drivers:` section."""
+    argv = ["--scenario", args.scenario] if args.scenario else []
+    return argv + (["--scenario-text", args.scenario_text] if args.scenario_text else [])
+
+
 def station_command(args) -> int:
     """`hrc-drake station`: serve the scenario's simulated station over LCM until a controller
     (`hrc-drake simulate --station-lcm URL`) has run against it. Exit status 0; 1 if no
     controller came, it stopped answering or the station failed; `EXIT_MISMATCH` (2) if the
-    controller runs another scenario."""
+    controller runs another scenario. A scenario that puts a device on real hardware is
+    refused (UsageError, exit status 2): `hrc-drake drivers` serves those."""
     url = check_lcm_url(args.lcm or DEFAULT_LCM_URL, "--lcm")
     if not args.timeout > 0:
         raise UsageError(f"--timeout {args.timeout}: give a number of seconds > 0")
     scenario = scenario_from_args(args)
+    refuse_real_devices(scenario, drivers_argv(args), url)
     identity = ScenarioIdentity.of(scenario, scenario_options(args))
     timeouts = LockstepTimeouts(start=args.timeout, step=args.timeout)
     print(
@@ -65,4 +75,4 @@ def station_command(args) -> int:
     return 0
 
 
-__all__ = ["EXIT_MISMATCH", "controller_hint", "station_command"]
+__all__ = ["EXIT_MISMATCH", "controller_hint", "drivers_argv", "station_command"]

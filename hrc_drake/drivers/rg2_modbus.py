@@ -30,6 +30,7 @@ from hrc_drake.cell.link.channels import COMMANDS, MEASUREMENTS, StationChannel
 from hrc_drake.cell.link.lcm_messages import utime
 from hrc_drake.cell.link.lcm_struct import LcmDecodeError
 from hrc_drake.cell.link.lockstep import DEFAULT_LCM_URL
+from hrc_drake.drivers.settings import Rg2Settings
 from hrc_drake.robot_models import RG2_MAX_FORCE, RG2_MAX_OPENING, RG2_MIN_FORCE
 
 _log = logging.getLogger(__name__)
@@ -60,35 +61,6 @@ class Rg2Error(RuntimeError):
 
 class Rg2ConnectionError(Rg2Error, ConnectionError):
     """No Modbus TCP server (or no RG2 behind it) where the settings say."""
-
-
-@dataclass(frozen=True)
-class Rg2Settings:
-    """Where the RG2's Compute Box is and how the driver talks to it: `host` and `port` of its
-    Modbus TCP server, the gripper's `unit` id on it, the `poll_rate` of readings [Hz] (the
-    Compute Box answers at 10-50 Hz, an *assumption*) and the `timeout` of each request [s]."""
-
-    host: str
-    port: int = 502
-    unit: int = 65
-    poll_rate: float = 25.0
-    timeout: float = 1.0
-
-    def __post_init__(self) -> None:
-        if not 0 < self.port < 65536:
-            raise ValueError(f"RG2 port {self.port}: give a TCP port, 1-65535 (502 by default)")
-        if not 0 <= self.unit <= 255:
-            raise ValueError(f"RG2 unit {self.unit}: a Modbus unit id is 0-255 (65 by default)")
-        if not (self.poll_rate > 0 and self.timeout > 0):
-            raise ValueError(
-                f"RG2 poll_rate {self.poll_rate} Hz and timeout {self.timeout} s: both must be "
-                "positive"
-            )
-
-    @property
-    def where(self) -> str:
-        """host:port of the Compute Box."""
-        return f"{self.host}:{self.port}"
 
 
 @dataclass(frozen=True)
@@ -322,11 +294,19 @@ def main(argv: list[str] | None = None) -> int:
         prog="python -m hrc_drake.drivers.rg2_modbus",
         description="Serve RG2_COMMAND and RG2_STATUS on LCM with an RG2 over Modbus TCP.",
     )
+    d = Rg2Settings("")  # the defaults, stated once
     parser.add_argument("--host", required=True, help="the Compute Box's address")
-    parser.add_argument("--port", type=int, default=502, help="its Modbus TCP port (502)")
-    parser.add_argument("--unit", type=int, default=65, help="the RG2's unit id (65)")
-    parser.add_argument("--poll-rate", type=float, default=25.0, help="readings per second (25)")
-    parser.add_argument("--timeout", type=float, default=1.0, help="per request [s] (1)")
+    parser.add_argument("--port", type=int, default=d.port, help=f"its Modbus TCP port ({d.port})")
+    parser.add_argument("--unit", type=int, default=d.unit, help=f"the RG2's unit id ({d.unit})")
+    parser.add_argument(
+        "--poll-rate",
+        type=float,
+        default=d.poll_rate,
+        help=f"readings per second ({d.poll_rate:g})",
+    )
+    parser.add_argument(
+        "--timeout", type=float, default=d.timeout, help=f"per request [s] ({d.timeout:g})"
+    )
     parser.add_argument("--lcm", default=DEFAULT_LCM_URL, help=f"LCM URL ({DEFAULT_LCM_URL})")
     args = parser.parse_args(argv)
     try:

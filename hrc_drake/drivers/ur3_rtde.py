@@ -35,8 +35,8 @@ import enum
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from datetime import timedelta
+from threading import Event
 from typing import Protocol
 
 import numpy as np
@@ -45,7 +45,7 @@ from drake import lcmt_panda_command, lcmt_panda_status
 from hrc_drake.cell.link.channels import COMMANDS, MEASUREMENTS
 from hrc_drake.cell.link.lcm_messages import N_JOINTS, ur3_command_values, ur3_status, utime
 from hrc_drake.cell.ports import SafetyMode
-from hrc_drake.robot_models import UR3_VELOCITY_LIMITS
+from hrc_drake.drivers.settings import Ur3RtdeSettings
 from hrc_drake.robot_names import UR3_JOINTS
 
 COMMAND_CHANNEL = next(c.channel for c in COMMANDS if c.message is lcmt_panda_command)
@@ -140,61 +140,12 @@ class ControlInterface(Protocol):
     def disconnect(self) -> None: ...
 
 
-@dataclass(frozen=True)
-class Ur3RtdeSettings:
-    """How the driver talks to one UR3. `frequency` is RTDE's rate [Hz] (125 on a CB3, 500 on
-    an e-Series: `cb3(host)`, `e_series(host)`); `servo_time` is `servoJ`'s `time` [s], one
-    period; `lookahead_time` [s] (0.03–0.2) and `gain` (100–2000) are `servoj`'s. The commands'
-    joints may move at most at `velocity_limits` [rad/s] (the UR3's, `UR3_JOINTS` order).
-    `servo_speed` and `servo_acceleration` fill `servoJ`'s speed and acceleration, which
-    ur_rtde 1.6 does not use; `stop_deceleration` [m/s², the tool's] is `servoStop`'s."""
-
-    host: str
-    frequency: float = 125.0
-    servo_time: float = 0.008
-    lookahead_time: float = 0.1
-    gain: float = 300.0
-    velocity_limits: tuple[float, ...] = UR3_VELOCITY_LIMITS
-    servo_speed: float = 0.5
-    servo_acceleration: float = 0.5
-    stop_deceleration: float = 10.0
-    stale_periods: int = 3
-    stale_margin: float = 0.050
-
-    def __post_init__(self):
-        if self.frequency <= 0 or self.servo_time <= 0:
-            raise ValueError("frequency and servo_time must be positive")
-        if not 0.03 <= self.lookahead_time <= 0.2:
-            raise ValueError(f"lookahead_time {self.lookahead_time} s is not in [0.03, 0.2]")
-        if not 100 <= self.gain <= 2000:
-            raise ValueError(f"gain {self.gain} is not in [100, 2000]")
-        if len(self.velocity_limits) != N_JOINTS or min(self.velocity_limits) <= 0:
-            raise ValueError(f"velocity_limits: {N_JOINTS} positive limits, one per joint")
-
-    @classmethod
-    def cb3(cls, host: str) -> Ur3RtdeSettings:
-        """A CB3 controller: RTDE at 125 Hz."""
-        return cls(host, frequency=125.0, servo_time=1 / 125)
-
-    @classmethod
-    def e_series(cls, host: str) -> Ur3RtdeSettings:
-        """An e-Series controller: RTDE at 500 Hz."""
-        return cls(host, frequency=500.0, servo_time=1 / 500)
-
-    @property
-    def period(self) -> float:
-        """RTDE's period [s]."""
-        return 1.0 / self.frequency
-
-    @property
-    def stale_after(self) -> float:
-        """How long [s] the newest command may go without a newer one before the arm is
-        stopped: `stale_periods` periods and `stale_margin`."""
-        return self.stale_periods * self.period + self.stale_margin
-
-
 class Ur3DriverError(RuntimeError):
     """The UR3 cannot be driven (connection lost, `servoJ` not taken)."""
+
+
+class Ur3ConnectionError(Ur3DriverError, ConnectionError):
+    """No UR controller answered RTDE (or ur_rtde's control script) where the settings say."""
 
 
 class Ur3CommandRefused(Ur3DriverError):
@@ -215,8 +166,24 @@ def _default_interfaces(settings: Ur3RtdeSettings):
     import rtde_control  # ur_rtde: the `hardware` extra
     import rtde_receive
 
-    receive = rtde_receive.RTDEReceiveInterface(settings.host, settings.frequency)
-    return receive, rtde_control.RTDEControlInterface(settings.host, settings.frequency)
+    try:
+        receive = rtde_receive.RTDEReceiveInterface(settings.host, settings.frequency)
+    except RuntimeError as err:  # ur_rtde's one exception for a connection it could not make
+        raise Ur3ConnectionError(
+            f"no UR controller answered RTDE at {settings.where} ({err}): check that the UR3's "
+            "controller is on, reachable from this host and not in local-only mode, and give "
+            "its address"
+        ) from err
+    try:
+        control = rtde_control.RTDEControlInterface(settings.host, settings.frequency)
+    except RuntimeError as err:
+        receive.disconnect()
+        raise Ur3ConnectionError(
+            f"the UR controller at {settings.host} answers RTDE but ur_rtde's control script "
+            f"did not start ({err}): put the robot in remote control, powered on and released, "
+            "with no other program running"
+        ) from err
+    return receive, control
 
 
 class Ur3RtdeDriver:
@@ -390,13 +357,14 @@ class Ur3Bridge:
         self._lcm.Publish(STATUS_CHANNEL, self.driver.status(utime(now)).encode())
         return self.driver.follow(self._newest, now - self._received_at)
 
-    def run(self, cycles: int | None = None) -> None:
-        """Run `cycles` cycles (None: until an error), each paced by ur_rtde's
-        `initPeriod`/`waitPeriod`; a refused command, a lost connection or an undecodable
-        command ends it, raising the error; either way the arm is left stopped (`servoStop`)."""
+    def run(self, cycles: int | None = None, stop: Event | None = None) -> None:
+        """Run `cycles` cycles (None: until an error or `stop` is set), each paced by
+        ur_rtde's `initPeriod`/`waitPeriod`; a refused command, a lost connection or an
+        undecodable command ends it, raising the error; either way the arm is left stopped
+        (`servoStop`). `stop` (a `threading.Event`) ends it from another thread."""
         count = 0
         try:
-            while cycles is None or count < cycles:
+            while (cycles is None or count < cycles) and not (stop is not None and stop.is_set()):
                 start = self.driver.init_period()
                 self.cycle()
                 self.driver.wait_period(start)
@@ -410,6 +378,8 @@ def serve_ur3(
     lcm,
     clock: Callable[[], float] = time.monotonic,
     cycles: int | None = None,
+    stop: Event | None = None,
 ) -> None:
-    """Serve the UR3 on `lcm` at RTDE's rate: `Ur3Bridge(driver, lcm, clock).run(cycles)`."""
-    Ur3Bridge(driver, lcm, clock).run(cycles)
+    """Serve the UR3 on `lcm` at RTDE's rate: `Ur3Bridge(driver, lcm, clock).run(cycles,
+    stop)`."""
+    Ur3Bridge(driver, lcm, clock).run(cycles, stop)

@@ -105,6 +105,10 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
     _check_separation(scenario.safety, fail)
     _check_interaction(scenario.interaction, fail)
     try:
+        scenario.drivers.check("drivers")
+    except ValueError as err:
+        raise ScenarioError(f"{where}: {err}") from err
+    try:
         check_faults(scenario.faults, source, UR3_JOINTS)
     except FaultError as err:
         raise ScenarioError(str(err)) from err

@@ -16,7 +16,8 @@ would. Command-line overrides are more YAML merged on top
     expected:
       published: ["1", "4", "8", "4", "1", "2", "7", "10"]
       minimum_effort: ["1", "4", "8", "11"]
-    motion: {hold_time: 5.0}         # optional: cell, motion, physics, run, safety, body
+    motion: {hold_time: 5.0}         # optional: cell, motion, physics, run, safety, body,
+                                     # station, drivers (hrc_drake.scenario.drivers)
     interaction: {mode: wait, interface: touch, delay: {distribution: lognormal, median: 2.5,
                   sigma: 0.3}}       # optional; the delay defaults to the interface's
 """
@@ -32,6 +33,7 @@ from hrc_drake.hri.operator import ScriptedOperator, StochasticOperator
 from hrc_drake.layout import CellLayout
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.resources import models_dir
+from hrc_drake.scenario.drivers import DriversConfig
 from hrc_drake.scenario.safety import (
     SafetyConfig,
 )
@@ -455,6 +457,7 @@ class Scenario:
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     body: BodyConfig = field(default_factory=BodyConfig)
     station: StationConfig = field(default_factory=StationConfig)
+    drivers: DriversConfig = field(default_factory=DriversConfig)
     interaction: InteractionConfig = field(default_factory=InteractionConfig)
     faults: list[FaultConfig] = field(default_factory=list)
 
@@ -525,6 +528,7 @@ __all__ = [
     "DeciderConfig",
     "DelayConfig",
     "Deviation",
+    "DriversConfig",
     "Expected",
     "GripperConfig",
     "InteractionConfig",

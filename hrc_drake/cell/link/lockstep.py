@@ -44,6 +44,8 @@ run with the station's message.
 
 from __future__ import annotations
 
+import ipaddress
+import re
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -53,11 +55,29 @@ from hrc_drake.cell.link.channels import StationChannel
 from hrc_drake.cell.link.lcm_messages import lcmt_station_session
 from hrc_drake.cell.link.lcm_struct import LcmDecodeError
 from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
+from hrc_drake.paths import UsageError
 from hrc_drake.scenario.schema import Scenario, ScenarioError
 
 # Host-local multicast (ttl=0: the datagrams never leave this machine), on a port of its own so
 # that another LCM user's default group (239.255.76.67:7667) does not mix in.
 DEFAULT_LCM_URL = "udpm://239.241.129.92:20185?ttl=0"
+
+
+def check_lcm_url(url: str, flag: str) -> str:
+    """`url` if it is a UDP multicast LCM URL (the transport between two processes here);
+    UsageError naming `flag` otherwise (DrakeLcm takes a bad URL silently, and then nothing
+    arrives)."""
+    match = re.fullmatch(r"udpm://([0-9.]+):(\d+)(\?.*)?", url)
+    try:
+        multicast = match is not None and ipaddress.IPv4Address(match[1]).is_multicast
+    except ValueError:
+        multicast = False
+    if not multicast or not 0 < int(match[2]) < 65536:
+        raise UsageError(
+            f"{flag} {url}: give an LCM UDP multicast URL udpm://GROUP:PORT?ttl=0 with GROUP in "
+            f"224.0.0.0-239.255.255.255 and PORT in 1-65535, e.g. {DEFAULT_LCM_URL}"
+        )
+    return url
 
 
 class StationLinkError(RuntimeError):

@@ -14,17 +14,14 @@ Before the first step the two compare the scenarios they were started with
 
 from __future__ import annotations
 
-import ipaddress
-import re
-
 from pydrake.lcm import DrakeLcm
 from pydrake.systems.framework import Diagram
 
 from hrc_drake.cell.link.interface import end_station_session, make_cell_station_interface
 from hrc_drake.cell.link.lockstep import (
-    DEFAULT_LCM_URL,
     LockstepTimeouts,
     StationLinkError,
+    check_lcm_url,
     exchange_period,
 )
 from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
@@ -42,28 +39,10 @@ from hrc_drake.cell.scenario import (
 from hrc_drake.cell.station.cell_station import CellStation
 from hrc_drake.cell.station.safety_function import SafetyFunctionLog
 from hrc_drake.motion.planner import MotionPlanner
-from hrc_drake.paths import UsageError
 from hrc_drake.scenario.schema import Scenario
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.policy import Policy
 from hrc_drake.tasks.spec import load_spec
-
-
-def check_lcm_url(url: str, flag: str) -> str:
-    """`url` if it is a UDP multicast LCM URL (the transport between two processes here);
-    UsageError naming `flag` otherwise (DrakeLcm takes a bad URL silently, and then nothing
-    arrives)."""
-    match = re.fullmatch(r"udpm://([0-9.]+):(\d+)(\?.*)?", url)
-    try:
-        multicast = match is not None and ipaddress.IPv4Address(match[1]).is_multicast
-    except ValueError:
-        multicast = False
-    if not multicast or not 0 < int(match[2]) < 65536:
-        raise UsageError(
-            f"{flag} {url}: give an LCM UDP multicast URL udpm://GROUP:PORT?ttl=0 with GROUP in "
-            f"224.0.0.0-239.255.255.255 and PORT in 1-65535, e.g. {DEFAULT_LCM_URL}"
-        )
-    return url
 
 
 def station_of(scenario: Scenario) -> CellStation:
