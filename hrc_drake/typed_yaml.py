@@ -232,12 +232,19 @@ def _convert(value: Any, tp: Any, key: str, default: Any = dataclasses.MISSING) 
             return None
         inner = [a for a in args if a is not type(None)]
         # `float | str` (as Drake's loader reads it): the first type the value fits.
+        mapped = None  # a mapping's error as a dataclass member: it names the key at fault
         for tp_ in inner[:-1]:
             try:
                 return _convert(value, tp_, key, default)
-            except TypedYamlError:
-                pass
-        return _convert(value, inner[-1], key, default)
+            except TypedYamlError as err:
+                if mapped is None and isinstance(value, dict) and dataclasses.is_dataclass(tp_):
+                    mapped = err
+        try:
+            return _convert(value, inner[-1], key, default)
+        except TypedYamlError:
+            if mapped is not None:
+                raise mapped from None
+            raise
     if dataclasses.is_dataclass(tp):
         base = default if dataclasses.is_dataclass(default) else None
         return _merge(value, tp, key, base)

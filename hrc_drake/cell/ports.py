@@ -122,12 +122,15 @@ class CellConfiguration:
 class BodySpheres:
     """The body as world-frame spheres: centres (n×3) [m], radii (n) [m], velocities (n×3)
     [m/s]; `groups` are the index ranges [start, end) of the body's parts (hand, forearm, upper
-    arm, torso, head), each part within the sphere `bound(group)`."""
+    arm, torso, head), each part within the sphere `bound(group)`. `stamp` is when the tracker
+    took this reading [s, station time], set by a sensor model (`sensors:`); None: now (an
+    exact tracker, or a reading over LCM, whose message carries no measurement time)."""
 
     centres: np.ndarray
     radii: np.ndarray
     velocities: np.ndarray
     groups: tuple[tuple[int, int], ...] = ()
+    stamp: float | None = None
 
     def bound(self, group: int) -> tuple[np.ndarray, float]:
         """(centre, radius) of a sphere that holds every sphere of `group`."""

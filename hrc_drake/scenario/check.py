@@ -23,6 +23,7 @@ from hrc_drake.scenario.schema import (
     Scenario,
     ScenarioError,
 )
+from hrc_drake.scenario.sensors import sensor_models
 from hrc_drake.tasks.interaction import (
     INTERFACES,
     MODES,
@@ -106,6 +107,7 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
     _check_interaction(scenario.interaction, fail)
     try:
         scenario.drivers.check("drivers")
+        sensor_models(scenario.sensors, "sensors")
     except ValueError as err:
         raise ScenarioError(f"{where}: {err}") from err
     try:

@@ -17,7 +17,8 @@ would. Command-line overrides are more YAML merged on top
       published: ["1", "4", "8", "4", "1", "2", "7", "10"]
       minimum_effort: ["1", "4", "8", "11"]
     motion: {hold_time: 5.0}         # optional: cell, motion, physics, run, safety, body,
-                                     # station, drivers (hrc_drake.scenario.drivers)
+                                     # station, drivers (hrc_drake.scenario.drivers),
+                                     # sensors (hrc_drake.scenario.sensors)
     interaction: {mode: wait, interface: touch, delay: {distribution: lognormal, median: 2.5,
                   sigma: 0.3}}       # optional; the delay defaults to the interface's
 """
@@ -37,6 +38,7 @@ from hrc_drake.scenario.drivers import DriversConfig
 from hrc_drake.scenario.safety import (
     SafetyConfig,
 )
+from hrc_drake.scenario.sensors import Preset, SensorsConfig
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.interaction import (
     DEFAULT_DELAYS,
@@ -458,6 +460,9 @@ class Scenario:
     body: BodyConfig = field(default_factory=BodyConfig)
     station: StationConfig = field(default_factory=StationConfig)
     drivers: DriversConfig = field(default_factory=DriversConfig)
+    # `ideal`, `realistic`, or a mapping (`hrc_drake.scenario.sensors`); the mapping first, as
+    # Drake's loader reads an untagged value as the first member that fits.
+    sensors: SensorsConfig | str = Preset.IDEAL.value
     interaction: InteractionConfig = field(default_factory=InteractionConfig)
     faults: list[FaultConfig] = field(default_factory=list)
 
@@ -539,5 +544,6 @@ __all__ = [
     "SafetyConfig",
     "Scenario",
     "ScenarioError",
+    "SensorsConfig",
     "StationConfig",
 ]

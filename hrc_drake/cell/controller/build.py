@@ -21,6 +21,7 @@ from hrc_drake.cell.controller.forecast import OperatorForecast
 from hrc_drake.cell.controller.intent import MotionIntent
 from hrc_drake.cell.controller.keep_clear import KeepClearSettings
 from hrc_drake.cell.controller.separation import (
+    BodyAge,
     ControllerSeparationMonitor,
     SafetyLog,
     assess,
@@ -41,6 +42,7 @@ from hrc_drake.motion.scene import load_cell_frames
 from hrc_drake.motion.service import PlanService
 from hrc_drake.scenario.safety import Separation
 from hrc_drake.scenario.schema import Activity, Scenario
+from hrc_drake.scenario.sensors import PORTS, sensor_models
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.policy import Policy
 
@@ -144,6 +146,15 @@ def keep_clear_settings(
     )
 
 
+def body_age(scenario: Scenario) -> BodyAge:
+    """What the separation monitor allows for the body reading's age under the scenario's
+    `sensors:`: its tracker's staleness bound and latency (an exact tracker: none)."""
+    model = sensor_models(scenario.sensors).get(PORTS["body"])
+    if model is None:
+        return BodyAge()
+    return BodyAge(stale_after=model.stale_after, latency=model.max_latency)
+
+
 def make_controller(
     scenario: Scenario,
     design: CellDesign,
@@ -180,6 +191,7 @@ def make_controller(
                 options.joint_acceleration_limit,
                 scenario.run.period,
                 envelope,
+                body_age(scenario),
             ),
         )
         builder.ConnectInput("ur3.state_estimated", monitor.GetInputPort("ur3.state_estimated"))

@@ -87,6 +87,8 @@ class SeparationReading:
         moving: a robot joint moves faster than `SafetyConfig.moving_speed`.
         imposed: a joint moves faster than commanded by more than IMPOSED_SPEED: the arm is
             moved by an outside force (a push), not by its servo.
+        stale: the body reading is older than the tracker's bound (`BodyAge.stale_after`):
+            no body is seen, and the plan stops (`limit` 0).
     """
 
     separation: float = float("inf")
@@ -95,6 +97,7 @@ class SeparationReading:
     limit: float = 1.0
     moving: bool = False
     imposed: bool = False
+    stale: bool = False
 
     def __deepcopy__(self, memo) -> SeparationReading:
         return self  # immutable once made (Drake copies abstract values often)
@@ -256,6 +259,28 @@ def plan_moves(intent: MotionIntent) -> bool:
     )
 
 
+@dataclass(frozen=True)
+class BodyAge:
+    """What the monitor allows for the tracked body's age (`sensors:`; the scenario's body
+    sensor model, `hrc_drake.scenario.sensors.SensorModel`).
+
+    Attributes:
+        stale_after: a reading (`BodySpheres.stamp`) older than this [s] is no body seen: the
+            plan stops until a fresh one comes (the tracker's period plus its latency bound).
+        latency: the reading's age bound [s] while fresh, added to the reaction time the plan
+            keeps S_p with (the person moved meanwhile).
+    """
+
+    stale_after: float = float("inf")
+    latency: float = 0.0
+
+
+def stale_reading(body: BodySpheres, now: float, age: BodyAge) -> bool:
+    """Whether `body`, read at `now`, is older than `age.stale_after` (a reading without a
+    stamp is current)."""
+    return body.stamp is not None and now - body.stamp > age.stale_after + 1e-9
+
+
 class ControllerSeparationMonitor(LeafSystem):
     """The controller's speed and separation monitor (see the module docstring).
 
@@ -264,7 +289,8 @@ class ControllerSeparationMonitor(LeafSystem):
     optional: unconnected, the fingers count over their whole travel). Output ports:
     `speed_limit` (1) and `reading` (SeparationReading). The log is the abstract state updated
     every `period` (`ControllerSeparationMonitor.log(context)`). `envelope` replaces the model
-    built from `design` (one per monitor)."""
+    built from `design` (one per monitor). `age`: what it allows for the body reading's age
+    (default: an exact tracker); a stale reading stops the plan."""
 
     def __init__(
         self,
@@ -273,10 +299,12 @@ class ControllerSeparationMonitor(LeafSystem):
         joint_acceleration: float,
         period: float,
         envelope: RobotEnvelope | None = None,
+        age: BodyAge | None = None,
     ):
         super().__init__()
         self.envelope = envelope if envelope is not None else RobotEnvelope(design)
         self._config, self._acc, self._period = config, joint_acceleration, period
+        self._age = age if age is not None else BodyAge()
         self._state_port = self.DeclareVectorInputPort("ur3.state_estimated", 2 * len(UR3_JOINTS))
         self._body_port = self.DeclareAbstractInputPort("operator.body", AbstractValue.Make(NOBODY))
         self._intent_port = self.DeclareAbstractInputPort(
@@ -303,17 +331,22 @@ class ControllerSeparationMonitor(LeafSystem):
         opening = None
         if self._gripper_port.HasValue(context):
             opening = float(self._gripper_port.Eval(context)[0])
+        body = self._body_port.Eval(context)
         reading = assess(
             self.envelope,
             x[:n],
             x[n:],
-            self._body_port.Eval(context),
+            body,
             self._intent_port.Eval(context),
             self._config,
             self._acc,
             opening,
-            self._period,
+            self._period + self._age.latency,
         )
+        if stale_reading(body, context.get_time(), self._age):
+            # No body seen: the person may be anywhere, so the plan stops (docs/hardware.md,
+            # "Body tracker"); the station's safety function stays on its own sensor.
+            reading = replace(reading, limit=0.0, stale=True)
         output.set_value(reading)
 
     def _update(self, context, state) -> None:
@@ -327,6 +360,7 @@ class ControllerSeparationMonitor(LeafSystem):
 
 
 __all__ = [
+    "BodyAge",
     "ControllerSeparationMonitor",
     "SafetyLog",
     "SeparationReading",
@@ -334,4 +368,5 @@ __all__ = [
     "log_step",
     "plan_moves",
     "planned_scales",
+    "stale_reading",
 ]

@@ -402,7 +402,7 @@ class _SafetySampler:
         if not self.trace.due(now):
             return
         cell = self._cell.GetMyContextFromRoot(root)
-        arm = self._cell.GetOutputPort("ur3.state_estimated").Eval(cell)
+        arm = self._truth("ur3.state_estimated").Eval(cell)
         controller = self._controller.GetMyContextFromRoot(root)
         commanded = self._controller.GetOutputPort("ur3.velocity").Eval(controller)
         n = len(commanded)
@@ -412,11 +412,17 @@ class _SafetySampler:
                 q=np.array(arm[:n]),
                 v=np.array(arm[n:]),
                 commanded=np.array(commanded),
-                opening=float(self._cell.GetOutputPort("rg2.state_measured").Eval(cell)[0]),
+                opening=float(self._truth("rg2.state_measured").Eval(cell)[0]),
                 carrying=self._cell.GetOutputPort("configuration").Eval(cell).held(),
-                body=self._cell.GetOutputPort("operator.body").Eval(cell),
+                body=self._truth("operator.body").Eval(cell),
             )
         )
+
+    def _truth(self, name: str):
+        """The cell's port `name`, or its exact value `sim.<name>` where a sensor model
+        (`sensors:`) sits on it: the check scores what happened, not what was measured."""
+        exact = f"sim.{name}"
+        return self._cell.GetOutputPort(exact if self._cell.HasOutputPort(exact) else name)
 
 
 def _monitor(loop: ClosedLoop):

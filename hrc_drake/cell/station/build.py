@@ -73,6 +73,7 @@ from hrc_drake.cell.station.obstacle import (
 )
 from hrc_drake.cell.station.operator_body import BodyScript, KnowsWhenFree, OperatorBody
 from hrc_drake.cell.station.safety_function import SafetyFunction
+from hrc_drake.cell.station.sensors import export_measured
 from hrc_drake.cell.station.sim_operator import SimulatedOperator
 from hrc_drake.cell.station.slot_monitor import SlotMonitor
 from hrc_drake.cell.station.welds import Bolts
@@ -222,7 +223,7 @@ def _add_arm(
         builder.ExportInput(function.GetInputPort(name), name)
     for name in ("safety.stop", "safety.mode"):
         builder.ExportOutput(function.GetOutputPort(name), name)
-    builder.ExportOutput(plant.get_state_output_port(ur3), "ur3.state_estimated")
+    export_measured(builder, plant.get_state_output_port(ur3), "ur3.state_estimated", scenario)
     weight = builder.AddNamedSystem("ur3_gravity", GravityCompensation(plant, ur3))
     builder.Connect(plant.get_state_output_port(ur3), weight.get_input_port())
     builder.Connect(weight.get_output_port(), plant.get_actuation_input_port(ur3))
@@ -265,7 +266,7 @@ def _add_operator(builder, plant, scene_graph, parts, scenario: Scenario, operat
     )
     builder.Connect(plant.get_body_poses_output_port(), body.GetInputPort("body_poses"))
     builder.Connect(person.GetOutputPort("activity"), body.GetInputPort("activity"))
-    builder.ExportOutput(body.GetOutputPort("spheres"), "operator.body")
+    export_measured(builder, body.GetOutputPort("spheres"), "operator.body", scenario)
     return person
 
 
@@ -476,7 +477,14 @@ def _add_robot(builder, plant, instances, scenario: Scenario, frames, space: Sta
     function = _add_arm(builder, plant, instances[UR3], scenario, frames.design)
     injector = _add_faults(builder, plant, scenario, SeatPositions(frames, space))
     builder.Connect(injector.GetOutputPort("safety.stop"), function.GetInputPort("external_stop"))
-    add_gripper_ports(builder, plant, instances[GRIPPER], scenario.station.rg2.kp, injector)
+    add_gripper_ports(
+        builder,
+        plant,
+        instances[GRIPPER],
+        scenario.station.rg2.kp,
+        injector,
+        lambda port, name: export_measured(builder, port, name, scenario),
+    )
     return injector
 
 

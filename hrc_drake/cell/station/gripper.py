@@ -80,13 +80,15 @@ class FingerServo(LeafSystem):
 
 
 def add_gripper_ports(
-    builder: DiagramBuilder, plant: MultibodyPlant, rg2, kp: float, faults=None
+    builder: DiagramBuilder, plant: MultibodyPlant, rg2, kp: float, faults=None, export=None
 ) -> None:
     """Export `rg2.opening` (commanded opening between the finger insides [m], clipped to the
     stroke), `rg2.force` (commanded gripping force [N], clipped to the RG2's range),
     `rg2.state_measured` (opening [m], rate [m/s]) and `rg2.grip_detected`; the fingers'
     servo has the plant's finger gain `kp` [N/m]. With `faults` (the station's
-    `hrc_drake.cell.station.faults.FaultInjector`) the command reaches the servo through it."""
+    `hrc_drake.cell.station.faults.FaultInjector`) the command reaches the servo through it.
+    `export(port, name)` exports `rg2.state_measured` (default: `builder.ExportOutput`; the
+    station's puts its sensor model between)."""
     clip = builder.AddNamedSystem("rg2_clip", Saturation([0.0], [RG2_MAX_OPENING]))
     force = builder.AddNamedSystem("rg2_force_clip", Saturation([RG2_MIN_FORCE], [RG2_MAX_FORCE]))
     servo = builder.AddNamedSystem("rg2_servo", FingerServo(kp, plant.time_step()))
@@ -107,7 +109,7 @@ def add_gripper_ports(
     builder.Connect(plant.get_state_output_port(rg2), measure.get_input_port())
     if faults is not None:
         builder.Connect(measure.get_output_port(), faults.GetInputPort("measured"))
-    builder.ExportOutput(measure.get_output_port(), "rg2.state_measured")
+    (export or builder.ExportOutput)(measure.get_output_port(), "rg2.state_measured")
     grip = builder.AddNamedSystem("rg2_grip", GripSensor())
     builder.Connect(clip.get_output_port(), grip.GetInputPort("commanded"))
     builder.Connect(measure.get_output_port(), grip.GetInputPort("measured"))

@@ -1,0 +1,224 @@
+"""The scenario's `sensors:` section: how each measured device port of the station reads what
+it measures — its rate, latency, noise, quantisation and dropout (docs/station.md, "Sensor
+models"). Apart from `hrc_drake.scenario.schema`, which takes it as its `sensors` field.
+
+    sensors: ideal                     # the default: every measurement exact, at every step
+    sensors: realistic                 # the devices' figures below
+    sensors: {preset: realistic, body: {latency: 0.1, dropout: 0.05}}   # a preset, overridden
+
+The measured ports modelled, by key: `ur3` (`ur3.state_estimated`: joint positions [rad], then
+velocities [rad/s]), `rg2` (`rg2.state_measured`: opening [m], then its rate [m/s]) and `body`
+(`operator.body`: sphere centres [m], then their velocities [m/s]). Each reading is a value and
+its rate of change, so a model has one noise for each (`noise`, `rate_noise`) and quantises the
+value only (an encoder's or a register's step; the rate is derived from it).
+
+Under `ideal` the station inserts nothing: its diagram is the one it always was. A port left
+ideal in a mapping over `ideal` stays so; a port given there starts from an exact sensor and
+needs its `rate`. Drake-free, as the loader is.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+
+class Preset(StrEnum):
+    """`sensors` (or `sensors.preset`): the sensors' figures before any override."""
+
+    IDEAL = "ideal"  # exact readings at every step: nothing inserted in the station
+    REALISTIC = "realistic"  # the devices' rates, latencies, noise and steps (below)
+
+
+# The measured ports a sensor model may sit on, by the section's key.
+PORTS = {
+    "ur3": "ur3.state_estimated",
+    "rg2": "rg2.state_measured",
+    "body": "operator.body",
+}
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """How one measured port reads: a sample every 1/`rate` s, delivered `latency` s later,
+    with Gaussian noise, its value quantised, and dropped with probability `dropout` (a dropped
+    sample leaves the previous reading, which goes stale).
+
+    Attributes:
+        rate: samples per second [Hz].
+        latency: seconds from a sample to its reading at the port.
+        noise: standard deviation of the value's noise (rad, m: the port's unit).
+        rate_noise: standard deviation of the rate's noise (rad/s, m/s).
+        quantum: the value's resolution (0: none); the value is rounded to a multiple of it.
+        dropout: probability that a sample is lost, in [0, 1).
+        max_latency: the latency's bound [s] (at least `latency`): a reader treats a reading
+            older than one period plus this as stale.
+        seed_offset: added to the run's seed for this port's noise and dropouts.
+    """
+
+    rate: float
+    latency: float = 0.0
+    noise: float = 0.0
+    rate_noise: float = 0.0
+    quantum: float = 0.0
+    dropout: float = 0.0
+    max_latency: float = 0.0
+    seed_offset: int = 0
+
+    @property
+    def period(self) -> float:
+        """Seconds between samples."""
+        return 1.0 / self.rate
+
+    @property
+    def stale_after(self) -> float:
+        """The age [s] past which a reading is stale: one period plus the latency's bound
+        (a reading is between `latency` and `latency + period` old while none is lost)."""
+        return self.period + max(self.latency, self.max_latency)
+
+
+# The `realistic` preset, the one statement of its figures (docs/station.md cites them):
+REALISTIC = {
+    # UR3 (CB3): RTDE streams `actual_q`/`actual_qd` at 125 Hz (RTDE guide; docs/hardware.md,
+    # "UR3: RTDE"); latency one RTDE period (our assumption: the controller's cycle). Joint
+    # encoder step 1e-4 rad (*assumption*: the class of UR's absolute encoders; UR publishes
+    # the arm's ±0.1 mm repeatability, not the step). Velocity noise 1e-3 rad/s and no lost
+    # samples on the wired RTDE link (*assumptions*).
+    "ur3": SensorModel(
+        rate=125.0,
+        latency=0.008,
+        rate_noise=1e-3,
+        quantum=1e-4,
+        max_latency=0.008,
+        seed_offset=1,
+    ),
+    # RG2: the width register counts 1/10 mm (docs/hardware.md's register map, register 267),
+    # polled at 25 Hz (the driver's default; *assumption*: 10-50 Hz, issue 31), read 10 ms
+    # after the poll (*assumption*: a Modbus TCP round trip), 1% of the polls lost
+    # (*assumption*); the rate from successive readings, 1 mm/s of noise (*assumption*).
+    "rg2": SensorModel(
+        rate=25.0,
+        latency=0.01,
+        rate_noise=1e-3,
+        quantum=1e-4,
+        dropout=0.01,
+        max_latency=0.02,
+        seed_offset=2,
+    ),
+    # Body tracker: a depth camera with skeleton tracking at about 30 Hz, 50-100 ms latency
+    # (75 ms taken; 100 ms the bound) and centimetre noise (issue 31; docs/hardware.md, "Body
+    # tracker"); its velocities filtered to 5 cm/s of noise and 1% of frames lost (occlusion)
+    # (*assumptions*).
+    "body": SensorModel(
+        rate=30.0,
+        latency=0.075,
+        noise=0.01,
+        rate_noise=0.05,
+        dropout=0.01,
+        max_latency=0.1,
+        seed_offset=3,
+    ),
+}
+
+PRESETS: dict[str, dict[str, SensorModel]] = {
+    Preset.IDEAL.value: {},
+    Preset.REALISTIC.value: REALISTIC,
+}
+
+
+# Plain (not frozen) dataclasses: the YAML loaders set their fields one by one.
+@dataclass
+class SensorSettings:
+    """One port's overrides (`sensors.<port>`): each field left out (None) is the preset's."""
+
+    rate: float | None = None
+    latency: float | None = None
+    noise: float | None = None
+    rate_noise: float | None = None
+    quantum: float | None = None
+    dropout: float | None = None
+    max_latency: float | None = None
+    seed_offset: int | None = None
+
+    def given(self) -> dict[str, float | int]:
+        """The fields given, by name."""
+        return {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
+
+
+@dataclass
+class SensorsConfig:
+    """`sensors:` as a mapping: a `preset` and per-port overrides (see the module docstring)."""
+
+    preset: str = Preset.IDEAL.value
+    ur3: SensorSettings = field(default_factory=SensorSettings)
+    rg2: SensorSettings = field(default_factory=SensorSettings)
+    body: SensorSettings = field(default_factory=SensorSettings)
+
+
+Sensors = SensorsConfig | str
+
+
+def _check_model(model: SensorModel, key: str) -> None:
+    """ValueError naming `key.field` for a value no sensor can have."""
+
+    def bad(name: str, problem: str) -> ValueError:
+        return ValueError(f"{key}.{name}: {problem}, got {getattr(model, name)}")
+
+    if not (math.isfinite(model.rate) and model.rate > 0):
+        raise bad("rate", "give samples per second > 0")
+    for name in ("latency", "noise", "rate_noise", "quantum", "max_latency"):
+        value = getattr(model, name)
+        if not (math.isfinite(value) and value >= 0):
+            raise bad(name, "give a finite value >= 0")
+    if not 0.0 <= model.dropout < 1.0:
+        raise bad("dropout", "give a probability in [0, 1)")
+
+
+def sensor_models(sensors: Sensors, key: str = "sensors") -> dict[str, SensorModel]:
+    """The sensor model of each port that is not ideal, by station port name
+    (`ur3.state_estimated`, ...); empty under `ideal`. ValueError in one line naming the key for
+    an unknown preset or a value no sensor can have."""
+    preset = sensors if isinstance(sensors, str) else sensors.preset
+    where = key if isinstance(sensors, str) else f"{key}.preset"
+    if preset not in PRESETS:
+        raise ValueError(f"{where}: unknown preset {preset!r}; use {' or '.join(PRESETS)}")
+    base = PRESETS[preset]
+    models = {}
+    for name, port in PORTS.items():
+        model = base.get(name)
+        given = {} if isinstance(sensors, str) else getattr(sensors, name).given()
+        if given and model is None:
+            if "rate" not in given:
+                raise ValueError(
+                    f"{key}.{name}: give its rate [Hz]: under the {preset} preset the port "
+                    "has no sensor to override"
+                )
+            model = SensorModel(rate=given["rate"], seed_offset=list(PORTS).index(name) + 1)
+        if model is None:
+            continue
+        model = dataclasses.replace(model, **given)
+        if "latency" in given and "max_latency" not in given:
+            model = dataclasses.replace(model, max_latency=max(model.max_latency, model.latency))
+        _check_model(model, f"{key}.{name}")
+        if model.max_latency < model.latency:
+            raise ValueError(
+                f"{key}.{name}.max_latency: the bound must be >= latency {model.latency}, "
+                f"got {model.max_latency}"
+            )
+        models[port] = model
+    return models
+
+
+__all__ = [
+    "PORTS",
+    "PRESETS",
+    "REALISTIC",
+    "Preset",
+    "SensorModel",
+    "SensorSettings",
+    "Sensors",
+    "SensorsConfig",
+    "sensor_models",
+]

@@ -1,0 +1,192 @@
+"""Sensor models on the station's measured ports (`sensors:`): the section's presets, overrides
+and refusals, and the sampled sensor itself in a tiny diagram (rate, latency, noise,
+quantisation, dropout, determinism)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from pydrake.common.value import AbstractValue
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder, LeafSystem
+from pydrake.systems.primitives import ConstantVectorSource
+
+from hrc_drake.cell.controller.separation import BodyAge, stale_reading
+from hrc_drake.cell.ports import BodySpheres
+from hrc_drake.cell.station.sensors import SampledBody, SampledVector, quantise
+from hrc_drake.scenario.load import load_scenario
+from hrc_drake.scenario.schema import ScenarioError
+from hrc_drake.scenario.sensors import REALISTIC, SensorModel, sensor_models
+
+
+class Ramp(LeafSystem):
+    """A value t and its rate 1 (a vector of 2: value, rate)."""
+
+    def __init__(self):
+        super().__init__()
+        self.DeclareVectorOutputPort("y", 2, lambda c, o: o.SetFromVector([c.get_time(), 1.0]))
+
+
+def _sensor(model: SensorModel, seed: int = 0, source=None):
+    builder = DiagramBuilder()
+    source = builder.AddSystem(source if source is not None else Ramp())
+    sensor = builder.AddSystem(SampledVector(model, seed, 2))
+    builder.Connect(source.get_output_port(0), sensor.GetInputPort("input"))
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    simulator.Initialize()
+    context = sensor.GetMyContextFromRoot(simulator.get_context())
+    return simulator, sensor, context
+
+
+def _readings(model: SensorModel, times, seed: int = 0, source=None):
+    """(reading, stamp) at each of `times`."""
+    simulator, sensor, context = _sensor(model, seed, source)
+    out = []
+    for t in times:
+        simulator.AdvanceTo(t)
+        out.append(
+            (
+                sensor.GetOutputPort("reading").Eval(context).copy(),
+                float(sensor.GetOutputPort("stamp").Eval(context)[0]),
+            )
+        )
+    return out
+
+
+def test_output_updates_at_the_rate_and_arrives_latency_late():
+    model = SensorModel(rate=10.0, latency=0.25)
+    times = np.arange(0.0, 1.0, 0.01)
+    stamps = [stamp for _, stamp in _readings(model, times)]
+    # The first sample is delivered at once; then each sample k/10 is read from k/10 + 0.25.
+    for t, stamp in zip(times, stamps, strict=True):
+        expected = 0.0 if t < 0.25 - 1e-9 else np.floor((t - 0.25) * 10 + 1e-6) / 10
+        assert stamp == pytest.approx(expected, abs=1e-9), t
+    values = [reading[0] for reading, _ in _readings(model, times)]
+    assert values == pytest.approx([max(0.0, s) for s in stamps])  # the ramp's value at the stamp
+    assert len(set(stamps)) == 8  # 0, then 0.1 ... 0.7 by t = 0.99
+
+
+def test_noise_has_its_standard_deviation_and_the_rate_its_own():
+    model = SensorModel(rate=100.0, noise=0.01, rate_noise=0.5)
+    source = ConstantVectorSource([1.0, 0.0])
+    times = np.arange(0.005, 20.0, 0.01)
+    readings = np.array([reading for reading, _ in _readings(model, times, source=source)])
+    assert np.std(readings[:, 0]) == pytest.approx(0.01, rel=0.1)
+    assert np.mean(readings[:, 0]) == pytest.approx(1.0, abs=0.002)
+    assert np.std(readings[:, 1]) == pytest.approx(0.5, rel=0.1)
+
+
+def test_the_value_is_quantised_and_its_rate_not():
+    model = SensorModel(rate=50.0, quantum=0.003)
+    readings = _readings(model, np.arange(0.01, 1.0, 0.02))
+    for reading, _ in readings:
+        assert reading[0] / 0.003 == pytest.approx(round(reading[0] / 0.003), abs=1e-9)
+        assert reading[1] == 1.0
+    assert quantise(np.array([0.0051]), 0.0) == pytest.approx([0.0051])
+
+
+def test_a_dropped_sample_keeps_the_old_value_and_its_old_stamp():
+    model = SensorModel(rate=100.0, dropout=0.3)
+    times = np.arange(0.005, 3.0, 0.01)  # between samples: each sees the newest delivered
+    readings = _readings(model, times)
+    stale = 0
+    for (reading, stamp), t in zip(readings, times, strict=True):
+        assert reading[0] == pytest.approx(stamp)  # the value belongs to its stamp
+        stale += t - stamp > 0.01
+    assert 0.2 * len(times) < stale < 0.4 * len(times)  # about 30 % of the samples lost
+
+
+def test_the_same_seed_gives_the_same_readings_and_another_seed_others():
+    model = SensorModel(rate=100.0, noise=0.01, dropout=0.1)
+    times = np.arange(0.005, 0.5, 0.01)
+
+    def run(seed):
+        return np.array([np.r_[r, s] for r, s in _readings(model, times, seed=seed)])
+
+    first = run(3)
+    assert np.array_equal(first, run(3))
+    assert not np.array_equal(first, run(4))
+    offset = dataclasses.replace(model, seed_offset=1)
+    assert not np.array_equal(first, np.array([np.r_[r, s] for r, s in _readings(offset, times, 3)]))
+
+
+def test_a_fresh_context_starts_the_sensor_again():
+    model = SensorModel(rate=100.0, noise=0.01)
+    simulator, sensor, _ = _sensor(model)
+    simulator.AdvanceTo(0.3)
+    first = sensor.state(sensor.GetMyContextFromRoot(simulator.get_context()))
+    simulator, sensor, _ = _sensor(model)
+    simulator.AdvanceTo(0.3)
+    again = sensor.state(sensor.GetMyContextFromRoot(simulator.get_context()))
+    assert [s.value.tolist() for s in first.samples] == [s.value.tolist() for s in again.samples]
+    fresh = sensor.CreateDefaultContext()
+    assert sensor.state(fresh).samples == ()
+
+
+class _Body(LeafSystem):
+    def __init__(self, body: BodySpheres):
+        super().__init__()
+        self.DeclareAbstractOutputPort(
+            "body", lambda: AbstractValue.Make(body), lambda c, o: o.set_value(body)
+        )
+
+
+def test_the_body_reading_is_noisy_late_and_stamped():
+    body = BodySpheres(np.ones((4, 3)), np.full(4, 0.05), np.zeros((4, 3)), ((0, 4),))
+    model = SensorModel(rate=30.0, latency=0.075, noise=0.01, rate_noise=0.05, max_latency=0.1)
+    builder = DiagramBuilder()
+    source = builder.AddSystem(_Body(body))
+    sensor = builder.AddSystem(SampledBody(model, 0))
+    builder.Connect(source.get_output_port(0), sensor.GetInputPort("input"))
+    simulator = Simulator(builder.Build())
+    simulator.AdvanceTo(0.2)
+    context = sensor.GetMyContextFromRoot(simulator.get_context())
+    reading = sensor.GetOutputPort("reading").Eval(context)
+    assert reading.stamp == pytest.approx(3 / 30)  # 3/30 + 0.075 <= 0.2 < 4/30 + 0.075
+    assert reading.radii.tolist() == body.radii.tolist() and reading.groups == body.groups
+    assert 0 < np.abs(reading.centres - body.centres).max() < 0.06
+    assert 0 < np.abs(reading.velocities).max() < 0.3
+    age = BodyAge(stale_after=model.stale_after, latency=model.max_latency)
+    assert not stale_reading(reading, 0.2, age)
+    assert stale_reading(reading, reading.stamp + 1 / 30 + 0.1 + 0.001, age)
+    assert not stale_reading(dataclasses.replace(reading, stamp=None), 100.0, age)
+
+
+def test_the_presets_and_their_overrides_parse():
+    assert sensor_models(load_scenario("row1-optimal").sensors) == {}
+    realistic = sensor_models(load_scenario("row1-optimal", "{sensors: realistic}").sensors)
+    assert set(realistic) == {"ur3.state_estimated", "rg2.state_measured", "operator.body"}
+    assert realistic["ur3.state_estimated"] == REALISTIC["ur3"]
+    assert realistic["ur3.state_estimated"].rate == 125.0
+    assert realistic["operator.body"].latency == 0.075
+    text = "{sensors: {preset: realistic, body: {latency: 0.09, dropout: 0.0}}}"
+    body = sensor_models(load_scenario("row1-optimal", text).sensors)["operator.body"]
+    assert (body.latency, body.dropout, body.rate) == (0.09, 0.0, 30.0)
+    only = sensor_models(load_scenario(None, "{sensors: {rg2: {rate: 10}}}").sensors)
+    assert list(only) == ["rg2.state_measured"] and only["rg2.state_measured"].noise == 0.0
+
+
+@pytest.mark.parametrize(
+    "text, named",
+    [
+        ("{sensors: real}", "sensors: unknown preset 'real'; use ideal or realistic"),
+        ("{sensors: {preset: exact}}", "sensors.preset: unknown preset 'exact'"),
+        ("{sensors: {body: {rat: 3}}}", "sensors.body.rat: unknown key"),
+        ("{sensors: {body: {latency: 0.1}}}", "sensors.body: give its rate [Hz]"),
+        ("{sensors: {preset: realistic, rg2: {dropout: 1.0}}}", "sensors.rg2.dropout"),
+        ("{sensors: {preset: realistic, ur3: {rate: 0}}}", "sensors.ur3.rate"),
+        ("{sensors: {preset: realistic, ur3: {noise: -1}}}", "sensors.ur3.noise"),
+        (
+            "{sensors: {preset: realistic, body: {max_latency: 0.01}}}",
+            "sensors.body.max_latency: the bound must be >= latency",
+        ),
+    ],
+)
+def test_a_malformed_section_is_refused_in_one_line(text, named):
+    with pytest.raises(ScenarioError) as err:
+        load_scenario("row1-optimal", text)
+    message = str(err.value)
+    assert named in message and "\n" not in message
