@@ -13,9 +13,9 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource
 
-from hrc_drake.cell.controller.separation import BodyAge, stale_reading
+from hrc_drake.cell.controller.separation import BodyAge, reading_age, stale_reading
 from hrc_drake.cell.ports import BodySpheres
-from hrc_drake.cell.station.sensors import SampledBody, SampledVector, quantise
+from hrc_drake.cell.station.sensors import SampledBody, SampledVector, export_measured, quantise
 from hrc_drake.scenario.load import load_scenario
 from hrc_drake.scenario.schema import ScenarioError
 from hrc_drake.scenario.sensors import REALISTIC, SensorModel, sensor_models
@@ -109,8 +109,9 @@ def test_the_same_seed_gives_the_same_readings_and_another_seed_others():
     first = run(3)
     assert np.array_equal(first, run(3))
     assert not np.array_equal(first, run(4))
-    offset = dataclasses.replace(model, seed_offset=1)
-    assert not np.array_equal(first, np.array([np.r_[r, s] for r, s in _readings(offset, times, 3)]))
+    other = dataclasses.replace(model, seed_offset=1)
+    offset = [np.r_[r, s] for r, s in _readings(other, times, 3)]
+    assert not np.array_equal(first, np.array(offset))
 
 
 def test_a_fresh_context_starts_the_sensor_again():
@@ -149,7 +150,8 @@ def test_the_body_reading_is_noisy_late_and_stamped():
     assert reading.radii.tolist() == body.radii.tolist() and reading.groups == body.groups
     assert 0 < np.abs(reading.centres - body.centres).max() < 0.06
     assert 0 < np.abs(reading.velocities).max() < 0.3
-    age = BodyAge(stale_after=model.stale_after, latency=model.max_latency)
+    age = BodyAge(stale_after=model.stale_after)
+    assert reading_age(reading, 0.2) == pytest.approx(0.1)
     assert not stale_reading(reading, 0.2, age)
     assert stale_reading(reading, reading.stamp + 1 / 30 + 0.1 + 0.001, age)
     assert not stale_reading(dataclasses.replace(reading, stamp=None), 100.0, age)
@@ -190,3 +192,34 @@ def test_a_malformed_section_is_refused_in_one_line(text, named):
         load_scenario("row1-optimal", text)
     message = str(err.value)
     assert named in message and "\n" not in message
+
+
+@pytest.mark.parametrize("preset", ["ideal", "realistic"])
+def test_ideal_inserts_nothing_and_realistic_a_sensor_with_its_stamp(preset):
+    scenario = load_scenario("row1-optimal", f"{{sensors: {preset}}}")
+    builder = DiagramBuilder()
+    source = builder.AddSystem(Ramp())  # a value and its rate, as rg2.state_measured
+    export_measured(builder, source.get_output_port(0), "rg2.state_measured", scenario)
+    diagram = builder.Build()
+    ports = [diagram.get_output_port(i).get_name() for i in range(diagram.num_output_ports())]
+    if preset == "ideal":
+        assert ports == ["rg2.state_measured"] and len(diagram.GetSystems()) == 1
+    else:
+        assert ports == ["rg2.state_measured", "rg2.state_measured.stamp", "sim.rg2.state_measured"]
+        assert diagram.HasSubsystemNamed("sensor.rg2.state_measured")
+
+
+@pytest.mark.slow
+def test_row_1_runs_to_its_end_with_realistic_sensors():
+    """One lean run with `sensors: realistic`: late, noisy, quantised readings that are now and
+    then lost, and the cell still ends terminal in its states, without a collision."""
+    from hrc_drake.cell.run.run import run_scenario
+    from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+
+    scenario = load_cell_scenario("row1-optimal", [LEAN, "{sensors: realistic}"])
+    result = run_scenario(scenario)
+    assert result.error is None, result.error
+    assert result.done and result.final_kind == "terminal"
+    assert result.collisions == []
+    assert result.names == list(load_scenario("row1-optimal").minimum_effort)
+    assert result.safety.violations == 0 and result.safety.body_contacts == 0

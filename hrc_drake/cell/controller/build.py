@@ -148,11 +148,9 @@ def keep_clear_settings(
 
 def body_age(scenario: Scenario) -> BodyAge:
     """What the separation monitor allows for the body reading's age under the scenario's
-    `sensors:`: its tracker's staleness bound and latency (an exact tracker: none)."""
+    `sensors:`: its tracker's staleness bound (an exact tracker: none)."""
     model = sensor_models(scenario.sensors).get(PORTS["body"])
-    if model is None:
-        return BodyAge()
-    return BodyAge(stale_after=model.stale_after, latency=model.max_latency)
+    return BodyAge() if model is None else BodyAge(stale_after=model.stale_after)
 
 
 def make_controller(

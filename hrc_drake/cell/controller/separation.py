@@ -262,23 +262,26 @@ def plan_moves(intent: MotionIntent) -> bool:
 @dataclass(frozen=True)
 class BodyAge:
     """What the monitor allows for the tracked body's age (`sensors:`; the scenario's body
-    sensor model, `hrc_drake.scenario.sensors.SensorModel`).
+    sensor model, `hrc_drake.scenario.sensors.SensorModel`). A fresh reading's age (now minus
+    `BodySpheres.stamp`) is added to the reaction time the plan keeps S_p with: the person
+    moved meanwhile.
 
     Attributes:
-        stale_after: a reading (`BodySpheres.stamp`) older than this [s] is no body seen: the
-            plan stops until a fresh one comes (the tracker's period plus its latency bound).
-        latency: the reading's age bound [s] while fresh, added to the reaction time the plan
-            keeps S_p with (the person moved meanwhile).
+        stale_after: a reading older than this [s] is no body seen: the plan stops until a
+            fresh one comes (the tracker's period plus its latency bound).
     """
 
     stale_after: float = float("inf")
-    latency: float = 0.0
+
+
+def reading_age(body: BodySpheres, now: float) -> float:
+    """How old `body` is at `now` [s] (a reading without a stamp is current: 0)."""
+    return 0.0 if body.stamp is None else max(0.0, now - body.stamp)
 
 
 def stale_reading(body: BodySpheres, now: float, age: BodyAge) -> bool:
-    """Whether `body`, read at `now`, is older than `age.stale_after` (a reading without a
-    stamp is current)."""
-    return body.stamp is not None and now - body.stamp > age.stale_after + 1e-9
+    """Whether `body`, read at `now`, is older than `age.stale_after`."""
+    return reading_age(body, now) > age.stale_after + 1e-9
 
 
 class ControllerSeparationMonitor(LeafSystem):
@@ -341,7 +344,7 @@ class ControllerSeparationMonitor(LeafSystem):
             self._config,
             self._acc,
             opening,
-            self._period + self._age.latency,
+            self._period + reading_age(body, context.get_time()),
         )
         if stale_reading(body, context.get_time(), self._age):
             # No body seen: the person may be anywhere, so the plan stops (docs/hardware.md,
@@ -368,5 +371,6 @@ __all__ = [
     "log_step",
     "plan_moves",
     "planned_scales",
+    "reading_age",
     "stale_reading",
 ]
