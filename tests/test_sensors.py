@@ -223,3 +223,15 @@ def test_row_1_runs_to_its_end_with_realistic_sensors():
     assert result.collisions == []
     assert result.names == list(load_scenario("row1-optimal").minimum_effort)
     assert result.safety.violations == 0 and result.safety.body_contacts == 0
+
+
+@pytest.mark.parametrize(
+    "text", ["{}", "{sensors: realistic}", "{sensors: {preset: realistic, body: {rate: 15}}}"]
+)
+def test_drakes_loader_reads_the_section_as_ours(text):
+    from pydrake.common.yaml import yaml_load_typed
+
+    from hrc_drake.scenario.schema import Scenario
+
+    drakes = yaml_load_typed(schema=Scenario, data=text, defaults=Scenario()).sensors
+    assert drakes == load_scenario(None, text).sensors

@@ -17,8 +17,6 @@ ideal in a mapping over `ideal` stays so; a port given there starts from an exac
 needs its `rate`. Drake-free, as the loader is.
 """
 
-from __future__ import annotations
-
 import dataclasses
 import math
 from dataclasses import dataclass, field
