@@ -1,5 +1,7 @@
 """The operator's body in the cell and speed and separation monitoring (ISO/TS 15066 §5.5.4)."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from pydrake.multibody.tree import JacobianWrtVariable
@@ -7,6 +9,7 @@ from pydrake.systems.analysis import Simulator
 
 from hrc_drake.cell.controller.intent import MotionIntent
 from hrc_drake.cell.controller.separation import (
+    BodyAge,
     ControllerSeparationMonitor,
     SafetyLog,
     SeparationReading,
@@ -362,6 +365,35 @@ def test_the_monitor_system_reads_only_measured_ports_and_logs_each_period(cell)
     assert log.min_separation == pytest.approx(reading.separation)
     assert log.slowed_time == pytest.approx(0.02 * log.steps)
     assert log.stopped_time == 0.0 and log.body_contacts == 0
+
+
+def test_a_late_body_reading_counts_its_age_and_a_stale_one_stops_the_plan(cell):
+    """With a body sensor model (`sensors:`), the monitor adds the reading's age to the reaction
+    time it keeps S_p with, and a reading older than `BodyAge.stale_after` is no body seen:
+    speed limit 0."""
+    station, envelope = cell
+    age = BodyAge(stale_after=0.133)
+    monitor = ControllerSeparationMonitor(
+        station.design, SafetyConfig(), 3.0, 0.02, envelope=envelope, age=age
+    )
+    q, qdot = np.array(POSTURES[0]), np.array([0.6, 0.3, 0.0, 0.0, 0.0, 0.0])
+    p, v = _tcp_motion(envelope, q, qdot)
+    hand = dataclasses.replace(_one_sphere(p + 0.8 * v / np.linalg.norm(v), radius=0.05), stamp=0.0)
+    intent = MotionIntent(qdot=qdot, moving=True, rate=1.0)
+    context = monitor.CreateDefaultContext()
+    monitor.GetInputPort("ur3.state_estimated").FixValue(context, np.concatenate([q, qdot]))
+    monitor.GetInputPort("operator.body").FixValue(context, hand)
+    monitor.GetInputPort("intent").FixValue(context, intent)
+    context.SetTime(0.1)
+    late = monitor.GetOutputPort("reading").Eval(context)
+    assert not late.stale
+    assert late == assess(envelope, q, qdot, hand, intent, SafetyConfig(), 3.0, None, 0.12)
+    fresh = assess(envelope, q, qdot, hand, intent, SafetyConfig(), 3.0, None, 0.02)
+    assert 0.0 < late.limit < fresh.limit  # the age costs speed
+    context.SetTime(0.134)
+    stale = monitor.GetOutputPort("reading").Eval(context)
+    assert stale.stale and stale.limit == 0.0
+    assert monitor.GetOutputPort("speed_limit").Eval(context)[0] == 0.0
 
 
 def test_the_log_counts_time_stopped_or_slowed_only_where_the_plan_would_move():
