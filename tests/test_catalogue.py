@@ -39,10 +39,17 @@ def test_every_other_catalogue_scenario_runs_lean_to_its_terminal_state(name):
     assert result.collisions == []
     if result.safety is not None:
         assert result.safety.violations == 0 and result.safety.body_contacts == 0
-        # The run's own check, the same for every mode (`hrc_drake.cell.run.safety_check`).
+        # The run's own check, the same for every mode (`hrc_drake.cell.run.safety_check`):
+        # inside S_p only at the contact speed, which power and force limiting permits.
         assert (
             result.safety_check.beyond_contact_speed == 0 and result.safety_check.body_contacts == 0
         )
+        # `simulate --json`'s `safety` is the check's, the monitor's own count apart.
+        data = json.loads(json.dumps(result.to_json()))["safety"]
+        assert data["violations"] == result.safety_check.violations
+        assert data["violations_beyond_contact_speed"] == 0 and data["body_contacts"] == 0
+        assert data["monitor_violations"] == result.safety.violations
+        assert data["checked_steps"] == pytest.approx(result.sim_time / 0.02, abs=2)
     expected = load_scenario(name).minimum_effort
     if expected:
         assert result.names == list(expected)

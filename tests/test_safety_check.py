@@ -3,7 +3,6 @@ actual travel toward the robot, so a hand that sets off toward the moving arm is
 it went, not by its speed when it set off."""
 
 import dataclasses
-import json
 
 import numpy as np
 import pytest
@@ -163,24 +162,6 @@ def test_a_trace_takes_one_sample_a_period():
         if trace.due(float(now)):
             trace.add(dataclasses.replace(sample, time=float(now)))
     assert [round(s.time, 3) for s in trace.samples] == [0.0, 0.02, 0.04, 0.06, 0.08]
-
-
-@pytest.mark.slow
-def test_simulate_reports_the_check_under_safety(tmp_path):
-    """`simulate --json`: `safety.violations`, `least_margin`, `body_contacts` are the check's;
-    the monitor's own count is `monitor_violations`."""
-    from hrc_drake.cell.run.run import run_scenario
-    from hrc_drake.cell.scenario import LEAN, load_cell_scenario
-
-    result = run_scenario(load_cell_scenario("shared-desk", LEAN))
-    data = json.loads(json.dumps(result.to_json()))["safety"]
-    assert data["violations"] == result.safety_check.violations
-    # Inside S_p only at the contact speed, which power and force limiting permits.
-    assert data["violations_beyond_contact_speed"] == 0
-    # None: the arm never moved inside S_p faster toward the person than the contact speed.
-    assert data["body_contacts"] == 0 and (data["least_margin"] is None or data["least_margin"] > 0)
-    assert data["monitor_violations"] == result.safety.violations
-    assert data["checked_steps"] == pytest.approx(result.sim_time / 0.02, abs=2)
 
 
 def test_bounded_travel_speeds_up_to_the_cap_and_no_further():
