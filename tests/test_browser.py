@@ -52,6 +52,11 @@ CHROMIUM_ARGS = [
     "--disable-sync",
 ]
 VIEW = {"width": 1280, "height": 800}
+# The page's device pixels per CSS pixel. Chromium draws WebGL in software here: at half scale a
+# Meshcat page costs a quarter of the pixels, and its layout (what the tests check: the panel,
+# the buttons in view, where the scene's objects fall) is the same 1280×800 in CSS pixels. The
+# README's screenshots (HRC_DRAKE_SCREENSHOTS) are taken at full scale.
+RENDER_SCALE = 1.0 if os.environ.get("HRC_DRAKE_SCREENSHOTS") else 0.5
 # Our buttons sit in the panel's top level; Drake's own (save_scene, …) are in folders.
 BUTTONS = ".dg.main > ul > li.cr.function"
 STEP_TIMEOUT = 180.0  # s; a task at the wall clock's pace is ~8 s, planning on a busy CI more
@@ -127,7 +132,7 @@ class Page:
     opened: ClassVar[list] = []
 
     def _new_page(self):
-        page = self.browser.new_page(viewport=VIEW)
+        page = self.browser.new_page(viewport=VIEW, device_scale_factor=RENDER_SCALE)
         Page.opened.append(page)
         page.on("console", lambda m: self.errors.append(m.text) if m.type == "error" else None)
         page.on("pageerror", lambda e: self.errors.append(f"page error: {e}"))
@@ -451,44 +456,6 @@ def test_a_shared_desk_recording_shows_the_bins_and_the_robots_forecast(chromium
     assert page.errors == [], page.errors
 
 
-def test_a_person_does_a_task_the_robot_hands_over(chromium, tmp_path):
-    """Row 1 by hand with a part lost on its first carry that the robot may not pick again
-    (`run.recover_tries: 0`): the panel shows one button, "I did F1"; the person clicks it (as
-    if they had put the flange in place themselves) and the run goes on to its terminal state,
-    the step counted as handed over. The robot waits for each click (`interaction: wait`), so
-    that the part is lost after the person's answer however slowly the page comes up."""
-    text = (
-        "{interaction: {mode: wait}, run: {recover_tries: 0, indication_timeout: 60.0}, "
-        "faults: [!GripLost {task: 1}]}"
-    )
-    port = free_port()
-    args = ["--live", "--lean", "--scenario", "row1-optimal", "--port", str(port)]
-    run = SimulateProcess(*args, "--scenario-text", text, "--json")
-    try:
-        url = run.wait_for_line(r"live: open (http://\S+) in a web browser", STEP_TIMEOUT)[1]
-        page = Page(chromium)
-        page.open_live(url)
-        run.wait_for_line(r"^step 1: the robot proposes F1\b", STEP_TIMEOUT)
-        page.click(page.wait_for_panel(first="F1 - robot proposal")[0])
-        labels = page.wait_for_panel(first="I did F1", timeout=STEP_TIMEOUT)
-        assert labels == ["I did F1"] and page.buttons_out_of_view() == []
-        page.screenshot(tmp_path, "live_handover.png")
-        page.click("I did F1")
-        for step, proposal in ((2, "S23"), (3, "F03")):
-            run.wait_for_line(f"^step {step}: the robot proposes {proposal}\\b", STEP_TIMEOUT)
-            page.click(page.wait_for_panel(first=f"{proposal} - robot proposal")[0])
-        code, out, err = run.finish(STEP_TIMEOUT)
-    finally:
-        run.kill()
-    assert code == 0, err[-5:]
-    assert page.errors == [], page.errors
-    data = json.loads(out)
-    assert data["terminal"] and data["error"] is None
-    assert data["names"] == ["1", "2", "7", "10"]
-    assert data["handovers"] == 1
-    assert [bool(s["handed_over"]) for s in data["steps"]] == [True, False, False]
-
-
 def _arm_in_scene(page: Page) -> list[list[float]]:
     """Where the page draws the UR3: every mesh's world position under the arm's model."""
     return page.page.evaluate(
@@ -527,18 +494,22 @@ def _moved(before: list[list[float]], after: list[list[float]]) -> float:
     return max(abs(a - b) for p, q in pairs for a, b in zip(p, q, strict=True))
 
 
-def test_a_person_unlocks_a_protective_stop(chromium, tmp_path):
-    """Row 1 by hand with a protective stop 1 s into task 1 (the input on for 0.5 s): the panel
-    shows "Unlock protective stop" and the run holds, the arm still in the page and no unlock
-    in the terminal, for 3 s after the stop's 5 s unlock wait (the simulated operator would
-    have unlocked 1 s after the cause cleared, long before); the person clicks it, and the run
-    goes on to its terminal state, its JSON counting the stop and the unlock."""
+def test_a_person_does_a_task_handed_over_and_unlocks_a_protective_stop(chromium, tmp_path):
+    """Row 1 by hand with two faults, each met by the person in the panel. Task 1: a part lost
+    on its first carry that the robot may not pick again (`run.recover_tries: 0`): the panel
+    shows one button, "I did F1"; the person clicks it (as if they had put the flange in place
+    themselves) and the step counts as handed over. Task 2: a protective stop 1 s in (the input
+    on for 0.5 s): the panel shows "Unlock protective stop" and the run holds, the arm still in
+    the page and no unlock in the terminal, for 3 s after the stop's 5 s unlock wait (the
+    simulated operator would have unlocked 1 s after the cause cleared, long before); the person
+    clicks it, and the run goes on to its terminal state, its JSON counting both. The robot
+    waits for each click (`interaction: wait`), so that each fault comes after the person's
+    answer however slowly the page comes up."""
     from hrc_drake.hri.pendant import UNLOCK_LABEL
 
-    # SLOW_PAGE's indication timeout, with the fault.
     text = (
-        "{run: {indication_timeout: 60.0}, "
-        "faults: [!ProtectiveStop {task: 1, after: 1.0, duration: 0.5}]}"
+        "{interaction: {mode: wait}, run: {recover_tries: 0, indication_timeout: 60.0}, "
+        "faults: [!GripLost {task: 1}, !ProtectiveStop {task: 2, after: 1.0, duration: 0.5}]}"
     )
     port = free_port()
     args = ["--live", "--lean", "--scenario", "row1-optimal", "--port", str(port)]
@@ -548,12 +519,16 @@ def test_a_person_unlocks_a_protective_stop(chromium, tmp_path):
         page = Page(chromium)
         page.open_live(url)
         run.wait_for_line(r"^step 1: the robot proposes F1\b", STEP_TIMEOUT)
-        page.click(page.wait_for_panel(first="F1 - robot proposal" + ON_ITS_WAY)[0])
-        # The stop comes 1 s into task 1, which the robot starts on before the click
-        # (anticipating): the person may click F1 during the stop or before it.
+        page.click(page.wait_for_panel(first="F1 - robot proposal")[0])
+        labels = page.wait_for_panel(first="I did F1", timeout=STEP_TIMEOUT)
+        assert labels == ["I did F1"] and page.buttons_out_of_view() == []
+        page.screenshot(tmp_path, "live_handover.png")
+        page.click("I did F1")
+        run.wait_for_line(r"^step 2: the robot proposes S23\b", STEP_TIMEOUT)
+        page.click(page.wait_for_panel(first="S23 - robot proposal")[0])
         run.wait_for_line(r"^protective stop at \d+\.\d+ s: the robot holds", STEP_TIMEOUT)
         run.wait_for_line(r"^protective stop: 5 s have passed", STEP_TIMEOUT)
-        # Once the page draws what the run did until now (the F1 buttons gone, the unlock up,
+        # Once the page draws what the run did until now (the S23 buttons gone, the unlock up,
         # the arm still), the run must not go on by itself: 3 s more, the arm stays where it
         # is, the unlock stays up, and the terminal says nothing.
         assert page.wait_for_panel(first=UNLOCK_LABEL) == [UNLOCK_LABEL]
@@ -562,12 +537,10 @@ def test_a_person_unlocks_a_protective_stop(chromium, tmp_path):
         assert _moved(held, _arm_in_scene(page)) < 1e-4
         assert run.stderr_lines[lines:] == [] and run.proc.poll() is None
         assert page.panel() == [UNLOCK_LABEL] and page.buttons_out_of_view() == []
-        page.screenshot(tmp_path, "live_unlock.png")
         page.click(UNLOCK_LABEL)
         run.wait_for_line(r"^protective stop unlocked at", STEP_TIMEOUT, start=lines)
-        for step, proposal in ((2, "S23"), (3, "F03")):
-            run.wait_for_line(f"^step {step}: the robot proposes {proposal}\\b", STEP_TIMEOUT)
-            page.click(page.wait_for_panel(first=f"{proposal} - robot proposal{ON_ITS_WAY}")[0])
+        run.wait_for_line(r"^step 3: the robot proposes F03\b", STEP_TIMEOUT)
+        page.click(page.wait_for_panel(first="F03 - robot proposal")[0])
         code, out, err = run.finish(STEP_TIMEOUT)
     finally:
         run.kill()
@@ -577,10 +550,11 @@ def test_a_person_unlocks_a_protective_stop(chromium, tmp_path):
     data = json.loads(out)
     assert data["terminal"] and data["error"] is None and not data["interrupted"]
     assert data["names"] == ["1", "2", "7", "10"]
+    assert data["handovers"] == 1
+    assert [bool(s["handed_over"]) for s in data["steps"]] == [True, False, False]
     function = data["safety"]["function"]
     assert (function["protective_stops"], function["unlocks"]) == (1, 1), function
     assert function["stopped_time"] > 8.0, function  # 5 s wait, 3 s held beyond it, the click
-    (fault,) = data["faults"]
-    assert fault["kind"] == "protective-stop" and fault["task"] == 1, fault
-    assert fault["detected_at"] is not None and fault["recovered"], fault
-    assert fault["recovery"] == "resume" and fault["seconds_lost"] > 8.0, fault
+    (stop,) = [f for f in data["faults"] if f["kind"] == "protective-stop"]
+    assert stop["task"] == 2 and stop["detected_at"] is not None and stop["recovered"], stop
+    assert stop["recovery"] == "resume" and stop["seconds_lost"] > 8.0, stop
