@@ -96,7 +96,10 @@ class _SampledSensor(LeafSystem):
         return context.get_abstract_state(self._state).get_value()
 
     def _corrupt(self, value, rng: np.random.Generator):
-        raise NotImplementedError
+        """The reading of the true `value` as this kind of sensor gives it (noise from `rng`).
+        Each subclass says it for its value's type: `SampledVector` for vectors,
+        `SampledBody` for the tracked body; the base sampler is never used alone."""
+        raise NotImplementedError(f"{type(self).__name__} does not say how it reads a value")
 
     def _take(self, context, state, first: bool) -> None:
         now = context.get_time()
