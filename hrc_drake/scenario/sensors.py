@@ -128,7 +128,7 @@ REALISTIC = {
     # period late (an e-Series streams RTDE at 500 Hz: the 10 ms plant step could not tell the
     # two apart); 1 N and 0.05 N·m of noise (*assumption*: of the order of the precision UR
     # states for the UR3e's sensor, a few newtons; a CB3 estimates the load from its joint
-    # currents, about ±10 N, too coarse for the guarded descent's 10 N, docs/station.md).
+    # currents, about ±10 N, too coarse for the guarded descent's 8 N, docs/station.md).
     "wrench": SensorModel(
         rate=125.0,
         latency=0.008,

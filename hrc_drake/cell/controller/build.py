@@ -19,6 +19,7 @@ import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
 from hrc_drake.cell.controller.forecast import OperatorForecast
+from hrc_drake.cell.controller.guard import GuardSettings
 from hrc_drake.cell.controller.intent import MotionIntent
 from hrc_drake.cell.controller.keep_clear import KeepClearSettings
 from hrc_drake.cell.controller.separation import (
@@ -96,6 +97,12 @@ def supervisor_limits(scenario: Scenario, options: MotionOptions) -> SupervisorL
         recover_tries=run.recover_tries,
         path_timeout=run.path_timeout,
         anticipate=scenario.interaction_model().anticipates,
+        guard=GuardSettings(
+            threshold=run.place_guard,
+            descent=options.approach_distance,
+            enabled=run.place_guard > 0,
+        ),
+        gripper_time=options.gripper_time,
     )
 
 
