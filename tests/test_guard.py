@@ -133,3 +133,15 @@ def test_without_a_reading_or_disabled_it_never_trips_and_a_new_plan_starts_it_a
     assert trip is None and state.zero == pytest.approx(-WEIGHT)
     state, _ = guard.watch(state, plan, 5.0, 1.0, Q_TOP, np.array([0, 0, -1.0, 0, 0, 0]))
     assert state.plan_start == 5.0 and state.readings == (-1.0,) and state.zero is None
+
+
+@pytest.mark.parametrize("value", ["-1", ".nan", ".inf"])
+def test_a_guard_force_no_sensor_can_read_is_refused_in_one_line(value):
+    from hrc_drake.scenario.load import load_scenario
+    from hrc_drake.scenario.schema import ScenarioError
+
+    problem = r"run\.place_guard: (give newtons >= 0|.*finite)"
+    with pytest.raises(ScenarioError, match=problem) as err:
+        load_scenario("row1-optimal", f"{{run: {{place_guard: {value}}}}}")
+    assert "\n" not in str(err.value)
+    assert load_scenario("row1-optimal", "{run: {place_guard: 0}}").run.place_guard == 0.0
