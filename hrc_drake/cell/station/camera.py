@@ -81,6 +81,14 @@ def _rotation(vector: np.ndarray) -> RotationMatrix:
     return RotationMatrix(AngleAxis(angle, vector / angle))
 
 
+def noisy_pose(X: RigidTransform, model: SensorModel, draw: np.ndarray) -> RigidTransform:
+    """The camera's estimate of the pose `X` for six standard normal draws: `model.noise`
+    times the first three added to the position, the orientation turned by the rotation vector
+    `model.angle_noise` times the last three (world axes)."""
+    R = _rotation(model.angle_noise * np.asarray(draw[3:])) @ X.rotation()
+    return RigidTransform(R, X.translation() + model.noise * np.asarray(draw[:3]))
+
+
 class CameraSensor(SampledSensor):
     """The camera (module docstring). Inputs: `truth` (the contact sensor's CellConfiguration:
     the exact pose of every part, the obstacle), `body_poses` (the plant's). Outputs: `reading`
@@ -114,13 +122,12 @@ class CameraSensor(SampledSensor):
 
     def _corrupt(self, value, rng: np.random.Generator) -> CameraFrame:
         truth, poses = value
-        model, geometry = self.model, self._geometry
+        geometry = self._geometry
         draws = rng.standard_normal((len(self._parts), 6))
         estimated = {}
         for part, draw in zip(self._parts, draws, strict=True):
             X = placement_transform(truth.placement(part))
-            R = _rotation(model.angle_noise * draw[3:]) @ X.rotation()
-            estimated[part] = RigidTransform(R, X.translation() + model.noise * draw[:3])
+            estimated[part] = noisy_pose(X, self.model, draw)
         X_W_tcp = None
         if geometry.tcp is not None:
             body, X_BT = geometry.tcp
@@ -194,4 +201,5 @@ __all__ = [
     "CameraReading",
     "CameraSensor",
     "export_configuration",
+    "noisy_pose",
 ]
