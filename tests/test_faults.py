@@ -349,12 +349,6 @@ def test_a_grip_too_weak_for_the_part_slips_and_is_detected():
     assert "square_flange slipped out of the gripper 3 times" in second.handed_over
 
 
-def test_without_faults_nothing_is_injected_or_detected():
-    loop = build_closed_loop(load_cell_scenario("row1-optimal", LEAN))
-    result = loop.run()
-    assert result.done and result.faults == () and loop.status.detections == ()
-
-
 @pytest.mark.parametrize(
     ("entry", "message"),
     [

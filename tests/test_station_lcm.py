@@ -234,6 +234,10 @@ def test_station_record_round_trips_through_the_report():
     bare = {"sim_time": 9.0, "exchanges": 900}
     assert StationRecord.from_report(bare) is None
     assert StationRecord.from_report({**bare, **StationRecord().to_json()}) == StationRecord()
+    # A camera's score rides along (only with a camera: the key is absent without one).
+    assert "camera" not in record.to_json()
+    camera = StationRecord(camera={"frames": 3, "false_detections": 0, "events": []})
+    assert StationRecord.from_report({**bare, **camera.to_json()}) == camera
     report["injected"][0]["colour"] = "red"
     with pytest.raises(StationLinkError, match="the cell station's report has a fault record"):
         StationRecord.from_report(report)

@@ -273,13 +273,20 @@ class Supervisor(LeafSystem):
             return self._recovery.wait_for_path(status, cell.configuration(), now)
         if mode == Mode.EXECUTE:
             return self._execute(status, cell, now)
-        if mode == Mode.SETTLE and now >= status.settle_until:
+        if mode == Mode.SETTLE and self._settled(status, cell, now):
             return self._observe(status, cell, now)
-        if mode == Mode.RECOVER and now >= status.settle_until:
+        if mode == Mode.RECOVER and self._settled(status, cell, now):
             return self._recovery.pick_again(status, cell.configuration(), now)
         if mode == Mode.HANDOVER:
             return self._recovery.wait_for_operator(status, cell, now)
         return status
+
+    @staticmethod
+    def _settled(s: SupervisorStatus, cell: Readings, now: float) -> bool:
+        """The parts have had their time to settle, and the configuration sensor's reading
+        describes the cell since then (a camera's verdicts come a few frames late: the reading
+        says up to when they hold, `CellConfiguration.current_at`; an exact sensor's hold now)."""
+        return now >= s.settle_until and cell.configuration().current_at(s.settle_until)
 
     def _check_tracking(self, s: SupervisorStatus, cell: Readings, now: float) -> None:
         """Stop when a joint is farther from its command than the tolerance (the command of
