@@ -160,7 +160,12 @@ def test_the_body_reading_is_noisy_late_and_stamped():
 def test_the_presets_and_their_overrides_parse():
     assert sensor_models(load_scenario("row1-optimal").sensors) == {}
     realistic = sensor_models(load_scenario("row1-optimal", "{sensors: realistic}").sensors)
-    assert set(realistic) == {"ur3.state_estimated", "rg2.state_measured", "operator.body"}
+    assert set(realistic) == {
+        "ur3.state_estimated",
+        "ur3.tcp_force",
+        "rg2.state_measured",
+        "operator.body",
+    }
     assert realistic["ur3.state_estimated"] == REALISTIC["ur3"]
     assert realistic["ur3.state_estimated"].rate == 125.0
     assert realistic["operator.body"].latency == 0.075

@@ -8,10 +8,13 @@ models"). Apart from `hrc_drake.scenario.schema`, which takes it as its `sensors
     sensors: {preset: realistic, configuration: camera}                # a camera for the parts
 
 The measured ports modelled, by key: `ur3` (`ur3.state_estimated`: joint positions [rad], then
-velocities [rad/s]), `rg2` (`rg2.state_measured`: opening [m], then its rate [m/s]) and `body`
-(`operator.body`: sphere centres [m], then their velocities [m/s]). Each reading is a value and
+velocities [rad/s]), `rg2` (`rg2.state_measured`: opening [m], then its rate [m/s]), `body`
+(`operator.body`: sphere centres [m], then their velocities [m/s]) and `wrench`
+(`ur3.tcp_force`: the wrist load's force [N], then its moment [N·m]). Each reading is a value and
 its rate of change, so a model has one noise for each (`noise`, `rate_noise`) and quantises the
-value only (an encoder's or a register's step; the rate is derived from it).
+value only (an encoder's or a register's step; the rate is derived from it); the wrench's two
+halves are its force and its moment, so there `noise` is the force's [N] and `rate_noise` the
+moment's [N·m].
 
 Under `ideal` the station inserts nothing: its diagram is the one it always was. A port left
 ideal in a mapping over `ideal` stays so; a port given there starts from an exact sensor and
@@ -50,6 +53,7 @@ PORTS = {
     "ur3": "ur3.state_estimated",
     "rg2": "rg2.state_measured",
     "body": "operator.body",
+    "wrench": "ur3.tcp_force",
 }
 
 
@@ -137,6 +141,21 @@ REALISTIC = {
         max_latency=0.1,
         seed_offset=3,
     ),
+    # The wrist load (`ur3.tcp_force`): a UR e-Series's force/torque sensor in the tool flange,
+    # RTDE's `actual_TCP_force`, zeroed before a guarded move as a UR program does with
+    # `zero_ftsensor()` (so no bias is modelled). Sampled with the arm's state, 125 Hz and one
+    # period late (an e-Series streams RTDE at 500 Hz: the 10 ms plant step could not tell the
+    # two apart); 1 N and 0.05 N·m of noise (*assumption*: of the order of the precision UR
+    # states for the UR3e's sensor, a few newtons; a CB3 estimates the load from its joint
+    # currents, about ±10 N, too coarse for the guarded descent's 8 N, docs/station.md).
+    "wrench": SensorModel(
+        rate=125.0,
+        latency=0.008,
+        noise=1.0,
+        rate_noise=0.05,
+        max_latency=0.008,
+        seed_offset=5,  # 4 is the camera's
+    ),
 }
 
 # The camera of `configuration: camera`, the one statement of its figures (docs/station.md cites
@@ -197,6 +216,7 @@ class SensorsConfig:
     ur3: SensorSettings = field(default_factory=SensorSettings)
     rg2: SensorSettings = field(default_factory=SensorSettings)
     body: SensorSettings = field(default_factory=SensorSettings)
+    wrench: SensorSettings = field(default_factory=SensorSettings)
     configuration: str = ConfigurationSensor.CONTACT.value
     camera: SensorSettings = field(default_factory=SensorSettings)
 

@@ -9,8 +9,8 @@ operator with its body, and a camera. Its ports (`docs/station.md`):
 
 - inputs, what a controller commands: `ur3.position`, `ur3.velocity`, `rg2.opening`,
   `rg2.force`, `hri.prompt`;
-- outputs, what a real cell measures: `ur3.state_estimated`, `rg2.state_measured`,
-  `rg2.grip_detected`, `configuration`, `operator.body`, `hri.indication`;
+- outputs, what a real cell measures: `ur3.state_estimated`, `ur3.tcp_force`,
+  `rg2.state_measured`, `rg2.grip_detected`, `configuration`, `operator.body`, `hri.indication`;
 - outputs for the simulation only (runner, recordings, tests): `sim.welds`, `sim.plant_state`,
   `sim.contact_results`, `sim.body_poses`, `sim.query_object`, `sim.camera.rgb_image`.
 
@@ -79,6 +79,7 @@ from hrc_drake.cell.station.sensors import export_measured
 from hrc_drake.cell.station.sim_operator import SimulatedOperator
 from hrc_drake.cell.station.slot_monitor import SlotMonitor
 from hrc_drake.cell.station.welds import Bolts
+from hrc_drake.cell.station.wrist import add_tcp_force
 from hrc_drake.cell_models import CellDesign, add_cell_models
 from hrc_drake.motion.poses import IN_TRAY, CellFrames, layout_poses
 from hrc_drake.motion.scene import read_cell_frames
@@ -210,8 +211,8 @@ def _add_arm(
 ) -> SafetyFunction:
     """`ur3.position` and `ur3.velocity` into the arm's servo through the safety function
     (returned; its measurements are connected once the station has them,
-    `_connect_safety_function`); `ur3.state_estimated`, `safety.stop` and `safety.mode` out,
-    `safety.unlock` in."""
+    `_connect_safety_function`); `ur3.state_estimated`, `ur3.tcp_force` (the wrist load,
+    `hrc_drake.cell.station.wrist`), `safety.stop` and `safety.mode` out, `safety.unlock` in."""
     function = builder.AddNamedSystem(
         "safety_function",
         SafetyFunction(
@@ -230,6 +231,8 @@ def _add_arm(
     for name in ("safety.stop", "safety.mode"):
         builder.ExportOutput(function.GetOutputPort(name), name)
     export_measured(builder, plant.get_state_output_port(ur3), "ur3.state_estimated", scenario)
+    gripper = plant.GetModelInstanceByName(GRIPPER)
+    export_measured(builder, add_tcp_force(builder, plant, gripper), "ur3.tcp_force", scenario)
     weight = builder.AddNamedSystem("ur3_gravity", GravityCompensation(plant, ur3))
     builder.Connect(plant.get_state_output_port(ur3), weight.get_input_port())
     builder.Connect(weight.get_output_port(), plant.get_actuation_input_port(ur3))
