@@ -48,11 +48,11 @@ from hrc_drake.cell.link.lockstep import (
     LockstepTimeouts,
     ScenarioMismatch,
     StationLinkError,
+    check_hello,
     identity_text,
     publish,
-    their_identity,
 )
-from hrc_drake.cell.link.scenario_identity import ScenarioIdentity, mismatch
+from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
 
 if TYPE_CHECKING:
     from hrc_drake.cell.link.station_record import StationRecord
@@ -257,11 +257,7 @@ class CellStationServer:
             stamp = utime(self._root.get_time())
             reply = session_message(stamp, HELLO, identity_text(self._identity))
             publish(self._lcm, REPORT_CHANNEL, reply)
-            theirs = their_identity(message)
-            if self._identity is not None and theirs is not None:
-                problem = mismatch(self._identity, theirs, "station")
-                if problem is not None:
-                    raise ScenarioMismatch(problem)
+            check_hello(self._identity, None, message)
             self._greeted = True
         self._hellos = len(hellos)
 
