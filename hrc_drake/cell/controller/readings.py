@@ -28,6 +28,8 @@ class SupervisorInputs:
     stop: InputPort
     body: InputPort
     safety_mode: InputPort
+    target: InputPort  # ur3.target: the command the arm followed when measured (real-time link)
+    stale: InputPort  # link.stale: an arm or body reading is stale (real-time link)
 
     @staticmethod
     def declare(system: LeafSystem) -> SupervisorInputs:
@@ -46,6 +48,8 @@ class SupervisorInputs:
             stop=system.DeclareVectorInputPort("safety.stop", BasicVector(1)),
             body=system.DeclareAbstractInputPort("operator.body", AbstractValue.Make(NOBODY)),
             safety_mode=system.DeclareVectorInputPort("safety.mode", BasicVector(1)),
+            target=system.DeclareVectorInputPort("ur3.target", BasicVector(N_JOINTS)),
+            stale=system.DeclareVectorInputPort("link.stale", BasicVector(1)),
         )
 
 
@@ -92,6 +96,22 @@ class Readings:
         if port.HasValue(self._context):
             return SafetyMode(round(port.Eval(self._context)[0]))
         return SafetyMode.PROTECTIVE_STOP if self.stop() else SafetyMode.NORMAL
+
+    def arm_target(self) -> np.ndarray | None:
+        """The joint positions the arm's servo followed when `arm_q` was measured, as the
+        robot reports them (RTDE's `target_q`; over the real-time link the command the station
+        held then); None where nobody says (unconnected, or not a number)."""
+        port = self._inputs.target
+        if not port.HasValue(self._context):
+            return None
+        target = port.Eval(self._context)
+        return target if np.isfinite(target).all() else None
+
+    def stale(self) -> bool:
+        """Whether an arm or body reading is too old to act on (the real-time link's
+        `link.stale`, `hrc_drake.cell.link.realtime`; unconnected: never)."""
+        port = self._inputs.stale
+        return port.HasValue(self._context) and port.Eval(self._context)[0] > 0.5
 
     def body(self) -> BodySpheres:
         """The tracked operator body (unconnected: nobody)."""
