@@ -46,11 +46,14 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import BasicVector, LeafSystem
 
-from hrc_drake.cell.link.channels import COMMANDS, SIM_CONTACTS
+from hrc_drake.cell.link.channels import COMMANDS, SIM_CONTACTS, Port
 from hrc_drake.scenario.schema import Scenario
 from hrc_drake.scenario.sensors import PORTS, sensor_models
 
@@ -152,6 +155,35 @@ def silent(stamps: dict[str, int], now: int) -> tuple[str, float] | None:
     channel = min(stamps, key=stamps.__getitem__)
     old = age(stamps[channel], now)
     return (channel, old) if old > SILENCE else None
+
+
+class MessageEncoder(LeafSystem):
+    """A channel's message from ports, for an `LcmPublisherSystem`: input ports `ports`, output
+    `message`, made by `make(stamp, t, values)` with `stamp` the shared clock when it is
+    evaluated (when its publisher publishes it), `t` the simulated time and `values` the
+    inputs' in `ports` order."""
+
+    def __init__(
+        self,
+        ports: Sequence[Port],
+        message: type,
+        make: Callable[[int, float, list], object],
+        clock: Callable[[], int] = wall_utime,
+    ):
+        super().__init__()
+        self._make, self._clock = make, clock
+        self._ports = []
+        for port in ports:
+            if port.size is not None:
+                self._ports.append(self.DeclareVectorInputPort(port.name, BasicVector(port.size)))
+            else:
+                value = AbstractValue.Make(port.model())
+                self._ports.append(self.DeclareAbstractInputPort(port.name, value))
+        self.DeclareAbstractOutputPort("message", lambda: AbstractValue.Make(message()), self._calc)
+
+    def _calc(self, context, output) -> None:
+        values = [p.Eval(context) for p in self._ports]
+        output.set_value(self._make(self._clock(), context.get_time(), values))
 
 
 @dataclass(frozen=True)
@@ -265,6 +297,7 @@ __all__ = [
     "STALE_MARGIN",
     "STALE_PERIODS",
     "WATCHED",
+    "MessageEncoder",
     "RealtimeFigures",
     "Staleness",
     "UpdateClock",
