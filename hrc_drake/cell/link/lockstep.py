@@ -202,14 +202,15 @@ def exchange_period(scenario: Scenario) -> float:
 
 
 class Inbox:
-    """The newest message of each channel with its stamp and how many came, kept by LCM
-    handlers that never throw (a message that cannot be read is kept as the error it gives),
-    and the session messages."""
+    """The newest message of each channel with its stamp, how many came and when the newest
+    came (`arrived`, `time.monotonic()`), kept by LCM handlers that never throw (a message that
+    cannot be read is kept as the error it gives), and the session messages."""
 
     def __init__(self, lcm: DrakeLcm, channels: dict[str, StationChannel], session: str):
         self.lcm = lcm
         self.latest: dict[str, tuple[int, bytes]] = {}
         self.count: dict[str, int] = dict.fromkeys(channels, 0)
+        self.arrived: dict[str, float] = {}
         self.session: list = []
         self.errors: list[str] = []
         self.on_message: Callable[[], None] | None = None
@@ -222,6 +223,7 @@ class Inbox:
         try:
             self.latest[name] = (channel.stamp_of(data), data)
             self.count[name] += 1
+            self.arrived[name] = time.monotonic()
         except LcmDecodeError as err:
             self.errors.append(f"{name}: {err}")
         if self.on_message is not None:

@@ -8,13 +8,22 @@ each paced to the wall clock (`Simulator.set_target_realtime_rate(pace)`); each 
 its channels at their own rates through Drake's LCM systems and reads the newest message of
 each channel it hears, whatever came before.
 
-**The clock.** Every message's `utime` is the host's wall clock, microseconds since the Unix
-epoch (`wall_utime`), taken when the station measured (the tracked body: when its tracker took
-the reading, `BodySpheres.stamp`, carried back to the wall clock) or when the controller
-commanded. Both processes read the same clock on one host (on two hosts, synchronised by
-PTP or NTP, their offset adds to every age). Neither side's simulated time is in a message: the
-two simulators start within a message's trip of each other (the station starts stepping at the
-controller's first command) but each keeps its own.
+**The clock.** Every message's `utime` is on the host's wall clock, microseconds since the
+Unix epoch (`wall_utime`): the wall-clock time the sender's simulated instant stands for
+(`LinkClock`: the wall time the sender started at, plus its simulated time since over the
+pace), the instant the station measured (the tracked body: when its tracker took the reading,
+`BodySpheres.stamp`) or the controller commanded. A side on time stamps the wall clock now; a
+side that fell behind stamps late, and the other side sees it as late. Both processes read the
+same clock on one host (on two hosts, synchronised by PTP or NTP, their offset adds to every
+age). The two simulators start within a message's trip of each other (the station starts
+stepping at the controller's first command) and each keeps its own simulated time, which no
+message carries.
+
+**Commands on the station's own time.** The station takes a command at the plant step whose
+instant the command's stamp stands for: a station on time takes the newest at once; one that
+fell behind (its simulator stalled) walks from the command it held to the newest over their
+stamps' interval, at its own simulated pace, so that the arm follows the commanded motion at
+its commanded speed instead of jumping to where the controller has got to meanwhile.
 
 **Rates.** `channel_rates`: the measured channels at their devices' rates, from the scenario's
 `sensors:` section where it states one (`hrc_drake.scenario.sensors`: `ur3` 125 Hz, `rg2`
@@ -36,10 +45,13 @@ stops on it:
   "no fresh command"); it resumes `RESTART_DELAY` after fresh commands come again, blending
   back to them.
 
-**Silence.** A channel with no message newer than `SILENCE` (2 s) ends the run on the side
-that listens, with one line naming the channel and the URL (exit status 1): the controller
-when the station died (within 2 s and one controller period of its last reading), the station
-when the controller did (within 2 s and one plant step of its last command).
+**Silence.** A channel on which no message has come for `SILENCE` (2 s) ends the run on the
+side that listens, with one line naming the channel and the URL (exit status 1): the
+controller when the station died (within 2 s and one controller period of its last reading),
+the station when the controller did (within 2 s and one plant step of its last command). A
+side that only fell behind still speaks: its late readings stop the robot, as above, until it
+catches up (a station that cannot keep real time on its machine leaves the robot stopped
+most of the time; the run's `realtime` figures say so).
 """
 
 from __future__ import annotations
@@ -64,14 +76,14 @@ SILENCE = 2.0  # s without a newer message on a channel: the other side is gone
 # The devices' rates where the scenario's `sensors:` does not state them [Hz]: the UR3's RTDE on
 # a CB3, the RG2 driver's Modbus poll (docs/hardware.md), a body tracker at about 30 Hz (issue
 # 31); a camera's configuration and the operator's interface at a few tens of hertz (our
-# choice); the simulation's touching pairs at every plant step.
+# choice). The simulation's touching pairs go at the controller's rate, as the run's collision
+# watch reads them.
 DEVICE_RATES = {
     "UR3_STATUS": 125.0,
     "RG2_STATUS": 25.0,
     "CELL_CONFIGURATION": 20.0,
     "OPERATOR_BODY": 30.0,
     "HRI_INDICATION": 20.0,
-    SIM_CONTACTS.channel: 100.0,
 }
 # The measured channels whose rate a sensor model of `sensors:` states, by its key.
 SENSOR_KEYS = {"UR3_STATUS": "ur3", "RG2_STATUS": "rg2", "OPERATOR_BODY": "body"}
@@ -83,6 +95,33 @@ ARM_COMMAND = "UR3_COMMAND"
 def wall_utime() -> int:
     """The shared clock: the host's wall clock [us since the Unix epoch]."""
     return time.time_ns() // 1000
+
+
+class LinkClock:
+    """The shared clock as one side's simulator stands for it: `stamp(t)` is the wall-clock
+    time [us] its simulated instant `t` stands for, `w0 + (t - t0) / pace` from the instant
+    `t0` it was started at, at wall time `w0` (`start`); before it is started, the wall clock
+    itself. A side that falls behind the wall clock stamps its messages late, and the other
+    side sees them so."""
+
+    def __init__(self, pace: float, wall: Callable[[], int] = wall_utime):
+        self.pace, self._wall = pace, wall
+        self._origin: tuple[float, int] | None = None
+
+    def start(self, t: float) -> None:
+        """Simulated time `t` stands for now from here on."""
+        self._origin = (t, self._wall())
+
+    def stamp(self, t: float) -> int:
+        """The wall-clock time [us] simulated time `t` stands for."""
+        if self._origin is None:
+            return self._wall()
+        t0, w0 = self._origin
+        return w0 + round((t - t0) / self.pace * 1e6)
+
+    def now(self) -> int:
+        """The wall clock now [us]."""
+        return self._wall()
 
 
 def check_pace(pace: float, flag: str = "--realtime") -> float:
@@ -101,8 +140,8 @@ def channel_rates(scenario: Scenario) -> dict[str, float]:
         model = models.get(PORTS[key])
         if model is not None:
             rates[channel] = model.rate
-    for command in COMMANDS:
-        rates[command.channel] = 1.0 / scenario.run.period
+    for channel in (*(c.channel for c in COMMANDS), SIM_CONTACTS.channel):
+        rates[channel] = 1.0 / scenario.run.period
     return rates
 
 
@@ -147,28 +186,29 @@ def judge(stamps: dict[str, int], now: int, rates: dict[str, float], pace: float
     return Staleness(tuple(found))
 
 
-def silent(stamps: dict[str, int], now: int) -> tuple[str, float] | None:
-    """(channel, age [s]) of the channel among `stamps` whose newest message is the oldest, if
-    older than `SILENCE`; None while every one speaks."""
-    if not stamps:
+def silent(arrived: dict[str, float], now: float) -> tuple[str, float] | None:
+    """(channel, seconds) of the channel among `arrived` (each channel's newest arrival, on a
+    clock that reads `now` now [s]) that has been quiet longest, if for more than `SILENCE`;
+    None while every one speaks. Arrivals, not stamps: a side that fell behind still speaks,
+    and its late readings stop the robot instead (`judge`)."""
+    if not arrived:
         return None
-    channel = min(stamps, key=stamps.__getitem__)
-    old = age(stamps[channel], now)
-    return (channel, old) if old > SILENCE else None
+    channel = min(arrived, key=arrived.__getitem__)
+    quiet = now - arrived[channel]
+    return (channel, quiet) if quiet > SILENCE else None
 
 
 class MessageEncoder(LeafSystem):
     """A channel's message from ports, for an `LcmPublisherSystem`: input ports `ports`, output
-    `message`, made by `make(stamp, t, values)` with `stamp` the shared clock when it is
-    evaluated (when its publisher publishes it), `t` the simulated time and `values` the
-    inputs' in `ports` order."""
+    `message`, made by `make(clock, t, values)` with `t` the simulated time when its publisher
+    publishes it and `values` the inputs' in `ports` order (`clock.stamp(t)`: its `utime`)."""
 
     def __init__(
         self,
         ports: Sequence[Port],
         message: type,
-        make: Callable[[int, float, list], object],
-        clock: Callable[[], int] = wall_utime,
+        make: Callable[[LinkClock, float, list], object],
+        clock: LinkClock,
     ):
         super().__init__()
         self._make, self._clock = make, clock
@@ -183,7 +223,7 @@ class MessageEncoder(LeafSystem):
 
     def _calc(self, context, output) -> None:
         values = [p.Eval(context) for p in self._ports]
-        output.set_value(self._make(self._clock(), context.get_time(), values))
+        output.set_value(self._make(self._clock, context.get_time(), values))
 
 
 @dataclass(frozen=True)
@@ -297,6 +337,7 @@ __all__ = [
     "STALE_MARGIN",
     "STALE_PERIODS",
     "WATCHED",
+    "LinkClock",
     "MessageEncoder",
     "RealtimeFigures",
     "Staleness",

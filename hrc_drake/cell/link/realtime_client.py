@@ -14,7 +14,8 @@ ends the session for the station's report.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import time
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -47,6 +48,7 @@ from hrc_drake.cell.link.lockstep import (
 )
 from hrc_drake.cell.link.realtime import (
     SILENCE,
+    LinkClock,
     MessageEncoder,
     RealtimeFigures,
     Staleness,
@@ -78,6 +80,7 @@ class RealtimeSession:
         self.lcm, self.pace, self._identity, self._timeouts = lcm, pace, identity, timeouts
         self._inbox = Inbox(lcm, {c.channel: c for c in channels}, REPORT_CHANNEL)
         self.clock: UpdateClock | None = None  # the readings' (set when the interface is made)
+        self.link_clock = LinkClock(pace)  # started as the simulation starts
 
     @property
     def url(self) -> str:
@@ -96,6 +99,7 @@ class RealtimeSession:
             self._inbox.raise_errors()
             missing = [n for n in names if self._inbox.count[n] == 0]
             if not missing:
+                self.link_clock.start(0.0)  # the simulation starts now
                 return
             if age(start, wall_utime()) > SILENCE:
                 raise StationLinkError(
@@ -109,6 +113,11 @@ class RealtimeSession:
         """StationLinkError with the station's own error, if it sent one."""
         self._inbox.raise_errors()
 
+    def silent(self) -> tuple[str, float] | None:
+        """The measured channel quiet longest and for how long [s], if for more than
+        `SILENCE` (`silent`)."""
+        return silent(self._inbox.arrived, time.monotonic())
+
     def end(self, timeout: float | None = None) -> dict:
         """Tell the station the run is over; its report (`request_report`)."""
         limit = self._timeouts.step if timeout is None else timeout
@@ -119,11 +128,14 @@ class RealtimeSession:
         return None if self.clock is None else self.clock.figures()
 
 
-def command_encoder(channel: StationChannel) -> MessageEncoder:
+def command_encoder(channel: StationChannel, clock: LinkClock) -> MessageEncoder:
     """A command channel's message from the controller's ports (input ports named like the
-    channel's), stamped when its publisher publishes it."""
+    channel's), stamped with the wall-clock time its simulated instant stands for."""
     return MessageEncoder(
-        channel.ports, channel.message, lambda stamp, t, values: channel.encode(stamp, *values)
+        channel.ports,
+        channel.message,
+        lambda clock, t, values: channel.encode(clock.stamp(t), *values),
+        clock,
     )
 
 
@@ -145,10 +157,9 @@ class RealtimeReadings(LeafSystem):
         rates: dict[str, float],
         period: float,
         session: RealtimeSession,
-        clock: Callable[[], int] = wall_utime,
     ):
         super().__init__()
-        self._rates, self._pace, self._clock = rates, session.pace, clock
+        self._rates, self._pace = rates, session.pace
         self._session = session
         self.updates = UpdateClock(period, session.pace)
         self._messages = {
@@ -215,7 +226,7 @@ class RealtimeReadings(LeafSystem):
 
     def _calc_judged(self, context, value) -> None:
         # One reading of the wall clock per simulated time: every reader at that time agrees.
-        now = self._clock()
+        now = self._session.link_clock.now()
         value.set_value((now, judge(self._stamps(context), now, self._rates, self._pace)))
 
     def _restamped(self, context, body: BodySpheres) -> BodySpheres:
@@ -235,7 +246,7 @@ class RealtimeReadings(LeafSystem):
     def _watch(self, context) -> None:
         self._session.raise_errors()
         now, staleness = self._judged.Eval(context)
-        gone = silent(self._stamps(context), now)
+        gone = self._session.silent()
         t = context.get_time()
         if gone is not None:
             channel, old = gone
@@ -289,7 +300,8 @@ def make_realtime_station_interface(
         )
         builder.Connect(subscriber.get_output_port(), readings.GetInputPort(c.channel))
     for c in COMMANDS:
-        encoder = builder.AddNamedSystem(f"encode {c.channel}", command_encoder(c))
+        encoder = command_encoder(c, session.link_clock)
+        encoder = builder.AddNamedSystem(f"encode {c.channel}", encoder)
         publisher = builder.AddNamedSystem(
             f"publish {c.channel}",
             LcmPublisherSystem.Make(c.channel, c.message, bus, publish_period=period),

@@ -6,9 +6,10 @@ through Drake's LCM systems: an `LcmSubscriberSystem` per command channel feedin
 `RealtimeCommands` (the newest command of each channel, latched at every plant step, and the
 arm's watchdog `ur3.command_stale`), and a `MessageEncoder` and an `LcmPublisherSystem` per
 measured channel at its device's rate (`channel_rates`). `UR3_STATUS` carries beside the
-measurement the command the arm followed when measured (`joint_position_desired` and
-`joint_velocity_desired`, as RTDE's `target_q` and `target_qd`), which the controller's tracking
-check compares with.
+measurement what the arm's servo followed when measured (`joint_position_desired` and
+`joint_velocity_desired`, as RTDE's `target_q` and `target_qd`: the station's `sim.ur3.target`,
+the command or its safety function's brake), which the controller's tracking check compares
+with.
 
 The session: the station answers the controller's hello (refusing another scenario, or a
 controller in lockstep or at another pace); it then publishes its measurements at time 0 until
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import shlex
 import time
+from dataclasses import dataclass
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -38,6 +40,7 @@ from pydrake.systems.framework import (
     LeafSystem,
 )
 from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
+from pydrake.systems.primitives import Multiplexer
 
 from hrc_drake.cell.link.channels import (
     COMMANDS,
@@ -62,8 +65,8 @@ from hrc_drake.cell.link.lockstep import (
 from hrc_drake.cell.link.realtime import (
     ARM_COMMAND,
     SILENCE,
+    LinkClock,
     MessageEncoder,
-    age,
     silent,
     stale_after,
     wall_utime,
@@ -78,29 +81,72 @@ from hrc_drake.hri.messages import Prompt
 WAITING_PUBLISH = 0.05
 
 
+@dataclass(frozen=True)
+class ArmSegment:
+    """The arm's command as the station walks to the newest: from `q_from`, `v_from` held at
+    `w_from` to `q_to`, `v_to` stamped `u_to` (wall-clock times [us])."""
+
+    q_from: np.ndarray
+    v_from: np.ndarray
+    w_from: int
+    q_to: np.ndarray
+    v_to: np.ndarray
+    u_to: int
+
+    def at(self, w: int, early: int) -> tuple[np.ndarray, np.ndarray]:
+        """(q, v) at wall-clock time `w`: the newest once `w` is within `early` of its stamp
+        (a command applies from its instant on, as in one process up to a step early)."""
+        if w + early >= self.u_to or self.u_to <= self.w_from:
+            return self.q_to, self.v_to
+        f = max(0.0, (w - self.w_from) / (self.u_to - self.w_from))
+        return self.q_from + f * (self.q_to - self.q_from), self.v_from + f * (
+            self.v_to - self.v_from
+        )
+
+    def __deepcopy__(self, memo) -> ArmSegment:
+        return self  # immutable once made
+
+
+@dataclass(frozen=True)
+class Latched:
+    """What `RealtimeCommands` holds: the commands applied, whether the arm's is stale, the
+    newest stamp of each channel, and the arm's segment (None before its first command)."""
+
+    applied: dict
+    stale: bool = False
+    stamps: tuple[tuple[str, int], ...] = ()
+    arm: ArmSegment | None = None
+
+    def __deepcopy__(self, memo) -> Latched:
+        return self  # replaced, never changed
+
+
 class RealtimeCommands(LeafSystem):
     """The station's command inputs over the real-time link.
 
     Input ports: one per command channel, named after it (the message its LcmSubscriberSystem
     keeps). Output ports: the station's command ports (`ur3.position`, ...) and
-    `ur3.command_stale` (1). Every plant `step` it latches the newest command of each channel
-    (the plant's step then reads commands that stay put through it; before a channel's first
-    message, `hold`), and judges the arm's: stale when older than `stale_after(rate, pace)`
-    (`rate`: the controller's)."""
+    `ur3.command_stale` (1). Every plant `step` it latches the commands for that step (the
+    plant's step then reads commands that stay put through it; before a channel's first
+    message, `hold`): the gripper's and the prompt as the newest message has them, the arm's
+    on the station's own time (`ArmSegment`, `clock`: the wall-clock time the step stands
+    for). The arm's command is stale when the newest is older than `stale_after(rate, pace)`
+    at that time (`rate`: the controller's)."""
 
-    def __init__(self, hold: dict[str, object], step: float, rate: float, pace: float):
+    def __init__(self, hold: dict[str, object], step: float, rate: float, clock: LinkClock):
         super().__init__()
-        self._bound = stale_after(rate, pace)
+        self._clock, self._bound = clock, round(stale_after(rate, clock.pace) * 1e6)
+        self._early = round(step / clock.pace * 1e6)
         self._messages = {
             c.channel: self.DeclareAbstractInputPort(c.channel, AbstractValue.Make(c.message()))
             for c in COMMANDS
         }
-        self._latched = self.DeclareAbstractState(AbstractValue.Make((dict(hold), False, {})))
+        self._latched = self.DeclareAbstractState(AbstractValue.Make(Latched(dict(hold))))
         deps = {self.abstract_state_ticket(self._latched)}
         for port in (p for c in COMMANDS for p in c.ports):
 
             def calc(context, output, name=port.name, vector=port.size is not None):
-                value = self._state(context)[0][name]
+                value = self._state(context).applied[name]
                 output.SetFromVector(value) if vector else output.set_value(value)
 
             if port.size is not None:
@@ -117,26 +163,36 @@ class RealtimeCommands(LeafSystem):
         self.DeclareVectorOutputPort(
             "ur3.command_stale",
             BasicVector(1),
-            lambda context, output: output.SetFromVector([float(self._state(context)[1])]),
+            lambda context, output: output.SetFromVector([float(self._state(context).stale)]),
             prerequisites_of_calc=deps,
         )
         self.DeclarePeriodicUnrestrictedUpdateEvent(step, 0.0, self._latch)
 
-    def _state(self, context) -> tuple[dict, bool, dict]:
+    def _state(self, context) -> Latched:
         return context.get_abstract_state(self._latched).get_value()
 
     def _latch(self, context, state) -> None:
-        commands, _, stamps = self._state(context)
-        commands, stamps = dict(commands), dict(stamps)
+        latched = self._state(context)
+        applied, stamps, arm = dict(latched.applied), dict(latched.stamps), latched.arm
+        w = self._clock.stamp(context.get_time())
         for c in COMMANDS:
             message = self._messages[c.channel].Eval(context)
             if message.utime == 0 or message.utime == stamps.get(c.channel):
                 continue  # none yet, or no newer one
             stamps[c.channel] = message.utime
-            commands.update(zip((p.name for p in c.ports), c.decode(message), strict=True))
-        arm = stamps.get(ARM_COMMAND)
-        stale = arm is not None and age(arm, wall_utime()) > self._bound
-        state.get_mutable_abstract_state(self._latched).set_value((commands, stale, stamps))
+            values = dict(zip((p.name for p in c.ports), c.decode(message), strict=True))
+            if c.channel != ARM_COMMAND:
+                applied.update(values)
+                continue
+            q, v = np.asarray(applied["ur3.position"]), np.asarray(applied["ur3.velocity"])
+            q_to, v_to = values["ur3.position"], values["ur3.velocity"]
+            arm = ArmSegment(q, v, w, q_to, v_to, message.utime)
+        stale = False
+        if arm is not None:
+            applied["ur3.position"], applied["ur3.velocity"] = arm.at(w, self._early)
+            stale = w - arm.u_to > self._bound
+        new = Latched(applied, stale, tuple(stamps.items()), arm)
+        state.get_mutable_abstract_state(self._latched).set_value(new)
 
 
 def initial_hold(station: Diagram) -> dict[str, object]:
@@ -158,38 +214,45 @@ def initial_hold(station: Diagram) -> dict[str, object]:
     }
 
 
-def _encoder(channel: StationChannel, pace: float) -> MessageEncoder:
-    """The encoder of a measured channel: the arm's status with the command it followed, the
-    body stamped when its tracker took it (its `stamp`, carried to the wall clock)."""
+def _encoder(channel: StationChannel, clock: LinkClock) -> MessageEncoder:
+    """The encoder of a measured channel, stamped with the wall-clock time its simulated
+    instant stands for: the arm's status with the command it followed, the body when its
+    tracker took it (its `stamp`)."""
     if channel.channel == "UR3_STATUS":
-        target = (Port("target.position", N_JOINTS), Port("target.velocity", N_JOINTS))
 
-        def status(stamp, t, values):
-            message = channel.encode(stamp, *values[:3])
-            message.joint_position_desired = [float(x) for x in values[3]]
-            message.joint_velocity_desired = [float(x) for x in values[4]]
+        def status(clock, t, values):
+            message = channel.encode(clock.stamp(t), *values[:3])
+            message.joint_position_desired = [float(x) for x in values[3][:N_JOINTS]]
+            message.joint_velocity_desired = [float(x) for x in values[3][N_JOINTS:]]
             return message
 
-        return MessageEncoder((*channel.ports, *target), channel.message, status)
+        target = Port("target", 2 * N_JOINTS)
+        return MessageEncoder((*channel.ports, target), channel.message, status, clock)
     if channel.channel == "OPERATOR_BODY":
 
-        def body(stamp, t, values):
+        def body(clock, t, values):
             taken = values[0].stamp
-            if taken is not None:
-                stamp -= round((t - taken) / pace * 1e6)
-            return channel.encode(stamp, *values)
+            return channel.encode(clock.stamp(t if taken is None else taken), *values)
 
-        return MessageEncoder(channel.ports, channel.message, body)
-    return MessageEncoder(channel.ports, channel.message, lambda s, t, v: channel.encode(s, *v))
+        return MessageEncoder(channel.ports, channel.message, body, clock)
+    return MessageEncoder(
+        channel.ports,
+        channel.message,
+        lambda clock, t, values: channel.encode(clock.stamp(t), *values),
+        clock,
+    )
 
 
-def _contacts_encoder(owners: dict) -> MessageEncoder:
+def _contacts_encoder(owners: dict, clock: LinkClock) -> MessageEncoder:
     """The touching pairs by owner, from the station's `sim.contact_results`."""
     results = Port("sim.contact_results", model=ContactResults)
     return MessageEncoder(
         (results,),
         SIM_CONTACTS.message,
-        lambda stamp, t, values: SIM_CONTACTS.encode(stamp, tuple(owner_pairs(values[0], owners))),
+        lambda clock, t, values: SIM_CONTACTS.encode(
+            clock.stamp(t), tuple(owner_pairs(values[0], owners))
+        ),
+        clock,
     )
 
 
@@ -218,10 +281,12 @@ class RealtimeStationServer:
         self._timeouts = timeouts if timeouts is not None else LockstepTimeouts()
         self._inbox = Inbox(lcm, {c.channel: c for c in COMMANDS}, END_CHANNEL)
         self._hellos = 0
+        self._clock = LinkClock(pace)  # started as the station starts stepping
         builder = DiagramBuilder()
         builder.AddSystem(station)
         bus = builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
-        commands = RealtimeCommands(initial_hold(station), step, rates[ARM_COMMAND], pace)
+        hold = initial_hold(station)
+        commands = RealtimeCommands(hold, step, rates[ARM_COMMAND], self._clock)
         commands = builder.AddNamedSystem("realtime_commands", commands)
         self._commands = commands
         for c in COMMANDS:
@@ -237,17 +302,15 @@ class RealtimeStationServer:
             )
         self._publishers = []
         for c in MEASUREMENTS:
-            encoder = builder.AddNamedSystem(f"encode {c.channel}", _encoder(c, pace))
+            encoder = builder.AddNamedSystem(f"encode {c.channel}", _encoder(c, self._clock))
             for p in c.ports:
                 builder.Connect(station.GetOutputPort(p.name), encoder.GetInputPort(p.name))
             if c.channel == "UR3_STATUS":
-                for name, target in (("ur3.position", "position"), ("ur3.velocity", "velocity")):
-                    builder.Connect(
-                        commands.GetOutputPort(name), encoder.GetInputPort(f"target.{target}")
-                    )
+                self._connect_target(builder, station, commands, encoder)
             self._publish(builder, bus, c, encoder, rates[c.channel])
         if owners is not None:
-            encoder = builder.AddNamedSystem("encode SIM_CONTACTS", _contacts_encoder(owners))
+            encoder = _contacts_encoder(owners, self._clock)
+            encoder = builder.AddNamedSystem("encode SIM_CONTACTS", encoder)
             builder.Connect(
                 station.GetOutputPort("sim.contact_results"),
                 encoder.GetInputPort("sim.contact_results"),
@@ -260,6 +323,18 @@ class RealtimeStationServer:
         self._silent: tuple[str, float] = ("", 0.0)  # the channel that fell silent, its age
         self._started_wall = 0.0
         self.report: dict | None = None
+
+    @staticmethod
+    def _connect_target(builder, station: Diagram, commands, encoder) -> None:
+        """What the arm's servo follows, for `UR3_STATUS`: the station's `sim.ur3.target` (the
+        command, or its safety function's brake or blend), else the command it holds."""
+        if station.HasOutputPort("sim.ur3.target"):
+            builder.Connect(station.GetOutputPort("sim.ur3.target"), encoder.GetInputPort("target"))
+            return
+        mux = builder.AddNamedSystem("held target", Multiplexer([N_JOINTS, N_JOINTS]))
+        builder.Connect(commands.GetOutputPort("ur3.position"), mux.get_input_port(0))
+        builder.Connect(commands.GetOutputPort("ur3.velocity"), mux.get_input_port(1))
+        builder.Connect(mux.get_output_port(), encoder.GetInputPort("target"))
 
     def _publish(self, builder, bus, channel: StationChannel, encoder, rate: float) -> None:
         publisher = LcmPublisherSystem.Make(
@@ -276,7 +351,7 @@ class RealtimeStationServer:
 
     def _watch(self, root: Context) -> EventStatus:
         """The simulator's monitor: stop for the controller's end, its silence, or welds."""
-        gone = silent(self._command_stamps(), wall_utime()) if self._started_wall else None
+        gone = silent(self._inbox.arrived, time.monotonic()) if self._started_wall else None
         if self._inbox.has_session("end"):
             self._stop = "end"
         elif gone is not None:
@@ -286,9 +361,6 @@ class RealtimeStationServer:
         else:
             return EventStatus.DidNothing()
         return EventStatus.ReachedTermination(self._commands, self._stop)
-
-    def _command_stamps(self) -> dict[str, int]:
-        return {c.channel: self._inbox.stamp(c.channel) or 0 for c in COMMANDS}
 
     def serve(self) -> dict:
         """Serve until the controller ends the session; its report. ScenarioMismatch if the
@@ -302,6 +374,7 @@ class RealtimeStationServer:
             self._await(self._commanded, "commands")
             self._simulator.set_target_realtime_rate(self._pace)
             self._simulator.ResetStatistics()
+            self._clock.start(self._root.get_time())
             self._started_wall = time.monotonic()
             self._run()
         except ScenarioMismatch:

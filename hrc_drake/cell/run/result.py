@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -13,6 +14,9 @@ from hrc_drake.cell.controller.supervisor import TaskRecord
 from hrc_drake.cell.run.safety_check import SafetyCheck
 from hrc_drake.cell.station.safety_function import SafetyFunctionLog
 from hrc_drake.hri.faults import FaultRecord
+
+if TYPE_CHECKING:
+    from hrc_drake.cell.link.realtime import RealtimeFigures
 
 
 @dataclass(frozen=True)
@@ -55,6 +59,9 @@ class RunResult:
     """Times the robot re-timed its plan because the body departed from its forecast."""
     capped: bool = False
     """The run ended by its own task cap (`run.max_steps`), its reason in `error`."""
+    realtime: RealtimeFigures | None = None
+    """How the controller kept its pace over the real-time link (None: in one process or in
+    the lockstep)."""
 
     @property
     def idle(self) -> tuple[float, ...]:
@@ -108,6 +115,7 @@ class RunResult:
             "handovers": self.handovers,
             "interaction": self.interaction,
             "separation": self.separation,
+            "realtime": None if self.realtime is None else self.realtime.to_json(),
         }
 
     def _safety_json(self) -> dict | None:

@@ -223,6 +223,9 @@ def _add_arm(
         builder.ExportInput(function.GetInputPort(name), name)
     # The real-time link's watchdog (`hrc_drake.cell.link.realtime_server`); unconnected, never.
     builder.ExportInput(function.GetInputPort("command_stale"), "ur3.command_stale")
+    # What the servo follows (the command, or the function's brake or blend): RTDE's target_q
+    # and target_qd, which the real-time link sends beside the measurement.
+    builder.ExportOutput(function.GetOutputPort("desired_state"), "sim.ur3.target")
     for name in ("safety.stop", "safety.mode"):
         builder.ExportOutput(function.GetOutputPort(name), name)
     export_measured(builder, plant.get_state_output_port(ur3), "ur3.state_estimated", scenario)
