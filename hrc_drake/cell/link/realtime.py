@@ -232,7 +232,8 @@ class RealtimeFigures:
     of the controller's updates: their mean period, the jitter |period - target| (the target:
     `run.period` over the pace), the updates later than one target period after they were due
     (due: the first update's wall time plus the simulated time since over the pace), the pace
-    achieved (simulated over wall time), and the stops on stale readings."""
+    achieved (simulated over wall time), the stops on stale readings, and how old the arm's
+    reading was at the updates (its percentiles: the station's lag and the trip)."""
 
     pace: float
     updates: int
@@ -247,6 +248,7 @@ class RealtimeFigures:
     stale_stops: int = 0
     stale_time: float = 0.0  # s of simulated time stopped on stale readings
     stale_events: tuple[str, ...] = ()
+    arm_age: tuple[float, float, float] = (0.0, 0.0, 0.0)  # p50, p99, max [s]
 
     def to_json(self) -> dict:
         """The JSON figures (seconds to the microsecond)."""
@@ -270,6 +272,7 @@ class RealtimeFigures:
             "stale_stops": self.stale_stops,
             "stale_time": round(self.stale_time, 3),
             "stale_events": list(self.stale_events),
+            "arm_age": dict(zip(("p50", "p99", "max"), map(us, self.arm_age), strict=True)),
         }
 
 
@@ -282,16 +285,19 @@ class UpdateClock:
     pace: float
     times: list[float] = field(default_factory=list)
     walls: list[float] = field(default_factory=list)
+    arm_ages: list[float] = field(default_factory=list)
     stale: Staleness = Staleness()
     stops: int = 0
     stale_since: float | None = None
     stale_time: float = 0.0
     events: list[str] = field(default_factory=list)
 
-    def note(self, t: float, wall: float, staleness: Staleness) -> None:
-        """The update at simulated time `t` ran at `wall` [s] with `staleness`."""
+    def note(self, t: float, wall: float, staleness: Staleness, arm_age: float = 0.0) -> None:
+        """The update at simulated time `t` ran at `wall` [s] with `staleness`, the arm's
+        reading `arm_age` [s] old."""
         self.times.append(t)
         self.walls.append(wall)
+        self.arm_ages.append(arm_age)
         if staleness.any and not self.stale.any:
             self.stops += 1
             self.stale_since = t
@@ -327,6 +333,7 @@ class UpdateClock:
             stale_stops=self.stops,
             stale_time=stale_time,
             stale_events=tuple(self.events),
+            arm_age=tuple(float(x) for x in np.percentile(self.arm_ages, [50, 99, 100])),
         )
 
 

@@ -255,7 +255,8 @@ class RealtimeReadings(LeafSystem):
                 f"{channel} for {old:.1f} s (the limit {SILENCE:g} s) at t = {t:.2f} s (it died "
                 "or was stopped)"
             )
-        self.updates.note(t, now / 1e6, staleness)
+        arm = age(self._messages["UR3_STATUS"].Eval(context).utime, now)
+        self.updates.note(t, now / 1e6, staleness, arm)
 
 
 @dataclass(frozen=True)

@@ -72,7 +72,11 @@ from hrc_drake.cell.link.realtime import (
     wall_utime,
 )
 from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
-from hrc_drake.cell.link.station_server import StationHooks, cell_station_hooks
+from hrc_drake.cell.link.station_server import (
+    StationHooks,
+    cell_station_hooks,
+    check_station_ports,
+)
 from hrc_drake.cell.station.contacts import geometry_owners, owner_pairs
 from hrc_drake.hri.messages import Prompt
 
@@ -282,13 +286,26 @@ class RealtimeStationServer:
         self._inbox = Inbox(lcm, {c.channel: c for c in COMMANDS}, END_CHANNEL)
         self._hellos = 0
         self._clock = LinkClock(pace)  # started as the station starts stepping
+        check_station_ports(station)
         builder = DiagramBuilder()
         builder.AddSystem(station)
         bus = builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
-        hold = initial_hold(station)
-        commands = RealtimeCommands(hold, step, rates[ARM_COMMAND], self._clock)
+        self._commands = self._add_commands(builder, bus, station, step, rates[ARM_COMMAND])
+        self._publishers = []
+        self._add_measurements(builder, bus, station, rates, owners)
+        self._simulator = Simulator(builder.Build())
+        self._root = self._simulator.get_mutable_context()
+        self._simulator.set_monitor(self._watch)
+        self._stop: str | None = None  # why the monitor stopped the simulation
+        self._silent: tuple[str, float] = ("", 0.0)  # the channel that fell silent, its age
+        self._lateness: list[int] = []  # [us] behind the wall clock, at each step
+        self._started_wall = 0.0
+        self.report: dict | None = None
+
+    def _add_commands(self, builder, bus, station: Diagram, step: float, rate: float):
+        """The command channels' subscribers into `RealtimeCommands`, into the station."""
+        commands = RealtimeCommands(initial_hold(station), step, rate, self._clock)
         commands = builder.AddNamedSystem("realtime_commands", commands)
-        self._commands = commands
         for c in COMMANDS:
             subscriber = LcmSubscriberSystem.Make(c.channel, c.message, bus)
             subscriber = builder.AddNamedSystem(f"subscribe {c.channel}", subscriber)
@@ -300,13 +317,17 @@ class RealtimeStationServer:
                 commands.GetOutputPort("ur3.command_stale"),
                 station.GetInputPort("ur3.command_stale"),
             )
-        self._publishers = []
+        return commands
+
+    def _add_measurements(self, builder, bus, station: Diagram, rates, owners) -> None:
+        """An encoder and a publisher per measured channel (and, with `owners`, the touching
+        pairs), each at its rate."""
         for c in MEASUREMENTS:
             encoder = builder.AddNamedSystem(f"encode {c.channel}", _encoder(c, self._clock))
             for p in c.ports:
                 builder.Connect(station.GetOutputPort(p.name), encoder.GetInputPort(p.name))
             if c.channel == "UR3_STATUS":
-                self._connect_target(builder, station, commands, encoder)
+                self._connect_target(builder, station, self._commands, encoder)
             self._publish(builder, bus, c, encoder, rates[c.channel])
         if owners is not None:
             encoder = _contacts_encoder(owners, self._clock)
@@ -316,13 +337,6 @@ class RealtimeStationServer:
                 encoder.GetInputPort("sim.contact_results"),
             )
             self._publish(builder, bus, SIM_CONTACTS, encoder, rates[SIM_CONTACTS.channel])
-        self._simulator = Simulator(builder.Build())
-        self._root = self._simulator.get_mutable_context()
-        self._simulator.set_monitor(self._watch)
-        self._stop: str | None = None  # why the monitor stopped the simulation
-        self._silent: tuple[str, float] = ("", 0.0)  # the channel that fell silent, its age
-        self._started_wall = 0.0
-        self.report: dict | None = None
 
     @staticmethod
     def _connect_target(builder, station: Diagram, commands, encoder) -> None:
@@ -351,7 +365,10 @@ class RealtimeStationServer:
 
     def _watch(self, root: Context) -> EventStatus:
         """The simulator's monitor: stop for the controller's end, its silence, or welds."""
-        gone = silent(self._inbox.arrived, time.monotonic()) if self._started_wall else None
+        gone = None
+        if self._started_wall:
+            gone = silent(self._inbox.arrived, time.monotonic())
+            self._lateness.append(self._clock.now() - self._clock.stamp(root.get_time()))
         if self._inbox.has_session("end"):
             self._stop = "end"
         elif gone is not None:
@@ -454,10 +471,18 @@ class RealtimeStationServer:
     def _end(self) -> None:
         sim_time = self._root.get_time()
         wall = max(time.monotonic() - self._started_wall, 1e-9)
+        late = np.round(np.percentile(self._lateness or [0], [50, 99, 100]) / 1e6, 4)
+        lateness = dict(zip(("p50", "p99", "max"), late.tolist(), strict=True))
         report = {
             "sim_time": sim_time,
             "commands": self._inbox.count[ARM_COMMAND],
-            "realtime": {"pace": self._pace, "pace_achieved": round(sim_time / wall, 4)},
+            "realtime": {
+                "pace": self._pace,
+                "pace_achieved": round(sim_time / wall, 4),
+                # How far behind the wall clock the station ran [s]: what its readings' ages owe
+                # to the simulation rather than to the trip.
+                "lateness": lateness,
+            },
         }
         if self._hooks.record is not None:
             report.update(self._hooks.record(self._root).to_json())

@@ -51,6 +51,10 @@ from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.policy import Policy
 from hrc_drake.tasks.spec import load_spec
 
+# The planning worker's niceness beside a real-time controller: on a busy machine the kernel
+# runs the controller's and the station's loops first (benchmarks/reports/planning_service.md).
+REALTIME_PLANNER_NICE = 10
+
 
 def station_of(scenario: Scenario) -> CellStation:
     """The station a run of `scenario` simulates: the arm starts at the motion planner's home,
@@ -171,8 +175,11 @@ def run_over_lcm(
         shown = [] if not scenario_text else ["--scenario-text", scenario_text]
         identity = ScenarioIdentity.of(scenario, ["--lean"] if scenario_text == LEAN else shown)
     # Paced to the wall clock, simulated time cannot stand still while the planner works (as
-    # in a live run): the robot holds still meanwhile.
-    setup = prepare_run(scenario, policy, live=pace is not None, space=space)
+    # in a live run): the robot holds still meanwhile, and the planner gives way to the control
+    # loops on a busy machine (its worker niced).
+    realtime = pace is not None
+    nice = REALTIME_PLANNER_NICE if realtime else 0
+    setup = prepare_run(scenario, policy, live=realtime, space=space, nice=nice)
     lcm, link = DrakeLcm(url), None
     if pace is None:
         interface = make_cell_station_interface(

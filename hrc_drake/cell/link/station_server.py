@@ -130,7 +130,9 @@ class StationHooks:
     record: Callable[[Context], StationRecord] | None = None
 
 
-def _check_station_ports(diagram: Diagram) -> None:
+def check_station_ports(diagram: Diagram) -> None:
+    """ValueError naming the station ports `diagram` lacks (of the commands and measurements
+    the link carries)."""
     missing = [
         p.name
         for c in (*COMMANDS, *MEASUREMENTS)
@@ -160,7 +162,7 @@ class CellStationServer:
         timeouts: LockstepTimeouts | None = None,
         identity: ScenarioIdentity | None = None,
     ):
-        _check_station_ports(station)
+        check_station_ports(station)
         self._identity, self._greeted, self._hellos = identity, False, 0
         self._lcm, self._period, self._station = lcm, period, station
         self._hooks = hooks if hooks is not None else StationHooks()
