@@ -7,6 +7,7 @@ killed."""
 from __future__ import annotations
 
 import json
+import shlex
 import socket
 import subprocess
 import sys
@@ -338,3 +339,15 @@ def test_a_real_time_pair_runs_row_1():
     assert report["scenario"] == "row1-optimal" and report["commands"] > 100
     assert report["realtime"]["pace"] == 1.0
     assert report["safety_function"] == result["safety"]["function"]
+
+
+def test_the_station_hint_runs_the_controller_at_the_same_pace():
+    """The station's hint gives `--realtime` (and a pace other than 1), for `simulate`."""
+    from hrc_drake import cli
+    from hrc_drake.cli.station import controller_hint
+
+    for given, pace in ((["--realtime"], 1.0), (["--realtime", "2.5"], 2.5), ([], None)):
+        args = cli.build_parser().parse_args(["station", "--lean", *given])
+        hint = controller_hint(args, "udpm://239.241.129.94:7667?ttl=0")
+        parsed = cli.build_parser().parse_args(shlex.split(hint)[1:])
+        assert parsed.realtime == pace and parsed.station_lcm.startswith("udpm://")
