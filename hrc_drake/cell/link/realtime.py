@@ -28,11 +28,11 @@ its commanded speed instead of jumping to where the controller has got to meanwh
 **Rates.** `channel_rates`: the measured channels at their devices' rates, from the scenario's
 `sensors:` section where it states one (`hrc_drake.scenario.sensors`: `ur3` 125 Hz, `rg2`
 25 Hz, `body` 30 Hz under `realistic`), else the same devices' figures stated once here
-(`DEVICE_RATES`); the commands at the controller's rate (`run.period`, 100 Hz).
+(`DEVICE_RATES`); the commands at the controller's rate (1 / `run.period`: 50 Hz).
 
 **Staleness.** A reading is stale when it is older than `STALE_PERIODS` of its channel's
 periods (in wall time: the period over the pace) plus `STALE_MARGIN` (`stale_after`): 74 ms
-for the arm at 125 Hz, 150 ms for the body at 30 Hz; the arm's command at 100 Hz 80 ms. What
+for the arm at 125 Hz, 150 ms for the body at 30 Hz; the arm's command at 50 Hz 110 ms. What
 stops on it:
 
 - a stale arm (`UR3_STATUS`) or body (`OPERATOR_BODY`) reading: the controller's next update
