@@ -37,6 +37,7 @@ from hrc_drake.cell.link.realtime import (
     SILENCE,
     LinkClock,
     UpdateClock,
+    channel_latencies,
     channel_rates,
     judge,
     silent,
@@ -49,6 +50,7 @@ from hrc_drake.cell.link.station_server import CellStationServer
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 from hrc_drake.hri.messages import Prompt
 from hrc_drake.scenario.schema import Scenario
+from hrc_drake.scenario.sensors import CAMERA
 
 sys.path.insert(0, str(Path(__file__).parent))
 from fake_station import STEP, FakeController, make_fake_station
@@ -88,9 +90,28 @@ def test_a_reading_is_stale_past_three_periods_and_50_ms():
     assert not judge({"UR3_STATUS": now + 5 * MS}, now, rates, 1.0).any
 
 
+def test_a_sensor_latency_the_scenario_states_widens_the_bound():
+    """Under `realistic` the body tracker's readings are stamped when taken and sent up to
+    100 ms later: the body is stale past 250 ms, not 150 ms (else a tracker on time would stop
+    the robot); the arm's bound grows by its own few milliseconds."""
+    scenario = load_cell_scenario("row1-optimal", "{sensors: {preset: realistic}}")
+    rates, latencies = channel_rates(scenario), channel_latencies(scenario)
+    assert latencies["OPERATOR_BODY"] == pytest.approx(0.1)
+    assert channel_latencies(Scenario()) == {}
+    now = 1_700_000_000_000_000
+    on_time = {"UR3_STATUS": now, "OPERATOR_BODY": now - 240 * MS}
+    assert judge(on_time, now, rates, 1.0).any  # without the latency: stale
+    assert not judge(on_time, now, rates, 1.0, latencies).any
+    late = {**on_time, "OPERATOR_BODY": now - 260 * MS}
+    assert judge(late, now, rates, 1.0, latencies).words() == (
+        "OPERATOR_BODY 0.260 s old (bound 0.250 s)"
+    )
+
+
 def test_rates_come_from_the_sensors_section_where_it_states_them():
-    """Under `ideal` the devices' figures; a sensor model's rate where the scenario gives one;
-    the commands and the touching pairs at the controller's rate."""
+    """Under `ideal` the devices' figures; a sensor model's rate where the scenario gives one
+    (the camera's for the configuration under `configuration: camera`);
+        the commands and the touching pairs at the controller's rate."""
     scenario = Scenario()
     rates = channel_rates(scenario)
     assert {k: rates[k] for k in DEVICE_RATES} == DEVICE_RATES
@@ -101,6 +122,12 @@ def test_rates_come_from_the_sensors_section_where_it_states_them():
     )
     rates = channel_rates(scenario)
     assert (rates["OPERATOR_BODY"], rates["RG2_STATUS"], rates["UR3_STATUS"]) == (15, 50, 125)
+    scenario = load_cell_scenario(
+        "row1-optimal",
+        "{sensors: {preset: realistic, configuration: camera, wrench: {rate: 250}}}",
+    )
+    rates = channel_rates(scenario)
+    assert rates["UR3_TCP_FORCE"] == 250 and rates["CELL_CONFIGURATION"] == CAMERA.rate
 
 
 def test_silence_is_no_arrival_for_two_seconds():

@@ -27,13 +27,16 @@ its commanded speed instead of jumping to where the controller has got to meanwh
 
 **Rates.** `channel_rates`: the measured channels at their devices' rates, from the scenario's
 `sensors:` section where it states one (`hrc_drake.scenario.sensors`: `ur3` 125 Hz, `rg2`
-25 Hz, `body` 30 Hz under `realistic`), else the same devices' figures stated once here
+25 Hz, `body` 30 Hz, `wrench` 125 Hz under `realistic`; the camera of `configuration: camera` at its
+own rate), else the same devices' figures stated once here
 (`DEVICE_RATES`); the commands at the controller's rate (1 / `run.period`: 50 Hz).
 
 **Staleness.** A reading is stale when it is older than `STALE_PERIODS` of its channel's
-periods (in wall time: the period over the pace) plus `STALE_MARGIN` (`stale_after`): 74 ms
-for the arm at 125 Hz, 150 ms for the body at 30 Hz; the arm's command at 50 Hz 110 ms. What
-stops on it:
+periods plus the latency bound its sensor model states (`channel_latencies`: a reading is
+stamped when it was measured), in wall time (over the pace), plus `STALE_MARGIN`
+(`stale_after`): under `ideal`, 74 ms for the arm at 125 Hz, 150 ms for the body at 30 Hz;
+under `realistic`, the body's 100 ms of latency makes it 250 ms; the arm's command at 50 Hz
+110 ms. What stops on it:
 
 - a stale arm (`UR3_STATUS`) or body (`OPERATOR_BODY`) reading: the controller's next update
   (within one controller period) sets the Supervisor's speed scale to 0, so its plan
@@ -67,7 +70,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 
 from hrc_drake.cell.link.channels import COMMANDS, SIM_CONTACTS, Port
 from hrc_drake.scenario.schema import Scenario
-from hrc_drake.scenario.sensors import PORTS, sensor_models
+from hrc_drake.scenario.sensors import PORTS, camera_model, sensor_models
 
 STALE_PERIODS = 3  # periods of its channel a reading may be old before it is stale
 STALE_MARGIN = 0.05  # s: a message's trip and the reader's own period, on top
@@ -80,13 +83,19 @@ SILENCE = 2.0  # s without a newer message on a channel: the other side is gone
 # watch reads them.
 DEVICE_RATES = {
     "UR3_STATUS": 125.0,
+    "UR3_TCP_FORCE": 125.0,
     "RG2_STATUS": 25.0,
     "CELL_CONFIGURATION": 20.0,
     "OPERATOR_BODY": 30.0,
     "HRI_INDICATION": 20.0,
 }
 # The measured channels whose rate a sensor model of `sensors:` states, by its key.
-SENSOR_KEYS = {"UR3_STATUS": "ur3", "RG2_STATUS": "rg2", "OPERATOR_BODY": "body"}
+SENSOR_KEYS = {
+    "UR3_STATUS": "ur3",
+    "UR3_TCP_FORCE": "wrench",
+    "RG2_STATUS": "rg2",
+    "OPERATOR_BODY": "body",
+}
 # The readings whose staleness stops the robot: the arm's and the tracked body's.
 WATCHED = ("UR3_STATUS", "OPERATOR_BODY")
 ARM_COMMAND = "UR3_COMMAND"
@@ -140,15 +149,33 @@ def channel_rates(scenario: Scenario) -> dict[str, float]:
         model = models.get(PORTS[key])
         if model is not None:
             rates[channel] = model.rate
+    camera = camera_model(scenario.sensors)
+    if camera is not None:
+        # A camera's poses come at its own few hertz; publishing faster would repeat them.
+        rates["CELL_CONFIGURATION"] = camera.rate
     for channel in (*(c.channel for c in COMMANDS), SIM_CONTACTS.channel):
         rates[channel] = 1.0 / scenario.run.period
     return rates
 
 
-def stale_after(rate: float, pace: float) -> float:
+def channel_latencies(scenario: Scenario) -> dict[str, float]:
+    """Each measured channel's latency bound [s, simulated time] where a sensor model of
+    `scenario` states one: a reading is stamped when it was measured, so it arrives that much
+    old on time."""
+    models = sensor_models(scenario.sensors)
+    latencies = {}
+    for channel, key in SENSOR_KEYS.items():
+        model = models.get(PORTS[key])
+        if model is not None:
+            latencies[channel] = max(model.latency, model.max_latency)
+    return latencies
+
+
+def stale_after(rate: float, pace: float, latency: float = 0.0) -> float:
     """The age [s, wall clock] past which a reading of a channel at `rate` [Hz, simulated
-    time] is stale, both simulators paced at `pace`."""
-    return STALE_PERIODS / (rate * pace) + STALE_MARGIN
+    time] and measured `latency` [s, simulated time] before it is sent is stale, both
+    simulators paced at `pace`."""
+    return (STALE_PERIODS / rate + latency) / pace + STALE_MARGIN
 
 
 def age(stamp: int, now: int) -> float:
@@ -173,14 +200,23 @@ class Staleness:
         return ", ".join(f"{c} {a:.3f} s old (bound {b:.3f} s)" for c, a, b in self.stale)
 
 
-def judge(stamps: dict[str, int], now: int, rates: dict[str, float], pace: float) -> Staleness:
+def judge(
+    stamps: dict[str, int],
+    now: int,
+    rates: dict[str, float],
+    pace: float,
+    latencies: dict[str, float] | None = None,
+) -> Staleness:
     """The staleness of the `WATCHED` channels among `stamps` (each channel's newest `utime`)
-    at `now` (see the module docstring)."""
+    at `now`, with their `rates` and `latencies` (`channel_rates`, `channel_latencies`; see the
+    module docstring)."""
+    latencies = latencies or {}
     found = []
     for channel in WATCHED:
         if channel not in stamps:
             continue
-        old, bound = age(stamps[channel], now), stale_after(rates[channel], pace)
+        bound = stale_after(rates[channel], pace, latencies.get(channel, 0.0))
+        old = age(stamps[channel], now)
         if old > bound:
             found.append((channel, old, bound))
     return Staleness(tuple(found))
@@ -350,6 +386,7 @@ __all__ = [
     "Staleness",
     "UpdateClock",
     "age",
+    "channel_latencies",
     "channel_rates",
     "check_pace",
     "judge",

@@ -54,6 +54,7 @@ from hrc_drake.cell.link.realtime import (
     Staleness,
     UpdateClock,
     age,
+    channel_latencies,
     channel_rates,
     judge,
     silent,
@@ -157,9 +158,11 @@ class RealtimeReadings(LeafSystem):
         rates: dict[str, float],
         period: float,
         session: RealtimeSession,
+        latencies: dict[str, float] | None = None,
     ):
         super().__init__()
         self._rates, self._pace = rates, session.pace
+        self._latencies = latencies or {}
         self._session = session
         self.updates = UpdateClock(period, session.pace)
         self._messages = {
@@ -227,7 +230,8 @@ class RealtimeReadings(LeafSystem):
     def _calc_judged(self, context, value) -> None:
         # One reading of the wall clock per simulated time: every reader at that time agrees.
         now = self._session.link_clock.now()
-        value.set_value((now, judge(self._stamps(context), now, self._rates, self._pace)))
+        judged = judge(self._stamps(context), now, self._rates, self._pace, self._latencies)
+        value.set_value((now, judged))
 
     def _restamped(self, context, body: BodySpheres) -> BodySpheres:
         """`body` stamped on this simulator's clock: now less its age, in simulated seconds."""
@@ -292,7 +296,10 @@ def make_realtime_station_interface(
     builder = DiagramBuilder()
     bus = builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
     readings = builder.AddNamedSystem(
-        "realtime_readings", RealtimeReadings(measured, channel_rates(scenario), period, session)
+        "realtime_readings",
+        RealtimeReadings(
+            measured, channel_rates(scenario), period, session, channel_latencies(scenario)
+        ),
     )
     session.clock = readings.updates
     for c in measured:
