@@ -292,10 +292,8 @@ class Supervisor(LeafSystem):
         return now >= s.settle_until and cell.configuration().current_at(s.settle_until)
 
     def _check_tracking(self, s: SupervisorStatus, cell: Readings, now: float) -> None:
-        """Stop when a joint is farther from its command than the tolerance: the command the
-        robot says its servo followed when the joints were measured (over the real-time link,
-        which delays both), else the command of the previous update, which the servo has had a
-        period to follow."""
+        """Stop when a joint is farther from its command than the tolerance: the command its
+        servo followed when measured (`ur3.target`, over the real-time link), else the last."""
         if s.mode in (Mode.DONE, Mode.FAILED):
             return
         q = cell.arm_q()
