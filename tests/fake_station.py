@@ -1,5 +1,6 @@
 """A small station and controller with the cell's ports, to prove the LCM lockstep on its own
-(tests/test_station_lcm.py; also run as a station process: `python tests/fake_station.py URL`).
+(tests/test_station_lcm.py; also run as a station process: `python tests/fake_station.py URL`,
+or in real time, tests/test_station_realtime.py: `python tests/fake_station.py URL --realtime`).
 
 `FakeStation` has the station's ports and the features that make the lockstep's ordering
 matter: a discrete servo that integrates the commanded joint positions and velocities, grip
@@ -20,6 +21,8 @@ from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.systems.framework import BasicVector, Diagram, DiagramBuilder, LeafSystem
 
 from hrc_drake.cell.link.lockstep import LockstepTimeouts
+from hrc_drake.cell.link.realtime import channel_rates
+from hrc_drake.cell.link.realtime_server import RealtimeStationServer
 from hrc_drake.cell.link.station_server import CellStationServer
 from hrc_drake.cell.ports import (
     BodySpheres,
@@ -247,21 +250,31 @@ def make_fake_station(fail_at: float | None = None) -> Diagram:
 
 
 def main(argv: list[str]) -> int:
-    """`fake_station.py URL [START_TIMEOUT [STEP_TIMEOUT]]`: serve a fake station; print its
-    report's exchange count and the station's final joint positions."""
+    """`fake_station.py URL [START_TIMEOUT [STEP_TIMEOUT]] [--realtime]`: serve a fake station
+    (in the lockstep, or in real time at pace 1); print its report's exchange count and the
+    station's final joint positions (in real time: the report)."""
+    realtime = "--realtime" in argv
+    argv = [a for a in argv if a != "--realtime"]
     url = argv[0]
     start = float(argv[1]) if len(argv) > 1 else 30.0
     step = float(argv[2]) if len(argv) > 2 else 30.0
     station = make_fake_station()
-    server = CellStationServer(
-        station, DrakeLcm(url), STEP, timeouts=LockstepTimeouts(start, step, 0.2)
-    )
+    timeouts = LockstepTimeouts(start, step, 0.2)
+    if realtime:
+        server = RealtimeStationServer(
+            station, DrakeLcm(url), channel_rates(Scenario()), STEP, 1.0, timeouts=timeouts
+        )
+    else:
+        server = CellStationServer(station, DrakeLcm(url), STEP, timeouts=timeouts)
     print("serving", flush=True)
     try:
         report = server.serve()
     except Exception as err:
         print(f"error: {err}", file=sys.stderr, flush=True)
         return 1
+    if realtime:
+        print("report", report, flush=True)
+        return 0
     context = station.GetMyContextFromRoot(server.root_context)
     state = station.GetOutputPort("ur3.state_estimated").Eval(context)
     print("report", report["exchanges"], " ".join(repr(float(x)) for x in state), flush=True)

@@ -13,7 +13,7 @@ from pydrake.multibody.parsing import PackageMap
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.solvers import Solve
 
-from hrc_drake.cell.controller.build import COMMANDED, MEASURED, PENDANT
+from hrc_drake.cell.controller.build import COMMANDED, MEASURED, PENDANT, WATCHDOG
 from hrc_drake.cell.ports import PartStatus
 from hrc_drake.cell.scenario import load_cell_scenario, plant_config, scene_graph_config
 from hrc_drake.cell.station import make_cell_station, simulate_station, station_scenario
@@ -131,7 +131,7 @@ def test_whole_cell_builds_with_ports_and_constraints(cell, workcell):
     # The ports of docs/station.md: exactly what a controller commands and what a real cell
     # measures, and beside them only the simulator's own (`sim.*`).
     inputs, outputs = _port_names(diagram, inputs=True), _port_names(diagram, inputs=False)
-    assert {n for n in inputs if not n.startswith("sim.")} == {*COMMANDED, *PENDANT}
+    assert {n for n in inputs if not n.startswith("sim.")} == {*COMMANDED, *PENDANT, *WATCHDOG}
     assert {n for n in outputs if not n.startswith("sim.")} == set(MEASURED)
     assert set(SIM_PORTS) <= outputs
     for name, size in (

@@ -8,7 +8,13 @@ from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 
-from hrc_drake.cell.controller.build import COMMANDED, MEASURED, connect_controller, make_controller
+from hrc_drake.cell.controller.build import (
+    COMMANDED,
+    LINK_READINGS,
+    MEASURED,
+    connect_controller,
+    make_controller,
+)
 from hrc_drake.cell.controller.supervisor import Mode
 from hrc_drake.cell.ports import BodySpheres, CellConfiguration, PartPlacement, PartStatus
 from hrc_drake.cell.run.run import build_closed_loop, shared_planner
@@ -79,7 +85,7 @@ def test_the_controller_runs_against_a_cell_that_offers_only_real_ports():
     diagram = controller.diagram
     inputs = {diagram.get_input_port(i).get_name() for i in range(diagram.num_input_ports())}
     outputs = {diagram.get_output_port(i).get_name() for i in range(diagram.num_output_ports())}
-    assert inputs == set(MEASURED)
+    assert inputs == {*MEASURED, *LINK_READINGS}
     assert outputs == {*COMMANDED, "status"}
 
     builder = DiagramBuilder()

@@ -42,12 +42,13 @@ def _brake(now: float = 0.0) -> Brake:
     return Brake(now, np.zeros(6), np.array([1.0, 0.5, 0, 0, 0, 0]), 5.0)
 
 
-def _run(state, verdicts, *, external=False, unlock=False, config=CONFIG, start=0.0):
+def _run(state, verdicts, *, external=False, unlock=False, config=CONFIG, start=0.0, stale=False):
     """`state` after one period per verdict, from `start`; the states seen."""
     seen = []
     for k, verdict in enumerate(verdicts):
         now = start + k * PERIOD
-        state = step(state, verdict, external, unlock, _brake(now), now, config, PERIOD)
+        brake = _brake(now)
+        state = step(state, verdict, external, unlock, brake, now, config, PERIOD, stale=stale)
         seen.append(state)
     return state, seen
 
@@ -71,6 +72,25 @@ def test_the_separation_falling_short_while_moving_is_a_safeguard_stop_that_clea
     state, seen = _run(state, [STILL] * steps, start=11 * PERIOD)
     assert seen[-2].mode == SafetyMode.SAFEGUARD_STOP and state.mode == SafetyMode.NORMAL
     assert state.blend is not None and state.log.safeguard_stops == 1
+
+
+def test_commands_that_stop_coming_are_a_safeguard_stop_held_until_they_come_again():
+    """The real-time link's watchdog: the arm brakes at once and holds while the commands are
+    stale, however still it stands; RESTART_DELAY after fresh ones it resumes by itself."""
+    state, _ = _run(SafetyFunctionState(), [MOVING], stale=True)
+    assert state.mode == SafetyMode.SAFEGUARD_STOP and state.cause == StopCause.STALE_COMMAND
+    assert state.brake is not None
+    state, _ = _run(state, [STILL] * 100, stale=True, start=PERIOD)
+    assert state.mode == SafetyMode.SAFEGUARD_STOP
+    steps = round(RESTART_DELAY / PERIOD) + 1
+    state, seen = _run(state, [STILL] * steps, start=101 * PERIOD)
+    assert seen[-2].mode == SafetyMode.SAFEGUARD_STOP and state.mode == SafetyMode.NORMAL
+    assert state.log.safeguard_stops == 1 and state.log.protective_stops == 0
+    assert state.log.events[0].endswith("safeguard stop: no fresh command")
+    # A protective stop is not unlocked while the commands are stale.
+    stopped, _ = _run(SafetyFunctionState(), [MOVING], external=True)
+    held, _ = _run(stopped, [STILL] * 400, stale=True, start=PERIOD)
+    assert held.mode == SafetyMode.PROTECTIVE_STOP and held.log.unlocks == 0
 
 
 def test_an_external_stop_is_a_protective_stop_that_waits_for_the_unlock():

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform
 
-from hrc_drake.cell.controller.build import COMMANDED, MEASURED, PENDANT
+from hrc_drake.cell.controller.build import COMMANDED, MEASURED, PENDANT, WATCHDOG
 from hrc_drake.cell.controller.supervisor import Mode
 from hrc_drake.cell.run.run import build_closed_loop
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
@@ -24,7 +24,7 @@ def test_every_catalogue_scenario_builds_a_station_with_the_ports_of_a_real_cell
     inputs = {diagram.get_input_port(i).get_name() for i in range(diagram.num_input_ports())}
     outputs = {diagram.get_output_port(i).get_name() for i in range(diagram.num_output_ports())}
     # What a controller may use is exactly the contract; the rest is marked simulation-only.
-    assert {n for n in inputs if not n.startswith("sim.")} == {*COMMANDED, *PENDANT}
+    assert {n for n in inputs if not n.startswith("sim.")} == {*COMMANDED, *PENDANT, *WATCHDOG}
     assert {n for n in outputs if not n.startswith("sim.")} == set(MEASURED)
     assert diagram.GetInputPort("ur3.position").size() == 6
     assert diagram.GetOutputPort("rg2.state_measured").size() == 2

@@ -77,6 +77,31 @@ def probability(text: str) -> float:
     return value
 
 
+def pace(text: str) -> float:
+    """`--realtime PACE`: a real-time rate > 0 (NaN and infinity refused), as `discount`."""
+    value = _number(text)
+    if not 0.0 < value < float("inf"):  # False for NaN too
+        raise argparse.ArgumentTypeError(
+            f"{text} is not a pace; give a real-time rate > 0 (1, the default: the wall clock's)"
+        )
+    return value
+
+
+def add_realtime_flag(p, what: str) -> None:
+    """`--realtime [PACE]` on the parser `p` (`what`: the side it paces)."""
+    p.add_argument(
+        "--realtime",
+        nargs="?",
+        const=1.0,
+        default=None,
+        type=pace,
+        metavar="PACE",
+        help=f"real time instead of the lockstep: {what} paced to the wall clock at PACE times "
+        "its speed (default 1), every channel at its device's rate, the newest reading taken "
+        "(docs/hardware.md); start both sides with it",
+    )
+
+
 def seed(text: str) -> int:
     """`--seed`: a whole number >= 0 (numpy's generators refuse negative seeds, which would be a
     traceback after the runs began)."""
@@ -295,6 +320,7 @@ def _add_simulate(p) -> None:
         help="run the controller against the station `hrc-drake station` serves on this LCM URL "
         "(e.g. udpm://239.241.129.92:20185?ttl=0), started with the same scenario options",
     )
+    add_realtime_flag(p, "with --station-lcm, the controller")
     add_interaction_flags(
         p,
         " (sets the scenario's interaction): in anticipate mode the robot starts on its "
@@ -327,8 +353,10 @@ def _add_station(p) -> None:
         "--timeout",
         type=float,
         default=60.0,
-        help="seconds to wait for the controller to come, and for each of its later messages",
+        help="seconds to wait for the controller to come, and for each of its later messages "
+        "(in real time: for its first commands; then 2 s of silence end the run)",
     )
+    add_realtime_flag(p, "the station")
     p.set_defaults(policy=None)
 
 

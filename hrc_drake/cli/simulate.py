@@ -121,6 +121,7 @@ def _run(args, checked: CheckedRun, record, still, live: bool, port):
     station another process serves (`hrc-drake station`)."""
     scenario, space, policy = checked.scenario, checked.space, checked.policy
     url = getattr(args, "station_lcm", None)
+    pace = getattr(args, "realtime", None)
     # A scenario's decider learns from every task as the cell observed it (`DeciderPolicy`).
     on_task = policy.observe if isinstance(policy, ObservesTasks) else None
     if url is None:
@@ -140,7 +141,14 @@ def _run(args, checked: CheckedRun, record, still, live: bool, port):
     identity = ScenarioIdentity.of(scenario, scenario_options(args))
     url = check_lcm_url(url, "--station-lcm")
     return run_over_lcm(
-        scenario, url, policy, progress=True, identity=identity, on_task=on_task, space=space
+        scenario,
+        url,
+        policy,
+        progress=True,
+        identity=identity,
+        on_task=on_task,
+        space=space,
+        pace=pace,
     )
 
 
@@ -258,6 +266,11 @@ def _save_profile(args, profile, result) -> None:
 
 
 def _simulate(args) -> int:
+    if getattr(args, "realtime", None) is not None and getattr(args, "station_lcm", None) is None:
+        raise UsageError(
+            "--realtime paces the controller against a station over LCM: add --station-lcm URL "
+            "(and start the station with --realtime), or use --live for a paced run here"
+        )
     record, still = _outputs(args)
     live = getattr(args, "live", False)
     if getattr(args, "port", None) is not None and not (live or record is not None):
@@ -326,6 +339,15 @@ def _print_summary(result, scenario) -> None:
             f"stopped {figures['stopped_time']} s (added {figures['ssm_delay']} s); "
             f"separation {result.separation}"
             + (f", waited {result.waited:.1f} s where it planned to" if result.waited else "")
+        )
+    if result.realtime is not None:
+        paced = result.realtime.to_json()
+        print(
+            f"  real time: an update every {paced['period'] * 1000:.2f} ms "
+            f"(target {paced['target_period'] * 1000:g}), jitter p99 "
+            f"{paced['jitter']['p99'] * 1000:.2f} ms, {paced['missed_deadlines']} missed "
+            f"deadline(s), pace {paced['pace_achieved']:.2f} of {paced['pace']:g}, "
+            f"{paced['stale_stops']} stop(s) on stale readings"
         )
     if result.collisions:
         print("  unexpected contacts:", *result.collisions[:5], sep="\n    ")

@@ -26,8 +26,12 @@ refused (the two command lines must be made to agree), not 1, a link that failed
 
 def controller_hint(args, url: str) -> str:
     """The command that runs the controller against a station started with `args` on `url`,
-    to paste as it is into a POSIX shell or zsh (the URL's `?` quoted)."""
+    to paste as it is into a POSIX shell or zsh (the URL's `?` quoted); with `--realtime`,
+    at the same pace."""
     argv = ["hrc-drake", "simulate", *scenario_argv(args), "--station-lcm", url]
+    pace = getattr(args, "realtime", None)
+    if pace is not None:
+        argv += ["--realtime"] if pace == 1.0 else ["--realtime", f"{pace:g}"]
     return shlex.join(argv)
 
 
@@ -42,8 +46,9 @@ def station_command(args) -> int:
     """`hrc-drake station`: serve the scenario's simulated station over LCM until a controller
     (`hrc-drake simulate --station-lcm URL`) has run against it. Exit status 0; 1 if no
     controller came, it stopped answering or the station failed; `EXIT_MISMATCH` (2) if the
-    controller runs another scenario. A scenario that puts a device on real hardware is
-    refused (UsageError, exit status 2): `hrc-drake drivers` serves those."""
+    controller runs another scenario, or runs the link otherwise (`--realtime`). A scenario
+    that puts a device on real hardware is refused (UsageError, exit status 2): `hrc-drake
+    drivers` serves those."""
     url = check_lcm_url(args.lcm or DEFAULT_LCM_URL, "--lcm")
     if not args.timeout > 0:
         raise UsageError(f"--timeout {args.timeout}: give a number of seconds > 0")
@@ -58,7 +63,7 @@ def station_command(args) -> int:
         flush=True,
     )
     try:
-        report = serve_scenario(scenario, url, timeouts, identity)
+        report = serve_scenario(scenario, url, timeouts, identity, pace=args.realtime)
     except ScenarioMismatch as err:
         print(f"hrc-drake station: error: {err}", file=sys.stderr)
         return EXIT_MISMATCH
@@ -67,6 +72,13 @@ def station_command(args) -> int:
         return 1
     if args.json:
         print(json.dumps({"scenario": scenario.name, "lcm": url, **report}))
+    elif args.realtime is not None:
+        paced = report["realtime"]
+        print(
+            f"station {scenario.name}: served {report['sim_time']:.2f} s in real time (pace "
+            f"{paced['pace']:g}, achieved {paced['pace_achieved']:.2f}), "
+            f"{report['commands']} arm commands taken"
+        )
     else:
         print(
             f"station {scenario.name}: served {report['exchanges']} exchanges, "

@@ -347,11 +347,12 @@ class Ur3RtdeDriver:
 class Ur3Bridge:
     """The UR3 on `lcm` (a `pydrake.lcm.DrakeLcm`), subscribed to `UR3_COMMAND` from its
     construction: each `cycle()` publishes `UR3_STATUS` and `UR3_TCP_FORCE` stamped with
-    `clock` (the host's monotonic clock by default, in microseconds), then follows the newest
-    command received (the latest `utime`; `Ur3RtdeDriver.follow`: older than `stale_after`,
-    the arm stops)."""
+    `clock` (the host's wall clock by default, in microseconds since the epoch: the real-time
+    link's shared clock, `hrc_drake.cell.link.realtime`), then follows the newest command
+    received (the latest `utime`; `Ur3RtdeDriver.follow`: older than `stale_after`, the arm
+    stops)."""
 
-    def __init__(self, driver: Ur3RtdeDriver, lcm, clock: Callable[[], float] = time.monotonic):
+    def __init__(self, driver: Ur3RtdeDriver, lcm, clock: Callable[[], float] = time.time):
         self.driver, self._lcm, self._clock = driver, lcm, clock
         self._newest: lcmt_panda_command | None = None
         self._received_at = -math.inf
@@ -398,7 +399,7 @@ class Ur3Bridge:
 def serve_ur3(
     driver: Ur3RtdeDriver,
     lcm,
-    clock: Callable[[], float] = time.monotonic,
+    clock: Callable[[], float] = time.time,
     cycles: int | None = None,
     stop: Event | None = None,
 ) -> None:

@@ -442,18 +442,19 @@ _SHARED: dict[tuple, WorkerPlanService] = {}
 
 
 def shared_plan_service(
-    options: MotionOptions, design: CellDesign | None = None
+    options: MotionOptions, design: CellDesign | None = None, nice: int = 0
 ) -> WorkerPlanService:
-    """One worker (and its plan cache) per cell and set of options, shared by a process's runs,
-    like `shared_planner`; a closed or dead one is replaced. All end at exit."""
+    """One worker (and its plan cache) per cell, set of options and `nice` (the worker's, see
+    `WorkerPlanService`), shared by a process's runs, like `shared_planner`; a closed or dead
+    one is replaced. All end at exit."""
     if design is None:
         from hrc_drake.tasks.spec import load_spec
 
         design = CellDesign.of(load_spec())
-    key = (options, design.key())
+    key = (options, design.key(), nice)
     service = _SHARED.get(key)
     if service is None or not service.alive:
-        service = _SHARED[key] = WorkerPlanService(options, design)
+        service = _SHARED[key] = WorkerPlanService(options, design, nice=nice)
     return service
 
 

@@ -60,8 +60,15 @@ MEASURED = (
     "hri.indication",
 )
 COMMANDED = (*ARM_PORTS, "hri.prompt")
+# What only a station over the real-time link measures beside the station's ports: the command
+# the arm followed when measured (RTDE's `target_q`) and whether an arm or body reading is stale
+# (`hrc_drake.cell.link.realtime`). Unconnected in one process and in the lockstep.
+LINK_READINGS = ("ur3.target", "link.stale")
 # What the robot takes from a person rather than from its controller (a UR's pendant).
 PENDANT = ("safety.unlock",)
+# What the robot takes from the link that carries its commands: 1 while they have stopped coming
+# (the real-time link's watchdog, `hrc_drake.cell.link.realtime`); unconnected, never.
+WATCHDOG = ("ur3.command_stale",)
 
 
 @dataclass(frozen=True)
@@ -183,7 +190,7 @@ def make_controller(
     supervisor = builder.AddNamedSystem(
         "supervisor", Supervisor(space, policy, plans, home, opening, limits, on_task, clear)
     )
-    for name in MEASURED:
+    for name in (*MEASURED, *LINK_READINGS):
         if name != "operator.body":
             builder.ExportInput(supervisor.GetInputPort(name), name)
     for name in (*ARM_PORTS, "hri.prompt", "status"):
@@ -217,9 +224,13 @@ def make_controller(
 def connect_controller(builder: DiagramBuilder, station, controller) -> None:
     """Wire a station and a controller (both added to `builder`) by their port names: the
     station's measured outputs into the controller, its commands back (a controller without a
-    separation monitor leaves the tracked body unread)."""
+    separation monitor leaves the tracked body unread; a station that is not over the
+    real-time link leaves its `LINK_READINGS` unconnected)."""
     for name in MEASURED:
         if controller.HasInputPort(name):
+            builder.Connect(station.GetOutputPort(name), controller.GetInputPort(name))
+    for name in LINK_READINGS:
+        if station.HasOutputPort(name) and controller.HasInputPort(name):
             builder.Connect(station.GetOutputPort(name), controller.GetInputPort(name))
     for name in COMMANDED:
         builder.Connect(controller.GetOutputPort(name), station.GetInputPort(name))
@@ -227,8 +238,10 @@ def connect_controller(builder: DiagramBuilder, station, controller) -> None:
 
 __all__ = [
     "COMMANDED",
+    "LINK_READINGS",
     "MEASURED",
     "PENDANT",
+    "WATCHDOG",
     "Controller",
     "connect_controller",
     "make_controller",

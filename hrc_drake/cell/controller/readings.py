@@ -29,6 +29,8 @@ class SupervisorInputs:
     body: InputPort
     safety_mode: InputPort
     wrench: InputPort  # ur3.tcp_force: the wrist load's force, then its moment
+    target: InputPort  # ur3.target: the command the arm followed when measured (real-time link)
+    stale: InputPort  # link.stale: an arm or body reading is stale (real-time link)
 
     @staticmethod
     def declare(system: LeafSystem) -> SupervisorInputs:
@@ -48,6 +50,8 @@ class SupervisorInputs:
             body=system.DeclareAbstractInputPort("operator.body", AbstractValue.Make(NOBODY)),
             safety_mode=system.DeclareVectorInputPort("safety.mode", BasicVector(1)),
             wrench=system.DeclareVectorInputPort("ur3.tcp_force", BasicVector(6)),
+            target=system.DeclareVectorInputPort("ur3.target", BasicVector(N_JOINTS)),
+            stale=system.DeclareVectorInputPort("link.stale", BasicVector(1)),
         )
 
 
@@ -100,6 +104,22 @@ class Readings:
         arm measures none)."""
         port = self._inputs.wrench
         return port.Eval(self._context) if port.HasValue(self._context) else None
+
+    def arm_target(self) -> np.ndarray | None:
+        """The joint positions the arm's servo followed when `arm_q` was measured, as the
+        robot reports them (RTDE's `target_q`; over the real-time link the command the station
+        held then); None where nobody says (unconnected, or not a number)."""
+        port = self._inputs.target
+        if not port.HasValue(self._context):
+            return None
+        target = port.Eval(self._context)
+        return target if np.isfinite(target).all() else None
+
+    def stale(self) -> bool:
+        """Whether an arm or body reading is too old to act on (the real-time link's
+        `link.stale`, `hrc_drake.cell.link.realtime`; unconnected: never)."""
+        port = self._inputs.stale
+        return port.HasValue(self._context) and port.Eval(self._context)[0] > 0.5
 
     def body(self) -> BodySpheres:
         """The tracked operator body (unconnected: nobody)."""

@@ -110,7 +110,9 @@ class Supervisor(LeafSystem):
     (1), `speed_limit` (1: the speed scale the separation monitor allows; unconnected, 1),
     `safety.stop` (1: the robot's protective-stop input; unconnected, none), `operator.body`
     (BodySpheres, the tracked body: predictive separation holds it against its forecast;
-    unconnected, nobody).
+    unconnected, nobody), `ur3.target` (6: the command the arm followed when measured, which
+    the tracking check compares with; unconnected, its own), `link.stale` (1: an arm or body
+    reading is stale: the plan stops on its path; unconnected, never).
     Output ports: `ur3.position` (6), `ur3.velocity` (6), `rg2.opening` (1), `rg2.force` (1),
     `hri.prompt` (Prompt), `intent` (MotionIntent), `status` (SupervisorStatus).
     `policy` needs `next_task(state)` and `matches(spec)` (a `Policy`, or a decider wrapped by
@@ -230,12 +232,13 @@ class Supervisor(LeafSystem):
         now = context.get_time()
         cell = Readings(self._inputs, context)
         limit = cell.speed_limit()
-        stop = cell.stop()
+        stop, stale = cell.stop(), cell.stale()
         status = self._recovery.note_stop(status, stop, now, cell.safety_mode())
-        if stop or self._anticipation.stopping_to_turn(status, now):
+        if stop or stale or self._anticipation.stopping_to_turn(status, now):
             limit = 0.0  # decelerate along the path, as for the separation monitor's stop
         try:
-            self._check_tracking(status, cell, now)
+            if not stale:  # a stale reading says nothing of where the arm is now
+                self._check_tracking(status, cell, now)
             status = self._advance(status, float(np.clip(limit, 0.0, 1.0)), now)
             status = self._step(status, cell, now)
             status = self._keep_clear.update(status, cell.body, now)
@@ -289,12 +292,13 @@ class Supervisor(LeafSystem):
         return now >= s.settle_until and cell.configuration().current_at(s.settle_until)
 
     def _check_tracking(self, s: SupervisorStatus, cell: Readings, now: float) -> None:
-        """Stop when a joint is farther from its command than the tolerance (the command of
-        the previous update, which the servo has had a period to follow)."""
+        """Stop when a joint is farther from its command than the tolerance: the command its
+        servo followed when measured (`ur3.target`, over the real-time link), else the last."""
         if s.mode in (Mode.DONE, Mode.FAILED):
             return
         q = cell.arm_q()
-        error = np.abs(q - s.command(now).q)
+        target = cell.arm_target()
+        error = np.abs(q - (s.command(now).q if target is None else target))
         worst = int(np.argmax(error))
         if error[worst] > self._limits.tracking_tolerance:
             raise SupervisorError(

@@ -10,8 +10,6 @@ the station's report.
 
 from __future__ import annotations
 
-import json
-import shlex
 import time
 
 import numpy as np
@@ -28,7 +26,6 @@ from pydrake.systems.framework import (
 
 from hrc_drake.cell.link.channels import (
     COMMANDS,
-    END_CHANNEL,
     MEASUREMENTS,
     PRE_SUFFIX,
     REPORT_CHANNEL,
@@ -36,19 +33,18 @@ from hrc_drake.cell.link.channels import (
     Port,
     StationChannel,
 )
-from hrc_drake.cell.link.lcm_messages import session_message, utime
+from hrc_drake.cell.link.lcm_messages import utime
 from hrc_drake.cell.link.lockstep import (
-    HELLO,
     Inbox,
     LockstepTimeouts,
-    ScenarioMismatch,
     StationLinkError,
     exchange_period,
-    identity_text,
+    greet_station,
+    no_station,
     publish,
-    their_identity,
+    request_report,
 )
-from hrc_drake.cell.link.scenario_identity import ScenarioIdentity, mismatch
+from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
 from hrc_drake.scenario.schema import Scenario
 
 
@@ -166,34 +162,9 @@ class StationClient(LeafSystem):
         return values
 
     def _greet(self) -> None:
-        """Step 0 of the protocol: send this controller's identity until the station answers
-        with its own (a station started later, or a lost datagram, needs it again);
-        ScenarioMismatch, naming what differs, if the two run different scenarios."""
-        hello = session_message(0, HELLO, identity_text(self._identity))
-        limit, start = self._timeouts.start, time.monotonic()
-        resend_at = start
-        while True:
-            self._inbox.raise_errors()
-            answers = [m for m in self._inbox.session if m.kind == HELLO]
-            if answers:
-                theirs = their_identity(answers[-1])
-                problem = (
-                    None
-                    if self._identity is None
-                    else mismatch(self._identity, theirs, "controller")
-                )
-                if problem is not None:
-                    raise ScenarioMismatch(problem)
-                self._greeted = True
-                return
-            now = time.monotonic()
-            if now - start > limit:
-                raise StationLinkError(self._silence([REPORT_CHANNEL], 0, limit, first=True))
-            if now >= resend_at:
-                publish(self._lcm, END_CHANNEL, hello)
-                resend_at = now + self._timeouts.resend
-            wait = min(limit - (now - start), resend_at - now)
-            self._lcm.HandleSubscriptions(max(1, int(wait * 1000)))
+        """Step 0 of the protocol (`greet_station`)."""
+        greet_station(self._lcm, self._inbox, self._identity, self._timeouts)
+        self._greeted = True
 
     def _wait(self, names: list[str], stamp: int, first: bool) -> None:
         limit = self._timeouts.start if first else self._timeouts.step
@@ -219,11 +190,7 @@ class StationClient(LeafSystem):
     def _silence(self, missing: list[str], stamp: int, limit: float, first: bool) -> str:
         url = self._lcm.get_lcm_url()
         if first:
-            return (
-                f"no cell station answered on {url} within {limit:g} s (nothing on "
-                f"{', '.join(missing)}): start one with `hrc-drake station --scenario S "
-                f"--lcm {shlex.quote(url)}`"
-            )
+            return no_station(url, missing, limit)
         return (
             f"the cell station stopped answering on {url}: nothing on {', '.join(missing)} "
             f"for {limit:g} s at t = {stamp / 1e6:.3f} s (it died or was stopped)"
@@ -234,18 +201,7 @@ class StationClient(LeafSystem):
         if it does not answer within `timeout` (default: the step timeout)."""
         limit = self._timeouts.step if timeout is None else timeout
         k = self._values[0] if self._values is not None else 0
-        publish(self._lcm, END_CHANNEL, session_message(utime(k * self._period), "end"))
-        start = time.monotonic()
-        while time.monotonic() - start < limit:
-            self._inbox.raise_errors()
-            reports = [m for m in self._inbox.session if m.kind == "report"]
-            if reports:
-                return json.loads(reports[-1].text)
-            self._lcm.HandleSubscriptions(50)
-        raise StationLinkError(
-            f"the cell station did not confirm the end of the run on "
-            f"{self._lcm.get_lcm_url()} within {limit:g} s"
-        )
+        return request_report(self._lcm, self._inbox, utime(k * self._period), limit)
 
 
 def make_cell_station_interface(

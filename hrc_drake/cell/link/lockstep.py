@@ -45,16 +45,19 @@ run with the station's message.
 from __future__ import annotations
 
 import ipaddress
+import json
 import re
+import shlex
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
 from pydrake.lcm import DrakeLcm
 
-from hrc_drake.cell.link.channels import StationChannel
-from hrc_drake.cell.link.lcm_messages import lcmt_station_session
+from hrc_drake.cell.link.channels import END_CHANNEL, REPORT_CHANNEL, StationChannel
+from hrc_drake.cell.link.lcm_messages import lcmt_station_session, session_message
 from hrc_drake.cell.link.lcm_struct import LcmDecodeError
-from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
+from hrc_drake.cell.link.scenario_identity import ScenarioIdentity, mismatch
 from hrc_drake.paths import UsageError
 from hrc_drake.scenario.schema import Scenario, ScenarioError
 
@@ -93,9 +96,74 @@ HELLO = "hello"
 """The session message that carries a side's `ScenarioIdentity` (JSON; `{}` for none)."""
 
 
-def identity_text(identity: ScenarioIdentity | None) -> str:
-    """The text of a hello for `identity`: its JSON, or `{}` (a side that serves any scenario)."""
-    return "{}" if identity is None else identity.to_json()
+LINK = "link"
+"""The hello's key for the link's mode: absent in the lockstep, `{"realtime": PACE}` in the
+real-time mode (`hrc_drake.cell.link.realtime`)."""
+
+
+def identity_text(identity: ScenarioIdentity | None, pace: float | None = None) -> str:
+    """The text of a hello for `identity`: its JSON, or `{}` (a side that serves any scenario);
+    with `pace`, the real-time mode's pace beside it (a lockstep hello has no `link`)."""
+    if pace is None:
+        return "{}" if identity is None else identity.to_json()
+    data = {} if identity is None else json.loads(identity.to_json())
+    return json.dumps({**data, LINK: {"realtime": pace}})
+
+
+def link_pace(message) -> tuple[bool, float | None]:
+    """(whether the other side's hello states a mode, its real-time pace or None for the
+    lockstep). A hello of `{}` (a real cell's driver, a test's stand-in) states none: it
+    serves either mode."""
+    try:
+        data = json.loads(message.text or "{}")
+    except ValueError:
+        return False, None  # `their_identity` names what is wrong with it
+    if not isinstance(data, dict) or not data:
+        return False, None
+    link = data.get(LINK)
+    pace = link.get("realtime") if isinstance(link, dict) else None
+    return True, None if pace is None else float(pace)
+
+
+def _mode(pace: float | None) -> str:
+    return "in lockstep" if pace is None else f"in real time (--realtime {pace:g})"
+
+
+def link_mismatch(pace: float | None, message, side: str) -> str | None:
+    """None when the other side's hello runs the link as this side does (`pace`: the real-time
+    pace, None the lockstep), or states no mode; else one line naming both, as `side`
+    ("station" or "controller") says it."""
+    stated, theirs = link_pace(message)
+    if not stated or theirs == pace:
+        return None
+    if side == "station":
+        said = f"the controller runs {_mode(theirs)}, this station serves {_mode(pace)}"
+    else:
+        said = f"the station serves {_mode(theirs)}, this controller runs {_mode(pace)}"
+    return f"{said}: start both with the same --realtime option, or neither with it"
+
+
+def check_hello(identity: ScenarioIdentity | None, pace: float | None, message) -> None:
+    """The station's side of step 0: ScenarioMismatch, naming what differs, if the controller's
+    hello `message` runs another scenario than `identity` (None: any) or runs the link
+    otherwise than `pace` (None: the lockstep)."""
+    theirs = their_identity(message)
+    problem = None
+    if identity is not None and theirs is not None:
+        problem = mismatch(identity, theirs, "station")
+    problem = problem or link_mismatch(pace, message, "station")
+    if problem is not None:
+        raise ScenarioMismatch(problem)
+
+
+def no_station(url: str, missing: list[str], limit: float, realtime: bool = False) -> str:
+    """The line of a controller that no station answered within `limit` s."""
+    flag = " --realtime" if realtime else ""
+    return (
+        f"no cell station answered on {url} within {limit:g} s (nothing on "
+        f"{', '.join(missing)}): start one with `hrc-drake station --scenario S{flag} "
+        f"--lcm {shlex.quote(url)}`"
+    )
 
 
 def their_identity(message) -> ScenarioIdentity | None:
@@ -134,14 +202,15 @@ def exchange_period(scenario: Scenario) -> float:
 
 
 class Inbox:
-    """The newest message of each channel with its stamp and how many came, kept by LCM
-    handlers that never throw (a message that cannot be read is kept as the error it gives),
-    and the session messages."""
+    """The newest message of each channel with its stamp, how many came and when the newest
+    came (`arrived`, `time.monotonic()`), kept by LCM handlers that never throw (a message that
+    cannot be read is kept as the error it gives), and the session messages."""
 
     def __init__(self, lcm: DrakeLcm, channels: dict[str, StationChannel], session: str):
         self.lcm = lcm
         self.latest: dict[str, tuple[int, bytes]] = {}
         self.count: dict[str, int] = dict.fromkeys(channels, 0)
+        self.arrived: dict[str, float] = {}
         self.session: list = []
         self.errors: list[str] = []
         self.on_message: Callable[[], None] | None = None
@@ -154,6 +223,7 @@ class Inbox:
         try:
             self.latest[name] = (channel.stamp_of(data), data)
             self.count[name] += 1
+            self.arrived[name] = time.monotonic()
         except LcmDecodeError as err:
             self.errors.append(f"{name}: {err}")
         if self.on_message is not None:
@@ -206,3 +276,56 @@ def publish(lcm: DrakeLcm, channel: str, message) -> bytes:
     data = message.encode()
     lcm.Publish(channel, data)
     return data
+
+
+def greet_station(
+    lcm: DrakeLcm,
+    inbox: Inbox,
+    identity: ScenarioIdentity | None,
+    timeouts: LockstepTimeouts,
+    pace: float | None = None,
+) -> None:
+    """Step 0 of the protocol, the controller's side (also in the real-time mode, `pace`):
+    send this controller's hello until the station answers with its own (a station started
+    later, or a lost datagram, needs it again); ScenarioMismatch, naming what differs, if the
+    two run different scenarios or run the link differently; StationLinkError if no station
+    answers within `timeouts.start`."""
+    hello = session_message(0, HELLO, identity_text(identity, pace))
+    limit, start = timeouts.start, time.monotonic()
+    resend_at = start
+    while True:
+        inbox.raise_errors()
+        answers = [m for m in inbox.session if m.kind == HELLO]
+        if answers:
+            theirs = their_identity(answers[-1])
+            problem = None if identity is None else mismatch(identity, theirs, "controller")
+            problem = problem or link_mismatch(pace, answers[-1], "controller")
+            if problem is not None:
+                raise ScenarioMismatch(problem)
+            return
+        now = time.monotonic()
+        if now - start > limit:
+            url = lcm.get_lcm_url()
+            raise StationLinkError(no_station(url, [REPORT_CHANNEL], limit, pace is not None))
+        if now >= resend_at:
+            publish(lcm, END_CHANNEL, hello)
+            resend_at = now + timeouts.resend
+        wait = min(limit - (now - start), resend_at - now)
+        lcm.HandleSubscriptions(max(1, int(wait * 1000)))
+
+
+def request_report(lcm: DrakeLcm, inbox: Inbox, stamp: int, limit: float) -> dict:
+    """Tell the station the run is over (an "end" stamped `stamp`) and return its report (a
+    dict); StationLinkError if it does not answer within `limit` s."""
+    publish(lcm, END_CHANNEL, session_message(stamp, "end"))
+    start = time.monotonic()
+    while time.monotonic() - start < limit:
+        inbox.raise_errors()
+        reports = [m for m in inbox.session if m.kind == "report"]
+        if reports:
+            return json.loads(reports[-1].text)
+        lcm.HandleSubscriptions(50)
+    raise StationLinkError(
+        f"the cell station did not confirm the end of the run on {lcm.get_lcm_url()} within "
+        f"{limit:g} s"
+    )

@@ -10,6 +10,11 @@ session report (`hrc_drake.cell.link.station_record`), the same `faults` and `sa
 Before the first step the two compare the scenarios they were started with
 (`hrc_drake.cell.link.scenario_identity`) and refuse, on both sides, a pair that differs
 (`ScenarioMismatch`).
+
+With a `pace` (`--realtime`) both sides run in real time instead (`hrc_drake.cell.link.realtime`):
+each simulator paced to the wall clock, each channel at its device's rate, the newest reading
+taken; the run then has the scenario's states and terminal, not the one-process run's timing,
+and its result reports how the controller kept its pace (`RunResult.realtime`).
 """
 
 from __future__ import annotations
@@ -24,6 +29,8 @@ from hrc_drake.cell.link.lockstep import (
     check_lcm_url,
     exchange_period,
 )
+from hrc_drake.cell.link.realtime import RealtimeFigures, channel_rates
+from hrc_drake.cell.link.realtime_client import RealtimeSession, make_realtime_station_interface
 from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
 from hrc_drake.cell.link.station_record import StationRecord
 from hrc_drake.cell.link.station_server import serve_cell_station
@@ -44,6 +51,10 @@ from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.policy import Policy
 from hrc_drake.tasks.spec import load_spec
 
+# The planning worker's niceness beside a real-time controller: on a busy machine the kernel
+# runs the controller's and the station's loops first (benchmarks/reports/planning_service.md).
+REALTIME_PLANNER_NICE = 10
+
 
 def station_of(scenario: Scenario) -> CellStation:
     """The station a run of `scenario` simulates: the arm starts at the motion planner's home,
@@ -58,13 +69,20 @@ def serve_scenario(
     url: str,
     timeouts: LockstepTimeouts | None = None,
     identity: ScenarioIdentity | None = None,
+    pace: float | None = None,
 ) -> dict:
     """Serve the station of `scenario` on the LCM `url` until a controller ends its session;
-    the session's report (see `serve_cell_station`). A controller that runs another scenario
-    than `identity` (default: `scenario`'s) is refused with `ScenarioMismatch`."""
+    the session's report (see `serve_cell_station`; with `pace`, in real time:
+    `serve_realtime_station`). A controller that runs another scenario than `identity`
+    (default: `scenario`'s), or runs the link otherwise, is refused with `ScenarioMismatch`."""
     if identity is None:
         identity = ScenarioIdentity.of(scenario)
     station = station_of(scenario)
+    if pace is not None:
+        from hrc_drake.cell.link.realtime_server import serve_realtime_station
+
+        rates, step = channel_rates(scenario), scenario.physics.time_step
+        return serve_realtime_station(station, DrakeLcm(url), rates, step, pace, timeouts, identity)
     period = exchange_period(scenario)
     return serve_cell_station(station, DrakeLcm(url), period, timeouts, identity)
 
@@ -73,14 +91,17 @@ class RemoteCell:
     """A station served over LCM, reached through its interface, as a closed loop's cell side
     (`hrc_drake.cell.run.loop.CellSide`): no welds or stills here (the station applies its own), the
     touching pairs the station sends, and the session ended at the end of the run, whose
-    report (`report`) brings the station's fault record and safety function's log."""
+    report (`report`) brings the station's fault record and safety function's log. Over the
+    real-time link its `session` (`RealtimeSession`) ends it and tells how the controller kept
+    its pace (`realtime`)."""
 
     meshcat = None
 
-    def __init__(self, interface: Diagram):
+    def __init__(self, interface: Diagram, session: RealtimeSession | None = None):
         self.diagram = interface
         self.report: dict | None = None  # the station's session report (after `finish`)
         self._record: StationRecord | None = None
+        self._session = session
 
     def _context(self, root):
         return self.diagram.GetMyContextFromRoot(root)
@@ -120,9 +141,16 @@ class RemoteCell:
         """A still needs the station's camera: `simulate --station-lcm` refuses --still."""
         raise StationLinkError("a still needs the station in this process")
 
+    def realtime(self) -> RealtimeFigures | None:
+        """How the controller kept its pace over the real-time link (None: the lockstep)."""
+        return None if self._session is None else self._session.figures()
+
     def finish(self, root) -> None:
         """End the station's session and keep its report: the run's result is read after."""
-        self.report = end_station_session(self.diagram)
+        if self._session is None:
+            self.report = end_station_session(self.diagram)
+        else:
+            self.report = self._session.end()
         self._record = StationRecord.from_report(self.report)
 
 
@@ -137,24 +165,41 @@ def run_over_lcm(
     on_task=None,
     identity: ScenarioIdentity | None = None,
     space: StateSpace | None = None,
+    pace: float | None = None,
 ) -> RunResult:
     """Run the controller of `scenario` against the station served on the LCM `url` (by
     `hrc-drake station` or `serve_scenario`), as `run_scenario` runs both in one process
-    (`space`: the state space of its spec, when the caller built it already).
+    (`space`: the state space of its spec, when the caller built it already); with `pace`,
+    in real time at that pace (the station must serve in real time at the same pace).
     StationLinkError if the station is not there, stops answering, or fails;
     ScenarioMismatch, before the first step, if it serves another scenario than `identity`
-    (default: `scenario`'s, shown with `scenario_text`)."""
+    (default: `scenario`'s, shown with `scenario_text`) or runs the link otherwise."""
     if not isinstance(scenario, Scenario):
         scenario = load_cell_scenario(scenario, scenario_text)
     if identity is None:
         shown = [] if not scenario_text else ["--scenario-text", scenario_text]
         identity = ScenarioIdentity.of(scenario, ["--lean"] if scenario_text == LEAN else shown)
-    setup = prepare_run(scenario, policy, space=space)
-    interface = make_cell_station_interface(
-        setup.scenario, DrakeLcm(url), timeouts=timeouts, sim_contacts=True, identity=identity
-    )
-    loop = ClosedLoop(setup, RemoteCell(interface), controller_of(setup, on_task))
-    return loop.run(progress=progress)
+    # Paced to the wall clock, simulated time cannot stand still while the planner works (as
+    # in a live run): the robot holds still meanwhile, and the planner gives way to the control
+    # loops on a busy machine (its worker niced).
+    realtime = pace is not None
+    nice = REALTIME_PLANNER_NICE if realtime else 0
+    setup = prepare_run(scenario, policy, live=realtime, space=space, nice=nice)
+    lcm, link = DrakeLcm(url), None
+    if pace is None:
+        interface = make_cell_station_interface(
+            setup.scenario, lcm, timeouts=timeouts, sim_contacts=True, identity=identity
+        )
+        cell = RemoteCell(interface)
+    else:
+        link = make_realtime_station_interface(
+            setup.scenario, lcm, pace, timeouts=timeouts, sim_contacts=True, identity=identity
+        )
+        cell = RemoteCell(link.diagram, link.session)
+    loop = ClosedLoop(setup, cell, controller_of(setup, on_task))
+    if link is not None:
+        link.session.greet()  # before the simulation starts: its first readings are in
+    return loop.run(progress=progress, pace=pace)
 
 
 __all__ = [

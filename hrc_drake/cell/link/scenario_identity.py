@@ -140,6 +140,8 @@ class ScenarioIdentity:
         """The identity in a session message's text; None for `{}` (a side that serves no
         scenario: a real cell, a test's stand-in). ValueError if it is not one."""
         data = json.loads(text or "{}")
+        if isinstance(data, dict):
+            data.pop("link", None)  # the link's mode beside it (`hrc_drake.cell.link.lockstep`)
         if data == {}:
             return None
         if not isinstance(data, dict) or not isinstance(data.get("values"), dict):

@@ -48,11 +48,11 @@ from hrc_drake.cell.link.lockstep import (
     LockstepTimeouts,
     ScenarioMismatch,
     StationLinkError,
+    check_hello,
     identity_text,
     publish,
-    their_identity,
 )
-from hrc_drake.cell.link.scenario_identity import ScenarioIdentity, mismatch
+from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
 
 if TYPE_CHECKING:
     from hrc_drake.cell.link.station_record import StationRecord
@@ -130,7 +130,9 @@ class StationHooks:
     record: Callable[[Context], StationRecord] | None = None
 
 
-def _check_station_ports(diagram: Diagram) -> None:
+def check_station_ports(diagram: Diagram) -> None:
+    """ValueError naming the station ports `diagram` lacks (of the commands and measurements
+    the link carries)."""
     missing = [
         p.name
         for c in (*COMMANDS, *MEASUREMENTS)
@@ -160,7 +162,7 @@ class CellStationServer:
         timeouts: LockstepTimeouts | None = None,
         identity: ScenarioIdentity | None = None,
     ):
-        _check_station_ports(station)
+        check_station_ports(station)
         self._identity, self._greeted, self._hellos = identity, False, 0
         self._lcm, self._period, self._station = lcm, period, station
         self._hooks = hooks if hooks is not None else StationHooks()
@@ -257,11 +259,7 @@ class CellStationServer:
             stamp = utime(self._root.get_time())
             reply = session_message(stamp, HELLO, identity_text(self._identity))
             publish(self._lcm, REPORT_CHANNEL, reply)
-            theirs = their_identity(message)
-            if self._identity is not None and theirs is not None:
-                problem = mismatch(self._identity, theirs, "station")
-                if problem is not None:
-                    raise ScenarioMismatch(problem)
+            check_hello(self._identity, None, message)
             self._greeted = True
         self._hellos = len(hellos)
 

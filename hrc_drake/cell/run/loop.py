@@ -23,7 +23,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 from pydrake.geometry import Meshcat
@@ -58,6 +58,9 @@ from hrc_drake.scenario.safety import Separation
 from hrc_drake.scenario.schema import Scenario
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.policy import Policy
+
+if TYPE_CHECKING:
+    from hrc_drake.cell.link.realtime import RealtimeFigures
 
 
 @dataclass
@@ -110,6 +113,9 @@ class CellSide(Protocol):
 
     def finish(self, root) -> None:
         """End the run on the cell's side."""
+
+    def realtime(self) -> RealtimeFigures | None:
+        """How the controller kept its pace over a real-time link (None: no such link)."""
 
 
 class LocalCell:
@@ -164,6 +170,9 @@ class LocalCell:
 
     def finish(self, root) -> None:
         """Nothing to end."""
+
+    def realtime(self) -> None:
+        """No link: none."""
 
 
 class ClosedLoop:
@@ -249,16 +258,20 @@ class ClosedLoop:
         """What the run did so far (after `advance_to`; no wall time measured: 0)."""
         return _result(self, 0.0, None, interrupted=False)
 
-    def run(self, record=None, live: bool = False, progress: bool = False) -> RunResult:
+    def run(
+        self, record=None, live: bool = False, progress: bool = False, pace: float | None = None
+    ) -> RunResult:
         """Simulate to the end (see the class docstring); with `record`, save the Meshcat
-        recording there; `live` paces the run to the wall clock."""
+        recording there; `live` paces the run to the wall clock, `pace` at that real-time rate
+        (a station over the real-time link)."""
         meshcat = self.cell.meshcat
         if meshcat is not None:
             frame_cell(meshcat, self.station.frames)
         if record is not None:
             self.station.visualizer.StartRecording()
+        if live or pace is not None:
+            self.simulator.set_target_realtime_rate(1.0 if pace is None else pace)
         if live:
-            self.simulator.set_target_realtime_rate(1.0)
             _announce_live(meshcat)
         start = time.perf_counter()
         try:
@@ -558,6 +571,7 @@ def _result(loop: ClosedLoop, wall: float, path, interrupted: bool) -> RunResult
                 setup.scenario.faults, loop.cell.injected(root), status.detections, root.get_time()
             )
         ),
+        realtime=loop.cell.realtime(),
     )
 
 

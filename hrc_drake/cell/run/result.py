@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -13,6 +14,9 @@ from hrc_drake.cell.controller.supervisor import TaskRecord
 from hrc_drake.cell.run.safety_check import SafetyCheck
 from hrc_drake.cell.station.safety_function import SafetyFunctionLog
 from hrc_drake.hri.faults import FaultRecord
+
+if TYPE_CHECKING:
+    from hrc_drake.cell.link.realtime import RealtimeFigures
 
 
 @dataclass(frozen=True)
@@ -59,6 +63,9 @@ class RunResult:
     """The camera configuration sensor's verdicts scored against the contact sensor's
     (`sensors: {configuration: camera}`; `hrc_drake.cell.station.camera_score`); None: the
     contact sensor."""
+    realtime: RealtimeFigures | None = None
+    """How the controller kept its pace over the real-time link (None: in one process or in
+    the lockstep)."""
 
     @property
     def idle(self) -> tuple[float, ...]:
@@ -114,6 +121,7 @@ class RunResult:
             "separation": self.separation,
             # Only with a camera: the contact sensor's runs print what they always did.
             **({} if self.camera is None else {"configuration": self._configuration_json()}),
+            "realtime": None if self.realtime is None else self.realtime.to_json(),
         }
 
     def _configuration_json(self) -> dict:

@@ -61,15 +61,17 @@ def scenario_policy(scenario: Scenario, space) -> Policy:
     return exact_policy(space)
 
 
-def _plan_service(options, design, planner, motion_planner) -> tuple[PlanService, np.ndarray]:
+def _plan_service(
+    options, design, planner, motion_planner, nice: int = 0
+) -> tuple[PlanService, np.ndarray]:
     """The planner beside the controller and the home posture its plans start from: a shared
-    worker process by default (checked for reach before anything is simulated); in-process
-    when the caller hands a planner function or a MotionPlanner."""
+    worker process by default (at `nice`; checked for reach before anything is simulated);
+    in-process when the caller hands a planner function or a MotionPlanner."""
     if motion_planner is not None:
         check_reach(motion_planner)
         function = planner if planner is not None else planner_function(motion_planner)
         return InlinePlanService(function), motion_planner.q_home
-    worker = shared_plan_service(options, design)
+    worker = shared_plan_service(options, design, nice)
     worker.check_reach()
     if planner is not None:
         return InlinePlanService(planner), worker.q_home
@@ -84,19 +86,22 @@ def prepare_run(
     live=False,
     still=None,
     space: StateSpace | None = None,
+    *,
+    nice: int = 0,
 ) -> Setup:
     """What a run of `scenario` is built from: the state space (`space`, if the caller built
     it already), the policy (the scenario's, unless given), the cell design, the planner beside
     the controller and the home posture its plans start from (the station's arm starts there),
     whether the still camera is built, and whether simulated time waits for the planner (not
-    in live runs). CellModelError if the UR3 cannot reach the spec's grasps."""
+    in live runs); `nice`: the planning worker's (a run paced to the wall clock lets its
+    control loop go first). CellModelError if the UR3 cannot reach the spec's grasps."""
     if space is None:
         space = generate_states(load_spec(scenario.assembly_path))
     policy = policy or scenario_policy(scenario, space)
     policy.matches(space.spec)
     design = cell_design(scenario, space.spec)
     options = motion_options(scenario)
-    plans, home = _plan_service(options, design, planner, motion_planner)
+    plans, home = _plan_service(options, design, planner, motion_planner, nice)
     wait = scenario.run.wait_for_planner and not live
     return Setup(scenario, space, policy, design, options, plans, home, wait, still is not None)
 

@@ -212,7 +212,8 @@ def _add_arm(
     """`ur3.position` and `ur3.velocity` into the arm's servo through the safety function
     (returned; its measurements are connected once the station has them,
     `_connect_safety_function`); `ur3.state_estimated`, `ur3.tcp_force` (the wrist load,
-    `hrc_drake.cell.station.wrist`), `safety.stop` and `safety.mode` out, `safety.unlock` in."""
+    `hrc_drake.cell.station.wrist`), `safety.stop` and `safety.mode` out, `safety.unlock` and
+    `ur3.command_stale` in."""
     function = builder.AddNamedSystem(
         "safety_function",
         SafetyFunction(
@@ -228,6 +229,11 @@ def _add_arm(
     builder.Connect(plant.get_state_output_port(ur3), function.GetInputPort("ur3.state"))
     for name in ("ur3.position", "ur3.velocity", "safety.unlock"):
         builder.ExportInput(function.GetInputPort(name), name)
+    # The real-time link's watchdog (`hrc_drake.cell.link.realtime_server`); unconnected, never.
+    builder.ExportInput(function.GetInputPort("command_stale"), "ur3.command_stale")
+    # What the servo follows (the command, or the function's brake or blend): RTDE's target_q
+    # and target_qd, which the real-time link sends beside the measurement.
+    builder.ExportOutput(function.GetOutputPort("desired_state"), "sim.ur3.target")
     for name in ("safety.stop", "safety.mode"):
         builder.ExportOutput(function.GetOutputPort(name), name)
     export_measured(builder, plant.get_state_output_port(ur3), "ur3.state_estimated", scenario)

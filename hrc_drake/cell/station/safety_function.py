@@ -25,6 +25,10 @@ It acts through the robot's stop, by gating the arm's command between the contro
   then it holds until the cause has cleared and someone unlocks — the `safety.unlock` input (a
   button, an LCM message) or the simulated operator `unlock_delay` s after the cause clears —
   never within `UNLOCK_WAIT` of the stop, as a UR.
+- **No fresh command** (the `command_stale` input: over the real-time link the arm's commands
+  stopped coming, `hrc_drake.cell.link.realtime`): the same brake, a safeguard stop, held while
+  the input is on; it resumes `RESTART_DELAY` after fresh commands come again, as a UR's
+  controller stops an arm whose servo targets stop coming.
 - **Reduced**: nothing stopped, a body sphere within `reduced_band` of S_p.
 
 After a stop the command reaches the servo through a blend from the held posture, no faster than
@@ -72,6 +76,11 @@ class StopCause(enum.StrEnum):
     SEPARATION = "separation"  # safeguard stop
     CONTACT = "contact"  # protective stop: a robot shape touched the body while moving
     EXTERNAL = "external input"  # protective stop: the robot's protective-stop input
+    STALE_COMMAND = "no fresh command"  # safeguard stop: the commands stopped coming
+
+
+# The causes of a safeguard stop, which clears by itself; the others are protective stops.
+SAFEGUARD_CAUSES = (StopCause.SEPARATION, StopCause.STALE_COMMAND)
 
 
 @dataclass(frozen=True)
@@ -224,7 +233,7 @@ class SafetyFunctionState:
 def _stop(state: SafetyFunctionState, cause: StopCause, brake: Brake, now: float):
     """`state` stopped for `cause` at `now`, braking by `brake` (an arm already braking keeps
     its brake; a protective stop overrides a safeguard stop)."""
-    protective = cause != StopCause.SEPARATION
+    protective = cause not in SAFEGUARD_CAUSES
     log = state.log
     log = replace(
         log,
@@ -247,6 +256,8 @@ def _stop(state: SafetyFunctionState, cause: StopCause, brake: Brake, now: float
 def _words(cause: StopCause) -> str:
     if cause == StopCause.SEPARATION:
         return "safeguard stop: the separation fell short"
+    if cause == StopCause.STALE_COMMAND:
+        return f"safeguard stop: {cause.value}"
     return f"protective stop: {cause.value}"
 
 
@@ -260,11 +271,13 @@ def step(
     config: SafetyConfig,
     period: float,
     simulated_unlock: bool = True,
+    stale: bool = False,
 ) -> SafetyFunctionState:
     """One period of the function (see the module docstring): the next state from the
-    separation `verdict`, the `external` protective-stop input, the `unlock` input, and the
-    `brake` the arm would follow if it stopped now; with `simulated_unlock` the simulated
-    operator also unlocks, `safety.function.unlock_delay` after the cause clears."""
+    separation `verdict`, the `external` protective-stop input, the `unlock` input, the
+    `stale` command input, and the `brake` the arm would follow if it stopped now; with
+    `simulated_unlock` the simulated operator also unlocks, `safety.function.unlock_delay`
+    after the cause clears."""
     function = config.function
     log = state.log
     if state.mode.stopped:
@@ -276,6 +289,12 @@ def step(
         if state.cause != StopCause.EXTERNAL:
             state = _stop(state, StopCause.EXTERNAL, brake, now)
         return replace(state, cleared_at=None)
+    if stale:
+        if not state.mode.stopped:
+            return _stop(state, StopCause.STALE_COMMAND, brake, now)
+        # Held, whatever stopped it: a protective stop is not unlocked meanwhile.
+        stopped = state.mode == SafetyMode.SAFEGUARD_STOP
+        return replace(state, cleared_at=None) if stopped else state
     if verdict.contact and verdict.moving and state.mode != SafetyMode.PROTECTIVE_STOP:
         return _stop(state, StopCause.CONTACT, brake, now)
     if state.mode == SafetyMode.PROTECTIVE_STOP:
@@ -333,7 +352,8 @@ class SafetyFunction(LeafSystem):
     `ur3.state` (measured, 12), `rg2.state` (measured opening and rate, 2), `configuration`
     (CellConfiguration), `operator.body` (BodySpheres), `external_stop` (1: the robot's
     protective-stop input), `safety.unlock` (1: unlock a protective stop; connected, a person
-    unlocks there and only there; unconnected, the simulated operator does).
+    unlocks there and only there; unconnected, the simulated operator does), `command_stale`
+    (1 while the arm's commands have stopped coming; unconnected, never).
     Output ports: `desired_state` (12, for the arm's servo), `safety.stop` (1), `safety.mode`
     (1, the `SafetyMode` code). Updated every `period`."""
 
@@ -357,6 +377,7 @@ class SafetyFunction(LeafSystem):
         self._body = self.DeclareAbstractInputPort("operator.body", AbstractValue.Make(NOBODY))
         self._external = self.DeclareVectorInputPort("external_stop", 1)
         self._unlock = self.DeclareVectorInputPort("safety.unlock", 1)
+        self._stale = self.DeclareVectorInputPort("command_stale", 1)
         self._state = self.DeclareAbstractState(AbstractValue.Make(SafetyFunctionState()))
         command = {self._position.ticket(), self._velocity.ticket()}
         ticket = {self.abstract_state_ticket(self._state), self.time_ticket()}
@@ -413,6 +434,7 @@ class SafetyFunction(LeafSystem):
         pendant = self._unlock.HasValue(context)
         unlock = pendant and self._unlock.Eval(context)[0] > 0.5
         now = context.get_time()
+        stale = self._stale.HasValue(context) and self._stale.Eval(context)[0] > 0.5
         new = step(
             self.state(context),
             verdict,
@@ -423,6 +445,7 @@ class SafetyFunction(LeafSystem):
             self._config,
             self._period,
             simulated_unlock=not pendant,
+            stale=stale,
         )
         if new.blend is not None and new.blend.start == now:
             # The smoothstep's peak rate is 1.5 times its mean.
@@ -439,6 +462,7 @@ __all__ = [
     "MIN_BLEND",
     "RESTART_DELAY",
     "RESUME_SPEED",
+    "SAFEGUARD_CAUSES",
     "UNLOCK_WAIT",
     "Blend",
     "Brake",
