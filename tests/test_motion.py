@@ -21,6 +21,7 @@ from hrc_drake.motion.ik import solve_ik
 from hrc_drake.motion.poses import part_pose, tcp_pose
 from hrc_drake.motion.scene import Layout, load_cell_frames
 from hrc_drake.motion.trajectory import free_path, path_clearance
+from hrc_drake.rg2_kinematics import pad_offset
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.spec import load_spec
 from hrc_drake.tasks.tokens import UNDO
@@ -160,14 +161,15 @@ def test_a_seat_inside_the_table_fails_on_minimum_distance(planner):
 
 
 def test_kto_adds_distance_constraints_when_the_direct_path_collides(planner):
-    # Tcp 25 mm above the seats, from over slot 1 to past the square on slots 2-3: the square
-    # stands in the way of any path that keeps that height.
+    # The pads 25 mm above the seats, from over slot 1 to past the square on slots 2-3: the
+    # square stands in the way of any path that keeps that height. (The tcp points down; the
+    # pads stand pad_offset from it along its +z.)
     scene = planner.scene(Layout.of({"S23": "square_flange"}, None, 0.061))
     R = scene.tcp_pose(planner.q_home).rotation()
     seat = planner.frames.seats[1].translation()
 
     def posture(y):
-        X = RigidTransform(R, [seat[0], y, seat[2] + 0.025])
+        X = RigidTransform(R, [seat[0], y, seat[2] + 0.025 + pad_offset(0.061)])
         return solve_ik(
             scene,
             X,
