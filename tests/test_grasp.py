@@ -1,16 +1,65 @@
 """Friction grasps: the part is carried by the fingers' contact and friction alone, so too weak a
 grip lets it slip, and the cell detects that from the gripper's own measurements."""
 
+import numpy as np
 import pytest
+from pydrake.math import RigidTransform
 
 from hrc_drake.cell.run.run import run_scenario
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 from hrc_drake.cell.station.build import make_cell_station
 from hrc_drake.cell.station.gripper import RG2_MIN_FORCE
+from hrc_drake.motion.poses import part_pose, tcp_pose
+from hrc_drake.robot_models import set_rg2_opening
 from hrc_drake.scenario.schema import Scenario
 
 # The operator takes the square flange (the heaviest part) first.
 SQUARE_FIRST = "{operator: {deviations: [{step: 1, task: S23}]}}"
+
+
+@pytest.fixture(scope="module")
+def station():
+    return make_cell_station(Scenario())
+
+
+def _pads_in_tcp(station, opening: float) -> RigidTransform:
+    """Where the model's pads' centre (midway between the finger frames, on the pads' faces)
+    stands in the tcp frame with the fingers `opening` apart."""
+    plant = station.plant
+    context = plant.CreateDefaultContext()
+    set_rg2_opening(plant, context, opening)
+    tcp = plant.GetFrameByName("tcp")
+    centre = np.mean(
+        [
+            plant.GetFrameByName(name).CalcPose(context, tcp).translation()
+            for name in ("left_finger", "right_finger")
+        ],
+        axis=0,
+    )
+    return RigidTransform(centre)
+
+
+@pytest.mark.parametrize(
+    ("part", "token", "depth"), [("square_flange", "S23", 0.0163), ("oval_flange_1", "F1", 0.0)]
+)
+def test_the_grasp_puts_the_pads_on_the_parts_grasp_frame(station, part, token, depth):
+    """The tcp the planner takes to hold a part (`tcp_pose`, in the tray and seated) puts the
+    model's pads, closed on the part's width, on the part's `grasp` frame; for the square flange
+    (90 mm) the tcp stands 16.3 mm further along the approach than there, where the RG2's pads
+    swing back as they open, for the oval flanges (45 mm, the tcp's own opening) nowhere else."""
+    frames, plant = station.frames, station.plant
+    model = station.instances[part]
+    X_part_grasp = plant.GetFrameByName("grasp", model).GetFixedPoseInBodyFrame()
+    X_tcp_pads = _pads_in_tcp(station, frames.widths[part])
+    for X_W_part in (frames.homes[part], part_pose(frames, token, {token})):
+        X_W_tcp = tcp_pose(frames, part, X_W_part)
+        X_W_grasp = X_W_part @ X_part_grasp
+        np.testing.assert_allclose(
+            (X_W_tcp @ X_tcp_pads).translation(), X_W_grasp.translation(), atol=1e-6
+        )
+        assert X_W_grasp.InvertAndCompose(X_W_tcp).translation() == pytest.approx(
+            [0.0, 0.0, depth], abs=2e-4
+        )
 
 
 def _force_to_hold(part: str) -> float:

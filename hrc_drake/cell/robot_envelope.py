@@ -6,8 +6,8 @@ function (`hrc_drake.cell.station.safety_function`) and the run's check each bui
 Like a real controller or safety controller, each has its own kinematic model: a MultibodyPlant of
 the cell parsed from the project's models (`add_cell_models`), of which it uses the UR3, the
 gripper and the parts' shapes. At construction every collision shape of the robot, and of each
-part as it sits in the gripper (the gripper's `tcp` at the part's `grasp` frame), becomes a convex
-primitive in numpy (`RobotEnvelope`): a box, a cylinder (a disc swept along z),
+part as it sits in the gripper (its pads at the part's `grasp` frame, `CellFrames.grasps`),
+becomes a convex primitive in numpy (`RobotEnvelope`): a box, a cylinder (a disc swept along z),
 a capsule or a sphere, each the shape itself, so the distance from a point is exact; an
 ellipsoid or a mesh becomes its enclosing box. The gripper's linkage, when its opening is not
 measured, takes the box each of its shapes sweeps over the whole stroke. So the distance is never
@@ -28,11 +28,10 @@ from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.framework import DiagramBuilder
 
 from hrc_drake.cell_models import CellDesign, add_cell_models
-from hrc_drake.motion.scene import TCP
+from hrc_drake.motion.scene import TCP, read_cell_frames
 from hrc_drake.robot_models import RG2_JOINTS, RG2_MAX_OPENING, set_rg2_opening
 from hrc_drake.robot_names import GRIPPER, UR3, UR3_JOINTS
 
-GRASP = "grasp"  # the frame of a part where the gripper's tcp holds it (cell_models)
 _TINY = 1e-12  # keeps the divisions by a length finite where it vanishes
 # The linkage's sweep is taken at this many openings over the stroke; its boxes grow by
 # SWEEP_MARGIN, more than a shape's corner strays off its sampled arc between two samples
@@ -142,8 +141,11 @@ class RobotEnvelope:
             swept: Primitives.join([self._body_shapes(inspector, body, swept) for body in robot])
             for swept in (False, True)
         }
+        held = read_cell_frames(plant, scene_graph, self.context, design).grasps
         self._parts = {
-            part.name: self._part_shapes(inspector, plant.GetModelInstanceByName(part.name))
+            part.name: self._part_shapes(
+                inspector, plant.GetModelInstanceByName(part.name), held[part.name]
+            )
             for part in design.parts
         }
         self._sets: dict[tuple[str | None, bool], Primitives] = {}
@@ -195,13 +197,12 @@ class RobotEnvelope:
             rows.append((name, X_BC, half, disc, rounding))
         return self._primitives(rows, self._row[body.index()], self._link_of(body))
 
-    def _part_shapes(self, inspector, model) -> Primitives:
+    def _part_shapes(self, inspector, model, X_part_tcp: RigidTransform) -> Primitives:
         """A part's collision shapes as the gripper holds it: on the body of the `tcp` frame,
-        with the tcp at the part's `grasp` frame."""
+        with the tcp at `X_part_tcp` (`CellFrames.grasps`)."""
         plant = self.plant
         (index,) = plant.GetBodyIndices(model)
-        X_part_grasp = plant.GetFrameByName(GRASP, model).GetFixedPoseInBodyFrame()
-        X_B_part = self._tcp.GetFixedPoseInBodyFrame() @ X_part_grasp.inverse()
+        X_B_part = self._tcp.GetFixedPoseInBodyFrame() @ X_part_tcp.inverse()
         rows = []
         for gid in plant.GetCollisionGeometriesForBody(plant.get_body(index)):
             name = inspector.GetName(gid)

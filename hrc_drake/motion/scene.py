@@ -30,7 +30,13 @@ from pydrake.multibody.tree import FixedOffsetFrame
 from pydrake.systems.framework import DiagramBuilder
 
 from hrc_drake.cell_models import CellDesign, add_cell_models, check_cell_models
-from hrc_drake.motion.poses import CellFrames, part_pose, pose_from_values, pose_values
+from hrc_drake.motion.poses import (
+    CellFrames,
+    part_pose,
+    pose_from_values,
+    pose_values,
+    tcp_in_part,
+)
 from hrc_drake.obstacle_models import add_fixed_obstacle, far_below
 from hrc_drake.rg2_kinematics import joint_angles
 from hrc_drake.robot_models import RG2_JOINTS, RG2_MAX_OPENING, RG2_OPENING_AXIS
@@ -348,7 +354,8 @@ def _support(shape, direction: np.ndarray) -> float:
 
 
 def load_cell_frames(design: CellDesign) -> CellFrames:
-    """Read seat, tray and part frames (and the parts' grasp widths) from the cell's models."""
+    """Read seat, tray and part frames (and the parts' grasp widths and tcp poses) from the
+    cell's models."""
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
     add_cell_models(plant, design)
@@ -362,7 +369,8 @@ def read_cell_frames(
     plant: MultibodyPlant, scene_graph, plant_context, design: CellDesign
 ) -> CellFrames:
     """The cell's frames in a finalized plant holding `design`'s models (CellModelError if the
-    models do not fit the spec). Grasp widths need the gripper; without it they are empty."""
+    models do not fit the spec). Grasp widths need the gripper; without it they are empty, and
+    each part's tcp pose is its `grasp` frame."""
     check_cell_models(plant, scene_graph, design)
 
     def world_pose(model: str, frame: str) -> RigidTransform:
@@ -398,6 +406,7 @@ def read_cell_frames(
             hi = np.maximum(hi, offset + _support(shape, R @ axis_part))
             lo = np.minimum(lo, offset - _support(shape, R @ -axis_part))
         widths[instance] = float(hi - lo)
+        grasps[instance] = tcp_in_part(X_part_grasp, widths[instance])
     tray = plant.GetBodyByName(TRAY, plant.GetModelInstanceByName(TRAY))
     return CellFrames(
         design, seats, homes, rows, grasps, widths, tray.EvalPoseInWorld(plant_context)
