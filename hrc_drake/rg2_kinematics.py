@@ -101,6 +101,15 @@ def pad_offset(opening: float) -> float:
     return pad_height(opening) - pad_height(TCP_OPENING)
 
 
+def pad_travel_rate(opening: float) -> float:
+    """d(pad_height)/d(opening) at `opening` [m/m]: negative, the pads come back toward the
+    flange as they open (-0.19 at 45 mm, -0.61 at 90 mm). So a load that pulls the pads away from
+    the flange, such as the weight W of a part they hold from above, squeezes it harder: the
+    servo's force F on each pad becomes F + W * |rate| (the linkage's virtual work)."""
+    angle = crank_angle(opening)
+    return -CRANK * math.sin(angle - CRANK_TILT) / opening_rate(angle)
+
+
 def joint_angles(opening: float) -> dict[str, float]:
     """The model's joint positions [rad] (joint name -> angle) at `opening` [m]."""
     angle = crank_angle(opening)
@@ -126,4 +135,5 @@ __all__ = [
     "opening_rate",
     "pad_height",
     "pad_offset",
+    "pad_travel_rate",
 ]

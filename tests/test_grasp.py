@@ -10,6 +10,7 @@ from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 from hrc_drake.cell.station.build import make_cell_station
 from hrc_drake.cell.station.gripper import RG2_MIN_FORCE
 from hrc_drake.motion.poses import part_pose, tcp_pose
+from hrc_drake.rg2_kinematics import pad_travel_rate
 from hrc_drake.robot_models import set_rg2_opening
 from hrc_drake.scenario.schema import Scenario
 
@@ -62,10 +63,15 @@ def test_the_grasp_puts_the_pads_on_the_parts_grasp_frame(station, part, token, 
         )
 
 
-def _force_to_hold(part: str) -> float:
-    """The grip force [N] two pads need to hold `part` still against gravity: its weight over
-    twice the pads' friction coefficient on it (Drake combines two materials' coefficients as
-    2 μ1 μ2 / (μ1 + μ2); SAP uses the dynamic one)."""
+# Parts and plate this slippery let the RG2's weakest grip drop the square flange.
+SLIPPERY = "{physics: {contact: {static_friction: 0.15, dynamic_friction: 0.15}}}"
+
+
+def _force_to_hold(part: str, friction: float) -> float:
+    """The grip force [N] two pads need to hold `part` still against gravity, its friction on
+    the cell `friction`: its weight over twice the pads' friction coefficient on it (Drake
+    combines two materials' coefficients as 2 μ1 μ2 / (μ1 + μ2); SAP uses the dynamic one), less
+    what the weight itself adds to the squeeze through the RG2's linkage (`pad_travel_rate`)."""
     station = make_cell_station(Scenario())
     plant = station.plant
     inspector = station.scene_graph.model_inspector()
@@ -75,23 +81,33 @@ def _force_to_hold(part: str) -> float:
         for g in plant.GetCollisionGeometriesForBody(plant.GetBodyByName("left_finger"))
         if inspector.GetName(g).endswith("pad")
     )
-    pad = inspector.GetProximityProperties(pad).GetProperty("material", "coulomb_friction")
-    pad_mu, part_mu = pad.dynamic_friction(), station.scenario.physics.contact.dynamic_friction
+    pad_mu = inspector.GetProximityProperties(pad).GetProperty("material", "coulomb_friction")
+    pad_mu = pad_mu.dynamic_friction()
     # Drake's CoulombFriction::CombineWithOtherFrictionCoefficients.
-    mu = 2.0 * pad_mu * part_mu / (pad_mu + part_mu)
-    gravity = -plant.gravity_field().gravity_vector()[2]
-    return mass * gravity / (2.0 * mu)
+    mu = 2.0 * pad_mu * friction / (pad_mu + friction)
+    weight = mass * -plant.gravity_field().gravity_vector()[2]
+    return weight / (2.0 * mu) + weight * pad_travel_rate(station.frames.widths[part])
+
+
+def test_the_linkage_lets_the_rg2s_weakest_grip_carry_the_square_flange():
+    """Hanging from the pads, the square flange (90 mm) pulls them away from the flange, which
+    the RG2's linkage turns into squeeze (0.61 of its weight): its weakest grip holds it on the
+    cell's friction (a lean row 1 run carries and seats it at 3 N), not on a slippery one."""
+    friction = Scenario().physics.contact.dynamic_friction
+    assert _force_to_hold("square_flange", friction) < RG2_MIN_FORCE
+    assert _force_to_hold("square_flange", 0.15) > 2 * RG2_MIN_FORCE
 
 
 @pytest.mark.slow
 def test_a_grip_too_weak_for_the_part_lets_it_slip_and_the_task_is_handed_over():
-    needed = _force_to_hold("square_flange")
+    needed = _force_to_hold("square_flange", 0.15)
     default = Scenario().station.rg2.grip_force
-    # The RG2's weakest grip is below what the square flange needs; the default is well above.
+    # On slippery parts the RG2's weakest grip is below what the square flange needs; the
+    # default is well above.
     assert RG2_MIN_FORCE < needed < default / 2
     weak = load_cell_scenario(
         "row1-optimal",
-        [LEAN, SQUARE_FIRST, f"{{station: {{rg2: {{grip_force: {RG2_MIN_FORCE}}}}}}}"],
+        [LEAN, SQUARE_FIRST, SLIPPERY, f"{{station: {{rg2: {{grip_force: {RG2_MIN_FORCE}}}}}}}"],
     )
     result = run_scenario(weak)
     # The Supervisor saw the fingers close past the part's width (no grip), picked it again
