@@ -23,7 +23,7 @@ from hrc_drake.cell_models import CellDesign, CellModelError, add_cell_models
 from hrc_drake.hri.messages import Indication
 from hrc_drake.motion.poses import default_layout, tcp_pose
 from hrc_drake.resources import models_dir
-from hrc_drake.robot_models import add_robot, make_parser, set_rg2_opening
+from hrc_drake.robot_models import RG2_JOINTS, add_robot, make_parser, set_rg2_opening
 from hrc_drake.scenario.schema import Scenario, ScenarioError
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.spec import load_spec
@@ -145,7 +145,8 @@ def test_whole_cell_builds_with_ports_and_constraints(cell, workcell):
         assert diagram.GetOutputPort(name).size() == size, name
     assert diagram.GetOutputPort("rg2.grip_detected").size() == 1
     # What each part may be bolted to: the ovals to the plate or the square's rows, the square
-    # to the plate. No grasp welds (no constraints at all): the fingers hold by friction.
+    # to the plate. No grasp welds: the fingers hold by friction; the only constraints are the
+    # gripper linkage's couplers.
     assert dict(cell.bolts.supports) == {
         "oval_flange_1": (PLATE, "square_flange"),
         "oval_flange_2": (PLATE, "square_flange"),
@@ -153,7 +154,7 @@ def test_whole_cell_builds_with_ports_and_constraints(cell, workcell):
     }
     assert cell.bolts.holds(Weld("oval_flange_1", "square_flange/row_2"))
     assert not cell.bolts.holds(Weld("square_flange", "square_flange/row_1"))
-    assert cell.plant.num_constraints() == 0
+    assert cell.plant.num_constraints() == len(RG2_JOINTS) - 1
     context = cell.create_default_context()
     plant_context = cell.plant.GetMyContextFromRoot(context)
     assert cell.bolts.bolted(plant_context) == set()
