@@ -10,8 +10,10 @@ recovery rate (the cell went on by itself and finished the assembly), the simula
 robot collisions, separation violations (the robot moving under its own command closer than
 S_p) and, apart, the steps an outside force (a push) moved the arm closer than S_p.
 
-Usage: ``python benchmarks/bench_faults.py [--seeds 10] [--workers 2] [--lean]`` (with
-``--lean`` the report is printed, not written).
+Usage: ``python benchmarks/bench_faults.py [--seeds 10] [--workers 2] [--lean] [--modulus PA]
+[--kinds no-seat,...]`` (with ``--lean`` the report is printed, not written; with ``--modulus``
+the parts' hydroelastic modulus is that instead of the scenario's 5e6 Pa and the report is
+written to ``faults_E<PA>.md``; ``--kinds`` runs only those cases).
 """
 
 from __future__ import annotations
@@ -102,12 +104,18 @@ def run_tasks(cell: str, lean: bool) -> int:
     return len(decisions)
 
 
-def one_run(job: tuple[str, str, int, str, bool]) -> dict:
-    """One faulted run; its fault record and the run's figures."""
+def modulus_text(modulus: float) -> str:
+    """The scenario text that sets the parts' hydroelastic modulus [Pa]."""
+    return f"{{physics: {{contact: {{hydroelastic_modulus: {modulus:g}}}}}}}"
+
+
+def one_run(job: tuple) -> dict:
+    """One faulted run (`job`: cell, case, seed, fault entry, lean, and optionally more
+    scenario texts); its fault record and the run's figures."""
     from hrc_drake.cell.scenario import load_cell_scenario
 
-    cell, kind, seed, entry, lean = job
-    texts = [*_texts(cell, lean), f"{{faults: [{entry}]}}"]
+    cell, kind, seed, entry, lean, *extra = job
+    texts = [*_texts(cell, lean), *(extra[0] if extra else ()), f"{{faults: [{entry}]}}"]
     result = pooled_loop(load_cell_scenario(CELLS[cell], texts), cell).run()
     (record,) = result.faults
     safety = result.safety
@@ -127,6 +135,7 @@ def one_run(job: tuple[str, str, int, str, bool]) -> dict:
             result.error or next((t.handed_over for t in result.tasks if t.handed_over), None)
         ),
         "handovers": result.handovers,
+        "events": list(result.events),
     }
 
 
@@ -143,6 +152,8 @@ def summary_rows(runs: list[dict]) -> list[str]:
     for cell in CELLS:
         for case in CASES:
             mine = [r for r in runs if r["cell"] == cell and r["kind"] == case]
+            if not mine:
+                continue  # a case not run (`--kinds`)
             injected = [r for r in mine if r["record"]["injected_at"] is not None]
             detected = [r for r in injected if r["record"]["detected_at"] is not None]
             recovered = [r for r in detected if r["record"]["recovered"] and r["terminal"]]
@@ -190,20 +201,29 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--lean", action="store_true", help="0.5 s holds: a quick look")
+    parser.add_argument("--modulus", type=float, help="the parts' hydroelastic modulus [Pa]")
+    parser.add_argument("--kinds", help="comma-separated cases to run (default: all)")
     args = parser.parse_args(argv)
+    cases = CASES if args.kinds is None else args.kinds.split(",")
+    unknown = sorted(set(cases) - set(CASES))
+    if unknown:
+        parser.error(f"--kinds: unknown {', '.join(unknown)}; the cases are {', '.join(CASES)}")
+    extra = () if args.modulus is None else (modulus_text(args.modulus),)
     jobs = []
     for cell in CELLS:
         tasks = run_tasks(cell, args.lean)
-        for case in CASES:
+        for case in cases:
             for seed in range(args.seeds):
-                jobs.append((cell, case, seed, fault_entry(case, seed, tasks), args.lean))
+                entry = fault_entry(case, seed, tasks)
+                jobs.append((cell, case, seed, entry, args.lean, extra))
     runs, wall = run_pool(one_run, jobs, args.workers)
     text = report(runs, args, wall)
+    out = REPORT if args.modulus is None else REPORT.with_name(f"faults_E{args.modulus:g}.md")
     if args.lean:
         print(text)  # a quick look: the report keeps the full settings' figures
     else:
-        atomic_write_text(REPORT, text)
-        print(f"{text}\nwritten to {REPORT}")
+        atomic_write_text(out, text)
+        print(f"{text}\nwritten to {out}")
     return 0
 
 
@@ -212,11 +232,17 @@ def report(runs: list[dict], args, wall: float) -> str:
     from importlib.metadata import version
 
     settings = "lean (0.5 s holds)" if args.lean else "full (5 s holds, TCP <= 0.25 m/s)"
+    if args.modulus is not None:
+        settings += f"; hydroelastic modulus {args.modulus:g} Pa"
+    options = (" --lean" if args.lean else "") + (
+        f" --modulus {args.modulus:g}" if args.modulus is not None else ""
+    )
+    options += f" --kinds {args.kinds}" if args.kinds else ""
     lines = [
         "# Faults: detected and survived",
         "",
         f"`python benchmarks/bench_faults.py --seeds {args.seeds} --workers {args.workers}"
-        f"{' --lean' if args.lean else ''}` — drake {version('drake')}, {platform.machine()}, "
+        f"{options}` — drake {version('drake')}, {platform.machine()}, "
         f"{multiprocessing.cpu_count()} cores, Python {platform.python_version()}; "
         f"{len(runs)} runs in {wall / 60:.1f} min of wall time. Settings: {settings}; the "
         "operator's body and the separation monitor on; the operator follows the robot.",

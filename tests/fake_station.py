@@ -76,6 +76,8 @@ class FakeStation(LeafSystem):
             "rg2.state_measured", 2, self._gripper, prerequisites_of_calc=state
         )
         self.DeclareVectorOutputPort("rg2.grip_detected", 1, self._grip)
+        # A wrist load that changes with the arm's state: every bit of it must cross the link.
+        self.DeclareVectorOutputPort("ur3.tcp_force", 6, self._wrench, prerequisites_of_calc=state)
         # A protective stop now and then, to carry both values through the interface.
         self.DeclareVectorOutputPort(
             "safety.stop", 1, lambda c, o: o.SetFromVector([float(c.get_time() % 0.5 > 0.4)])
@@ -124,6 +126,10 @@ class FakeStation(LeafSystem):
     def _gripper(self, context, output) -> None:
         output.SetFromVector(self._x(context)[12:])
 
+    def _wrench(self, context, output) -> None:
+        x = self._x(context)
+        output.SetFromVector([0.1 * x[6], -0.2 * x[7], -5.5 + np.sin(x[0]), 0.01, 0.02, x[1] / 3])
+
     def _grip(self, context, output) -> None:
         # Direct feedthrough of the commanded opening, as the real station's grip sensor has.
         stalled = self._x(context)[12] - self._opening.Eval(context)[0] > 0.001
@@ -152,6 +158,7 @@ class FakeController(LeafSystem):
         self._gripper = self.DeclareVectorInputPort("rg2.state_measured", 2)
         self._grip = self.DeclareVectorInputPort("rg2.grip_detected", 1)
         self._stop = self.DeclareVectorInputPort("safety.stop", 1)
+        self._wrench = self.DeclareVectorInputPort("ur3.tcp_force", 6)
         self._config = self.DeclareAbstractInputPort(
             "configuration", AbstractValue.Make(CellConfiguration())
         )
@@ -191,6 +198,7 @@ class FakeController(LeafSystem):
                 float(self._stop.Eval(context)[0]),
                 self._config.Eval(context),
                 tuple(body.centres.ravel()),
+                tuple(self._wrench.Eval(context)),
                 indication,
             )
         )

@@ -7,19 +7,11 @@ from __future__ import annotations
 import os
 import re
 import signal
-import socket
 import subprocess
 import sys
 import threading
 import time
 from pathlib import Path
-
-
-def free_port() -> int:
-    """A TCP port free at the time of asking (for Meshcat's `--port`)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 def hrc_drake_command() -> list[str]:
@@ -111,4 +103,4 @@ class SimulateProcess:
         return f"hrc-drake {' '.join(self.args)}: {what}; stderr ends:\n{tail}"
 
 
-__all__ = ["SimulateProcess", "free_port", "hrc_drake_command"]
+__all__ = ["SimulateProcess", "hrc_drake_command"]

@@ -376,6 +376,12 @@ def test_held_flange_above_the_plate_is_held_not_seated(cell):
         cell.plant.EvalBodyPoseInWorld(plant_context, cell.part_body(part))
     )
     assert np.linalg.norm(drift.translation()) < 0.001
+    # The wrist feels the held part's weight, straight down, and no moment about the tcp to
+    # speak of (the part hangs under it): the load the guarded descent zeroes.
+    load = cell.diagram.GetOutputPort("ur3.tcp_force").Eval(station_context)
+    weight = cell.part_body(part).default_mass() * 9.81
+    assert load[2] == pytest.approx(-weight, rel=0.02)
+    assert np.abs(load[:2]).max() < 0.02 * weight and np.abs(load[3:]).max() < 0.01
 
 
 @pytest.mark.slow

@@ -34,6 +34,8 @@ class _BareCell(LeafSystem):
         self.DeclareVectorInputPort("rg2.force", 1)
         self._prompt = self.DeclareAbstractInputPort("hri.prompt", AbstractValue.Make(Prompt()))
         self.DeclareVectorOutputPort("ur3.state_estimated", 12, self._arm)
+        # The wrist carries nothing: no load (the guarded descent never trips).
+        self.DeclareVectorOutputPort("ur3.tcp_force", 6, lambda c, o: o.SetFromVector([0] * 6))
         self.DeclareVectorOutputPort("rg2.state_measured", 2, self._gripper)
         self.DeclareVectorOutputPort("rg2.grip_detected", 1, lambda c, o: o.SetFromVector([0]))
         self.DeclareVectorOutputPort("safety.stop", 1, lambda c, o: o.SetFromVector([0]))

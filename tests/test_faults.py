@@ -201,17 +201,35 @@ def test_a_part_resting_tilted_within_half_a_radian_is_picked_again():
     assert fault["recovered"] is True and fault["recovery"] == "regrasp"
 
 
-def test_a_part_let_go_off_its_seat_is_picked_again_and_replaced():
-    loop = build_closed_loop(
-        load_cell_scenario("row1-optimal", [LEAN, "{faults: [!NoSeat {task: 1}]}"])
-    )
-    result = loop.run()
-    assert result.done and result.states == ROW1_STATES, result.error
-    (found,) = loop.status.detections
-    assert found.cause == "seat" and found.step == 1 and found.recovery == "replace"
-    (record,) = result.faults
+@pytest.mark.slow
+def test_a_part_lowered_onto_a_rim_at_1e7_pa_is_let_go_by_the_guard_and_replaced():
+    # The 4-slot cell's square flange slid 8.3 mm in the fingers (bench_faults' seed 1), at
+    # Drake's default 1e7 Pa: pressed on onto the pocket's rim, the part burst out of the grasp
+    # and kicked the wrist off its command (the task stopped; at 5e6 Pa it was re-placed). The
+    # guarded descent reads the rim on the wrist, stops pressing while the part is still in
+    # the fingers, lets it go, and the part is picked again and re-placed, as at 5e6 Pa (the
+    # other no-seat tests). Run until the cell reads the re-placed part.
+    texts = [
+        "{assembly: four-slot, name: four-slot}",
+        LEAN,
+        "{physics: {contact: {hydroelastic_modulus: 1.0e7}}}",
+        "{faults: [!NoSeat {task: 2, offset: 0.0083}]}",
+    ]
+    loop = build_closed_loop(load_cell_scenario(None, texts))
+    t = 0.0
+    while len(loop.status.history) < 2 and loop.advance_to(t) not in (Mode.DONE, Mode.FAILED):
+        t += 0.5
+    status = loop.status
+    assert status.error is None and status.visited[:3] == [(), ("F1",), ("F1", "S34")]
+    (trip,) = [e for e in status.events if "guarded descent" in e]
+    # It met the rim some 3.5 mm above the seat, with the part still in the fingers.
+    above = float(trip.split("meets something ")[1].split(" mm")[0])
+    assert 2.5 < above < 4.5, trip
+    (found,) = status.detections
+    assert found.cause == "seat" and found.step == 2 and found.recovery == "replace"
+    (record,) = loop.result().faults
     assert record.kind == "no-seat" and record.recovered and record.recovery == "replace"
-    assert not result.collisions
+    assert not loop.watch.contacts.collisions
 
 
 def test_a_part_that_cannot_be_replaced_in_time_is_handed_over():
@@ -333,12 +351,6 @@ def test_a_grip_too_weak_for_the_part_slips_and_is_detected():
     assert detections[-1].recovery == "operator"
     second = loop.status.history[1]
     assert "square_flange slipped out of the gripper 3 times" in second.handed_over
-
-
-def test_without_faults_nothing_is_injected_or_detected():
-    loop = build_closed_loop(load_cell_scenario("row1-optimal", LEAN))
-    result = loop.run()
-    assert result.done and result.faults == () and loop.status.detections == ()
 
 
 @pytest.mark.parametrize(

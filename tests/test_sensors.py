@@ -160,7 +160,12 @@ def test_the_body_reading_is_noisy_late_and_stamped():
 def test_the_presets_and_their_overrides_parse():
     assert sensor_models(load_scenario("row1-optimal").sensors) == {}
     realistic = sensor_models(load_scenario("row1-optimal", "{sensors: realistic}").sensors)
-    assert set(realistic) == {"ur3.state_estimated", "rg2.state_measured", "operator.body"}
+    assert set(realistic) == {
+        "ur3.state_estimated",
+        "ur3.tcp_force",
+        "rg2.state_measured",
+        "operator.body",
+    }
     assert realistic["ur3.state_estimated"] == REALISTIC["ur3"]
     assert realistic["ur3.state_estimated"].rate == 125.0
     assert realistic["operator.body"].latency == 0.075
@@ -185,6 +190,12 @@ def test_the_presets_and_their_overrides_parse():
             "{sensors: {preset: realistic, body: {max_latency: 0.01}}}",
             "sensors.body.max_latency: the bound must be >= latency",
         ),
+        (
+            "{sensors: {configuration: cam}}",
+            "sensors.configuration: unknown sensor 'cam'; use contact or camera",
+        ),
+        ("{sensors: {camera: {rate: 3}}}", "sensors.camera: figures for a camera, but"),
+        ("{sensors: {configuration: camera, camera: {angle_noise: -1}}}", "sensors.camera.angle"),
     ],
 )
 def test_a_malformed_section_is_refused_in_one_line(text, named):
@@ -210,23 +221,34 @@ def test_ideal_inserts_nothing_and_realistic_a_sensor_with_its_stamp(preset):
 
 
 @pytest.mark.slow
-def test_row_1_runs_to_its_end_with_realistic_sensors():
-    """One lean run with `sensors: realistic`: late, noisy, quantised readings that are now and
-    then lost, and the cell still ends terminal in its states, without a collision."""
+def test_row_1_runs_to_its_end_with_realistic_sensors_and_the_camera():
+    """One lean run with `sensors: realistic` and the camera for the configuration: late, noisy,
+    quantised readings that are now and then lost, part verdicts from noisy poses alone, and
+    the cell still ends terminal in its states, without a collision, every verdict of the
+    camera backed by the contact sensor's and none missed."""
     from hrc_drake.cell.run.run import run_scenario
     from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 
-    scenario = load_cell_scenario("row1-optimal", [LEAN, "{sensors: realistic}"])
-    result = run_scenario(scenario)
+    text = "{sensors: {preset: realistic, configuration: camera}}"
+    result = run_scenario(load_cell_scenario("row1-optimal", [LEAN, text]))
     assert result.error is None, result.error
     assert result.done and result.final_kind == "terminal"
     assert result.collisions == []
     assert result.names == list(load_scenario("row1-optimal").minimum_effort)
     assert result.safety.violations == 0 and result.safety.body_contacts == 0
+    camera = result.camera
+    assert camera["detections"] == 3 and camera["frames"] > 100
+    assert (camera["false_detections"], camera["missed_detections"]) == (0, 0), camera["events"]
 
 
 @pytest.mark.parametrize(
-    "text", ["{}", "{sensors: realistic}", "{sensors: {preset: realistic, body: {rate: 15}}}"]
+    "text",
+    [
+        "{}",
+        "{sensors: realistic}",
+        "{sensors: {preset: realistic, body: {rate: 15}}}",
+        "{sensors: {configuration: camera, camera: {rate: 3}}}",
+    ],
 )
 def test_drakes_loader_reads_the_section_as_ours(text):
     from pydrake.common.yaml import yaml_load_typed

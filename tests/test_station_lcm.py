@@ -136,6 +136,7 @@ def _examples() -> dict[str, tuple]:
         "RG2_COMMAND": (np.array([0.0451]), np.array([17.5])),
         "HRI_PROMPT": (Prompt(3, PromptKind.BOLT, ("F1", "S12"), "F3", "oval_flange_2"),),
         "UR3_STATUS": (np.linspace(-3, 3, 12) / 11, np.array([1.0]), np.array([5.0])),
+        "UR3_TCP_FORCE": (np.array([0.25, -1.5, 7.125, 0.01, -0.02, 1 / 3]),),
         "RG2_STATUS": (np.array([0.0449, -0.0021]), np.array([1.0])),
         "CELL_CONFIGURATION": (DROPPED,),
         "OPERATOR_BODY": (body,),
@@ -233,6 +234,10 @@ def test_station_record_round_trips_through_the_report():
     bare = {"sim_time": 9.0, "exchanges": 900}
     assert StationRecord.from_report(bare) is None
     assert StationRecord.from_report({**bare, **StationRecord().to_json()}) == StationRecord()
+    # A camera's score rides along (only with a camera: the key is absent without one).
+    assert "camera" not in record.to_json()
+    camera = StationRecord(camera={"frames": 3, "false_detections": 0, "events": []})
+    assert StationRecord.from_report({**bare, **camera.to_json()}) == camera
     report["injected"][0]["colour"] = "red"
     with pytest.raises(StationLinkError, match="the cell station's report has a fault record"):
         StationRecord.from_report(report)

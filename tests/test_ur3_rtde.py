@@ -18,12 +18,18 @@ from drake import lcmt_panda_status
 from pydrake.lcm import DrakeLcm
 
 import hrc_drake.drivers.ur3_rtde as ur3_rtde
-from hrc_drake.cell.link.lcm_messages import ur3_command, ur3_status_values
+from hrc_drake.cell.link.lcm_messages import (
+    lcmt_ur3_tcp_force,
+    tcp_force_value,
+    ur3_command,
+    ur3_status_values,
+)
 from hrc_drake.cell.ports import SafetyMode
 from hrc_drake.drivers.ur3_rtde import (
     CommandOutcome,
     Ur3Bridge,
     Ur3CommandRefused,
+    Ur3DriverError,
     Ur3RtdeDriver,
     Ur3RtdeSettings,
     station_safety_mode,
@@ -42,6 +48,7 @@ class FakeReceive:
         self.target_q, self.target_qd = list(q), [0.0] * 6
         self.target_qdd, self.target_moment = [0.0] * 6, [0.0] * 6
         self.timestamp, self.safety_mode, self.robot_mode = 0.0, safety_mode, robot_mode
+        self.tcp_force = [0.0, 0.0, -5.6, 0.0, 0.0, 0.0]
         self.connected = True
 
     def isConnected(self):
@@ -67,6 +74,9 @@ class FakeReceive:
 
     def getTargetMoment(self):
         return list(self.target_moment)
+
+    def getActualTCPForce(self):
+        return list(self.tcp_force)
 
     def getSafetyMode(self):
         return self.safety_mode
@@ -326,6 +336,21 @@ def test_a_stale_command_stops_the_arm():
     assert len(control.named("servoJ")) == 2
 
 
+def test_rtde_tcp_force_maps_to_the_wrist_load_message():
+    """actual_TCP_force, force then moment, as UR3_TCP_FORCE (`ur3.tcp_force` on the
+    controller's side), every bit; a reading of another length is refused."""
+    r = FakeReceive()
+    r.tcp_force = [0.25, -1.5, 7.125, 0.01, -0.02, 1 / 3]
+    driver = Ur3RtdeDriver(Ur3RtdeSettings.e_series("ur3e"), r, FakeControl())
+    message = lcmt_ur3_tcp_force.decode(driver.tcp_force(123).encode())
+    assert message.utime == 123
+    (wrench,) = tcp_force_value(message)
+    assert list(wrench) == r.tcp_force
+    r.tcp_force = [0.0] * 3
+    with pytest.raises(Ur3DriverError, match="actual_TCP_force: 3 values"):
+        driver.tcp_force(124)
+
+
 def _status_counter(lcm: DrakeLcm) -> list:
     statuses = []
     lcm.Subscribe("UR3_STATUS", lambda data: statuses.append(lcmt_panda_status.decode(data)))
@@ -339,12 +364,15 @@ def test_the_bridge_publishes_status_each_period_and_stops_on_a_stale_command():
     driver = Ur3RtdeDriver(Ur3RtdeSettings.cb3("ur3"), receive, control)
     lcm = DrakeLcm("memq://")
     statuses = _status_counter(lcm)
+    loads = []
+    lcm.Subscribe("UR3_TCP_FORCE", lambda data: loads.append(lcmt_ur3_tcp_force.decode(data)))
     bridge = Ur3Bridge(driver, lcm, clock=lambda: control.clock)
     lcm.Publish("UR3_COMMAND", _command(5, HOME).encode())
     bridge.run(cycles=20)
     lcm.HandleSubscriptions(0)
     assert len(control.named("servoJ")) == 10 and control.named("servoStop") == [(10.0,)]
     assert [s.utime for s in statuses] == [round(8_000 * i) for i in range(20)]
+    assert [m.utime for m in loads] == [s.utime for s in statuses]
 
 
 def test_the_bridge_ends_on_a_refused_command_with_the_arm_stopped():

@@ -88,6 +88,11 @@ class CellConfiguration:
     # The world pose (x, y, z, qw, qx, qy, qz) of a temporary obstacle seen in the work
     # (`hrc_drake.obstacle_models`), or () when there is none.
     obstacle: tuple[float, ...] = ()
+    # Up to when the verdicts are known to hold [s, station time]: a camera's newest frame
+    # whose every part's view agreed with the verdict reported (`hrc_drake.cell.station.camera`).
+    # None: now (the contact sensor, exact at every step, or a reading over LCM, whose message
+    # carries no such time).
+    stamp: float | None = None
 
     def __deepcopy__(self, memo) -> CellConfiguration:
         # Immutable: Drake's copies of this abstract value can share it.
@@ -116,6 +121,11 @@ class CellConfiguration:
     def held(self) -> str | None:
         """The part read as in the gripper (None: none)."""
         return next((name for name, p in self.placements if p.status == PartStatus.HELD), None)
+
+    def current_at(self, time: float) -> bool:
+        """Whether the reading's verdicts hold at `time` or later: what a reader waits for
+        before it believes what the cell shows after `time` (a part let go, come to rest)."""
+        return self.stamp is None or self.stamp >= time - 1e-9
 
 
 @dataclass(frozen=True)

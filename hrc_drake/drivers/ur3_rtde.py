@@ -43,13 +43,21 @@ import numpy as np
 from drake import lcmt_panda_command, lcmt_panda_status
 
 from hrc_drake.cell.link.channels import COMMANDS, MEASUREMENTS
-from hrc_drake.cell.link.lcm_messages import N_JOINTS, ur3_command_values, ur3_status, utime
+from hrc_drake.cell.link.lcm_messages import (
+    N_JOINTS,
+    lcmt_ur3_tcp_force,
+    tcp_force_message,
+    ur3_command_values,
+    ur3_status,
+    utime,
+)
 from hrc_drake.cell.ports import SafetyMode
 from hrc_drake.drivers.settings import Ur3RtdeSettings
 from hrc_drake.robot_names import UR3_JOINTS
 
 COMMAND_CHANNEL = next(c.channel for c in COMMANDS if c.message is lcmt_panda_command)
 STATUS_CHANNEL = next(c.channel for c in MEASUREMENTS if c.message is lcmt_panda_status)
+TCP_FORCE_CHANNEL = next(c.channel for c in MEASUREMENTS if c.message is lcmt_ur3_tcp_force)
 
 
 class UrSafetyMode(enum.IntEnum):
@@ -124,6 +132,7 @@ class ReceiveInterface(Protocol):
     def getTargetQd(self) -> list[float]: ...
     def getTargetQdd(self) -> list[float]: ...
     def getTargetMoment(self) -> list[float]: ...
+    def getActualTCPForce(self) -> list[float]: ...
     def getSafetyMode(self) -> int: ...
     def getRobotMode(self) -> int: ...
     def disconnect(self) -> None: ...
@@ -237,6 +246,17 @@ class Ur3RtdeDriver:
         message.joint_torque_desired = self._joints(receive.getTargetMoment(), "target_moment")
         return message
 
+    def tcp_force(self, stamp: int) -> lcmt_ur3_tcp_force:
+        """The wrist load's `UR3_TCP_FORCE` stamped `stamp` [us]: RTDE's `actual_TCP_force`
+        (force, then moment; the arm's base frame; on an e-Series its flange sensor, on a CB3
+        an estimate from the joint currents) as it comes. Its sign is UR's, which nobody here
+        has checked against a real arm; the station's reads +z when a part is pushed up
+        against the fingers (docs/hardware.md)."""
+        values = self._receive.getActualTCPForce()
+        if len(values) != 6:
+            raise Ur3DriverError(f"RTDE actual_TCP_force: {len(values)} values, not 6")
+        return tcp_force_message(stamp, values)
+
     def _too_fast(self, stamp: int, q: np.ndarray) -> str | None:
         """Why a command at `stamp` to `q` is too fast, or None."""
         if self._sent is not None:
@@ -326,9 +346,10 @@ class Ur3RtdeDriver:
 
 class Ur3Bridge:
     """The UR3 on `lcm` (a `pydrake.lcm.DrakeLcm`), subscribed to `UR3_COMMAND` from its
-    construction: each `cycle()` publishes `UR3_STATUS` stamped with `clock` (the host's
-    monotonic clock by default, in microseconds), then follows the newest command received
-    (the latest `utime`; `Ur3RtdeDriver.follow`: older than `stale_after`, the arm stops)."""
+    construction: each `cycle()` publishes `UR3_STATUS` and `UR3_TCP_FORCE` stamped with
+    `clock` (the host's monotonic clock by default, in microseconds), then follows the newest
+    command received (the latest `utime`; `Ur3RtdeDriver.follow`: older than `stale_after`,
+    the arm stops)."""
 
     def __init__(self, driver: Ur3RtdeDriver, lcm, clock: Callable[[], float] = time.monotonic):
         self.driver, self._lcm, self._clock = driver, lcm, clock
@@ -355,6 +376,7 @@ class Ur3Bridge:
             raise Ur3DriverError(f"{COMMAND_CHANNEL}: {self._error}") from self._error
         now = self._clock()
         self._lcm.Publish(STATUS_CHANNEL, self.driver.status(utime(now)).encode())
+        self._lcm.Publish(TCP_FORCE_CHANNEL, self.driver.tcp_force(utime(now)).encode())
         return self.driver.follow(self._newest, now - self._received_at)
 
     def run(self, cycles: int | None = None, stop: Event | None = None) -> None:

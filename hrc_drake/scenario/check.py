@@ -179,6 +179,9 @@ def _check_run(scenario: Scenario, fail) -> None:
         raise fail("run.handover_time", f"give finite seconds >= 0, got {handover}")
     if scenario.run.recover_tries < 0:
         raise fail("run.recover_tries", "must be >= 0 (0: hand every lost part over)")
+    guard = scenario.run.place_guard
+    if not (math.isfinite(guard) and guard >= 0):
+        raise fail("run.place_guard", f"give newtons >= 0 (0: no guard), got {guard}")
 
 
 def _check_safety_body_and_station(scenario: Scenario, fail) -> None:

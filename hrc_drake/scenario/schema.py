@@ -226,6 +226,10 @@ class RunConfig:
         path_timeout: seconds the robot waits for a path that an obstacle blocks (holding
             still, planning again whenever the obstacle moves or goes) before it hands the task
             over to the operator.
+        place_guard: N; the guarded descent of a place: while the tool is more than 1 mm above
+            its place, a rise of the wrist load against the approach (`ur3.tcp_force`) past this
+            stops the descent, backs off and lets the part go (`docs/station.md`, "Guarded
+            descent"). 0: no guard, the arm presses on to the plan's place.
     """
 
     period: float = 0.02
@@ -239,6 +243,7 @@ class RunConfig:
     handover_time: float = 5.0
     recover_tries: int = 2
     path_timeout: float = 10.0
+    place_guard: float = 8.0
 
 
 class Activity(StrEnum):

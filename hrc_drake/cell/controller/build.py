@@ -1,12 +1,13 @@
 """The cell's controller: the Supervisor and its separation monitor, as one diagram whose ports
 are exactly what a real cell offers (`docs/station.md`).
 
-Inputs (measured): `ur3.state_estimated`, `rg2.state_measured`, `rg2.grip_detected`,
-`configuration`, `operator.body`, `hri.indication`. Outputs (commanded): `ur3.position`,
-`ur3.velocity`, `rg2.opening`, `rg2.force`, `hri.prompt`; and `status` (the Supervisor's, for
-whoever runs the controller: progress lines, the stack light, reports). The planner runs beside
-it, behind a `PlanService` (`hrc_drake.motion.service`). Built the same whether the station is
-the simulated one in this process (`make_cell_station`) or one served over LCM.
+Inputs (measured): `ur3.state_estimated`, `ur3.tcp_force`, `rg2.state_measured`,
+`rg2.grip_detected`, `configuration`, `operator.body`, `hri.indication`. Outputs (commanded):
+`ur3.position`, `ur3.velocity`, `rg2.opening`, `rg2.force`, `hri.prompt`; and `status` (the
+Supervisor's, for whoever runs the controller: progress lines, the stack light, reports). The
+planner runs beside it, behind a `PlanService` (`hrc_drake.motion.service`). Built the same
+whether the station is the simulated one in this process (`make_cell_station`) or one served
+over LCM.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
 from hrc_drake.cell.controller.forecast import OperatorForecast
+from hrc_drake.cell.controller.guard import GuardSettings
 from hrc_drake.cell.controller.intent import MotionIntent
 from hrc_drake.cell.controller.keep_clear import KeepClearSettings
 from hrc_drake.cell.controller.separation import (
@@ -48,6 +50,7 @@ from hrc_drake.tasks.policy import Policy
 
 MEASURED = (
     "ur3.state_estimated",
+    "ur3.tcp_force",
     "rg2.state_measured",
     "rg2.grip_detected",
     "safety.stop",
@@ -94,6 +97,12 @@ def supervisor_limits(scenario: Scenario, options: MotionOptions) -> SupervisorL
         recover_tries=run.recover_tries,
         path_timeout=run.path_timeout,
         anticipate=scenario.interaction_model().anticipates,
+        guard=GuardSettings(
+            threshold=run.place_guard,
+            descent=options.approach_distance,
+            enabled=run.place_guard > 0,
+        ),
+        gripper_time=options.gripper_time,
     )
 
 

@@ -28,6 +28,7 @@ class SupervisorInputs:
     stop: InputPort
     body: InputPort
     safety_mode: InputPort
+    wrench: InputPort  # ur3.tcp_force: the wrist load's force, then its moment
 
     @staticmethod
     def declare(system: LeafSystem) -> SupervisorInputs:
@@ -46,6 +47,7 @@ class SupervisorInputs:
             stop=system.DeclareVectorInputPort("safety.stop", BasicVector(1)),
             body=system.DeclareAbstractInputPort("operator.body", AbstractValue.Make(NOBODY)),
             safety_mode=system.DeclareVectorInputPort("safety.mode", BasicVector(1)),
+            wrench=system.DeclareVectorInputPort("ur3.tcp_force", BasicVector(6)),
         )
 
 
@@ -92,6 +94,12 @@ class Readings:
         if port.HasValue(self._context):
             return SafetyMode(round(port.Eval(self._context)[0]))
         return SafetyMode.PROTECTIVE_STOP if self.stop() else SafetyMode.NORMAL
+
+    def wrench(self) -> np.ndarray | None:
+        """The wrist load: force [N], then moment [N·m], world frame (unconnected: None, the
+        arm measures none)."""
+        port = self._inputs.wrench
+        return port.Eval(self._context) if port.HasValue(self._context) else None
 
     def body(self) -> BodySpheres:
         """The tracked operator body (unconnected: nobody)."""

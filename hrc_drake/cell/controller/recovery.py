@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from hrc_drake.cell.controller.anticipation import Turn, turn_at
+from hrc_drake.cell.controller.guard import GuardTrip, Retreat, tau_at_height
 from hrc_drake.cell.controller.planning import PlanAsker
 from hrc_drake.cell.controller.readings import Readings
 from hrc_drake.cell.controller.supervisor_state import (
@@ -100,6 +101,44 @@ class FaultRecovery:
             f"step {s.step}: the gripper stands at {opening * 1000:.1f} mm {what}; the task is "
             "stopped",
             cause=cause,
+        )
+
+    def stop_pressing(self, s: SupervisorStatus, trip: GuardTrip, now: float) -> SupervisorStatus:
+        """The guarded descent tripped (`trip`): the part met something before its seat. Stop
+        pressing — the arm backs off to where it stood just before the contact — and let the
+        part go there (the fingers open as at a release, for `gripper_time`); then the arm goes
+        back up its own descent to the pre-place pose (a `Retreat`, as long as the descent
+        took from there), and the cell is read once the part settles, as after any release: a
+        part out of its seat is picked again and re-placed, or the task handed over
+        (`Supervisor._observe`). The plan's hold for the bolts never came: the arm holds away
+        from home, and the next plan starts where it holds."""
+        plan, part, limits = s.plan, s.task.part, self._limits
+        place = plan.segment(Stage.PLACE)
+        tau_from = tau_at_height(plan, trip.above_back, limits.guard.descent)
+        start = now + limits.gripper_time
+        end = start + 1.5 * (tau_from - place.start)  # unhurried: the descent's own pace
+        retreat = Retreat(plan, trip.q_back, tau_from, place.start, start, end)
+        event = (
+            f"{now:.2f}: guarded descent: {part} meets something {trip.above * 1000:.1f} mm "
+            f"above its place ({trip.rise:.0f} N against the approach): stops pressing, backs "
+            "off and lets it go"
+        )
+        prompt = s.question.prompt
+        return s.noted(
+            event,
+            mode=Mode.SETTLE,
+            settle_until=end + limits.settle_time,
+            q_hold=tuple(float(x) for x in plan.positions(place.start)),
+            retreat=retreat,
+            opening_hold=plan.gripper_opening(plan.segment(Stage.RELEASE).end),
+            clock=replace(s.clock, plan=None),
+            question=replace(
+                s.question,
+                prompt=prompt
+                if prompt.kind == PromptKind.CHOOSE
+                else replace(prompt, kind=PromptKind.NONE),
+            ),
+            recovery=replace(s.recovery, guarded=True, away=True, grip_lost_at=None),
         )
 
     @staticmethod

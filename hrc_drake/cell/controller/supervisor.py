@@ -63,6 +63,7 @@ from hrc_drake.cell.controller.anticipation import (
     same_part,
     wait_point,
 )
+from hrc_drake.cell.controller.guard import DescentGuard
 from hrc_drake.cell.controller.intent import MotionIntent
 from hrc_drake.cell.controller.keep_clear import KeepClear, KeepClearSettings
 from hrc_drake.cell.controller.observe import cell_shows, task_record
@@ -139,6 +140,7 @@ class Supervisor(LeafSystem):
         self._recovery = FaultRecovery(self._limits, space.spec, self._planning, home)
         self._anticipation = Anticipation(space, policy, self._planning)
         self._keep_clear = KeepClear(keep_clear if keep_clear is not None else KeepClearSettings())
+        self._guard = DescentGuard(self._limits.guard)
         self._inputs = SupervisorInputs.declare(self)
         initial = SupervisorStatus(q_hold=home, opening_hold=float(home_opening))
         self._status_index = self.DeclareAbstractState(AbstractValue.Make(initial))
@@ -271,13 +273,20 @@ class Supervisor(LeafSystem):
             return self._recovery.wait_for_path(status, cell.configuration(), now)
         if mode == Mode.EXECUTE:
             return self._execute(status, cell, now)
-        if mode == Mode.SETTLE and now >= status.settle_until:
+        if mode == Mode.SETTLE and self._settled(status, cell, now):
             return self._observe(status, cell, now)
-        if mode == Mode.RECOVER and now >= status.settle_until:
+        if mode == Mode.RECOVER and self._settled(status, cell, now):
             return self._recovery.pick_again(status, cell.configuration(), now)
         if mode == Mode.HANDOVER:
             return self._recovery.wait_for_operator(status, cell, now)
         return status
+
+    @staticmethod
+    def _settled(s: SupervisorStatus, cell: Readings, now: float) -> bool:
+        """The parts have had their time to settle, and the configuration sensor's reading
+        describes the cell since then (a camera's verdicts come a few frames late: the reading
+        says up to when they hold, `CellConfiguration.current_at`; an exact sensor's hold now)."""
+        return now >= s.settle_until and cell.configuration().current_at(s.settle_until)
 
     def _check_tracking(self, s: SupervisorStatus, cell: Readings, now: float) -> None:
         """Stop when a joint is farther from its command than the tolerance (the command of
@@ -481,6 +490,13 @@ class Supervisor(LeafSystem):
         s = self._recovery.check_grip(s, cell, now)
         if s.mode != Mode.EXECUTE:
             return s  # the part was lost: it is picked again once it rests
+        if self._guard.in_descent(plan, tau) and not s.turn.returning:
+            guard, trip = self._guard.watch(
+                s.guard, plan, s.clock.plan_start, tau, cell.arm_q(), cell.wrench()
+            )
+            s = replace(s, guard=guard)
+            if trip is not None:  # the part met something before its seat
+                return self._recovery.stop_pressing(s, trip, now)
         if tau >= plan.t_in_place and not s.planned_ahead:
             s = replace(s, planned_ahead=True)
             self._planning.plan_ahead_after(s, cell.configuration())
@@ -531,11 +547,17 @@ class Supervisor(LeafSystem):
         hand is read the same way (and never handed over again)."""
         indicated, part = s.task.indicated, s.task.part
         config: CellConfiguration = cell.configuration()
-        handover = s.recovery.handover
+        handover, guarded = s.recovery.handover, s.recovery.guarded
+        s = replace(s, recovery=replace(s.recovery, guarded=False), retreat=None)
+        # A part the guarded descent let go early is placed again even if it fell into its
+        # seat: it was never held there for the bolts.
         unseated = (
             indicated != UNDO
             and not handover
-            and config.placement(part).status in (PartStatus.MISPLACED, PartStatus.TRANSIT)
+            and (
+                guarded
+                or config.placement(part).status in (PartStatus.MISPLACED, PartStatus.TRANSIT)
+            )
         )
         if unseated and s.recovery.recoveries < self._limits.recover_tries:
             return self._recovery.lose_part(s, cell, now, Cause.SEAT, Recovery.REPLACE)

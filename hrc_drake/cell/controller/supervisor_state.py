@@ -9,6 +9,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from hrc_drake.cell.controller.forecast import Anchor
+from hrc_drake.cell.controller.guard import GuardSettings, GuardState, Retreat
 from hrc_drake.hri.messages import Prompt
 from hrc_drake.motion.clearance import Hold
 from hrc_drake.motion.path_time import SpeedCap
@@ -223,6 +224,7 @@ class RecoveryState:
     stopped: bool = False  # the protective-stop input is on
     handover: str = ""  # why the task is handed over to the operator ("": it is not)
     away: bool = False  # the arm holds away from home: the next plan starts where it holds
+    guarded: bool = False  # the guarded descent stopped the place: the part was let go early
 
 
 @dataclass(frozen=True)
@@ -247,6 +249,9 @@ class SupervisorStatus:
     turn: TurnState = TurnState()
     clear: KeepClearState = KeepClearState()
     recovery: RecoveryState = RecoveryState()
+    guard: GuardState = field(default_factory=GuardState)
+    # After a guarded stop, settling: the arm backs off up its descent (else it holds `q_hold`).
+    retreat: Retreat | None = None
     history: tuple[TaskRecord, ...] = ()
     detections: tuple[Detection, ...] = ()
     events: tuple[str, ...] = ()
@@ -293,6 +298,9 @@ class SupervisorStatus:
     def command(self, now: float) -> ArmCommand:
         """What the arm and the gripper are commanded at `now`."""
         plan = self.plan
+        if self.mode == Mode.SETTLE and self.retreat is not None:
+            q = self.retreat.positions(now)
+            return ArmCommand(q, np.zeros(len(q)), self.opening_hold)
         if self.mode != Mode.EXECUTE or plan is None:
             q = np.asarray(self.q_hold, dtype=float)
             return ArmCommand(q, np.zeros(len(q)), self.opening_hold)
@@ -383,6 +391,10 @@ class SupervisorLimits:
     recover_tries: int = 2
     path_timeout: float = 10.0
     anticipate: bool = False  # start on the policy's commitment before the indication
+    # The guarded descent of a place (`hrc_drake.cell.controller.guard`).
+    guard: GuardSettings = field(default_factory=GuardSettings)
+    # Seconds the fingers take to open or close (`MotionOptions.gripper_time`).
+    gripper_time: float = 0.5
 
 
 __all__ = [

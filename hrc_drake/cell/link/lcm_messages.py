@@ -47,6 +47,14 @@ struct lcmt_rg2_command {
     double force;           // [N], 3 to 40
 }
 
+// The load the UR3's tool meets: the force/torque sensor in a UR e-Series's tool flange
+// (RTDE's actual_TCP_force), in the arm's base frame, signed as the tool meets it.
+struct lcmt_ur3_tcp_force {
+    int64_t utime;          // the station time of the measurement [us]
+    double force[3];        // [N]
+    double torque[3];       // about the tcp [N m]
+}
+
 // What the RG2 measures.
 struct lcmt_rg2_status {
     int64_t utime;          // the station time of the measurement [us]
@@ -133,6 +141,7 @@ struct lcmt_station_session {
 _TYPES = parse_definitions(DEFINITIONS, __name__)
 lcmt_rg2_command = _TYPES["lcmt_rg2_command"]
 lcmt_rg2_status = _TYPES["lcmt_rg2_status"]
+lcmt_ur3_tcp_force = _TYPES["lcmt_ur3_tcp_force"]
 lcmt_hri_prompt = _TYPES["lcmt_hri_prompt"]
 lcmt_hri_indication = _TYPES["lcmt_hri_indication"]
 lcmt_part_placement = _TYPES["lcmt_part_placement"]
@@ -246,6 +255,19 @@ def ur3_status_values(message: lcmt_panda_status) -> tuple[np.ndarray, np.ndarra
         np.array([1.0 if safety.stopped else 0.0]),
         np.array([float(safety)]),
     )
+
+
+def tcp_force_message(stamp: int, wrench) -> lcmt_ur3_tcp_force:
+    """`ur3.tcp_force` (force, then moment) as a UR3 wrist load."""
+    values = _count(wrench, 6, "ur3.tcp_force")
+    return lcmt_ur3_tcp_force(utime=stamp, force=values[:3], torque=values[3:])
+
+
+def tcp_force_value(message) -> tuple[np.ndarray]:
+    """(`ur3.tcp_force`,) of a UR3 wrist load."""
+    force = _count(message.force, 3, "UR3 wrist force")
+    torque = _count(message.torque, 3, "UR3 wrist torque")
+    return (np.array(force + torque),)
 
 
 def rg2_command(stamp: int, opening, force) -> lcmt_rg2_command:

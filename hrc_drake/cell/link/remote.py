@@ -107,6 +107,11 @@ class RemoteCell:
         `finish`, or from a station that keeps none)."""
         return None if self._record is None else self._record.safety_function
 
+    def camera_score(self, root) -> dict | None:
+        """The station camera's score as its session report brought it (None before `finish`,
+        or from a station without a camera)."""
+        return None if self._record is None else self._record.camera
+
     def configuration(self, root):
         """The configuration the station measured last."""
         return self.diagram.GetOutputPort("configuration").Eval(self._context(root))

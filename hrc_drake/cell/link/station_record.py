@@ -9,6 +9,10 @@ The report is the `text` of the station's `report` session message, JSON:
      "injected": [Injection.to_json(), ...],
      "safety_function": SafetyFunctionLog.to_json() or null}
 
+With a camera for the configuration (`sensors: {configuration: camera}`) the report also holds
+`"camera"`: its verdicts scored against the contact sensor's
+(`hrc_drake.cell.station.camera_score.CameraScore.to_json`); without one the key is absent.
+
 `injected` has one entry per scenario fault, in the scenario's order
 (`hrc_drake.cell.station.faults.Injection`: kind, task, task_start, injected_at, since, ended_at,
 shifted, target); `safety_function` is null for a station without the robot. A station that
@@ -33,6 +37,7 @@ class StationRecord:
 
     injected: tuple[Injection, ...] = ()
     safety_function: SafetyFunctionLog | None = None
+    camera: dict | None = None  # the camera's score (JSON), None without a camera
 
     @staticmethod
     def of(station, root: Context) -> StationRecord:
@@ -41,15 +46,24 @@ class StationRecord:
         context = station.diagram.GetMyContextFromRoot(root)
         injected = station.diagram.GetOutputPort("sim.faults").Eval(context)
         state = station.safety_function_state(root)
-        return StationRecord(tuple(injected), None if state is None else state.log)
+        camera = station.camera_score(root)
+        return StationRecord(
+            tuple(injected),
+            None if state is None else state.log,
+            None if camera is None else camera.to_json(),
+        )
 
     def to_json(self) -> dict:
-        """The report's `injected` and `safety_function` keys (see the module docstring)."""
+        """The report's `injected` and `safety_function` keys, and `camera` with a camera (see
+        the module docstring)."""
         function = self.safety_function
-        return {
+        report = {
             "injected": [i.to_json() for i in self.injected],
             "safety_function": None if function is None else function.to_json(),
         }
+        if self.camera is not None:
+            report["camera"] = self.camera
+        return report
 
     @staticmethod
     def from_report(report: dict) -> StationRecord | None:
@@ -62,6 +76,7 @@ class StationRecord:
             return StationRecord(
                 tuple(Injection.from_json(i) for i in report["injected"]),
                 None if function is None else SafetyFunctionLog.from_json(function),
+                report.get("camera"),
             )
         except (KeyError, TypeError, ValueError) as err:
             raise StationLinkError(

@@ -97,6 +97,11 @@ class CellSide(Protocol):
     def configuration(self, root) -> CellConfiguration:
         """The configuration the station measures now."""
 
+    def camera_score(self, root) -> dict | None:
+        """The camera's verdicts scored against the contact sensor's (the JSON of
+        `hrc_drake.cell.station.camera_score.CameraScore`; None: no camera, or a station that
+        does not say)."""
+
     def safety_function(self, root) -> SafetyFunctionLog | None:
         """What the station's safety function did (a station that does not say: None)."""
 
@@ -134,8 +139,13 @@ class LocalCell:
         return self.diagram.GetOutputPort("sim.faults").Eval(context)
 
     def configuration(self, root) -> CellConfiguration:
-        """The configuration sensor's reading."""
+        """Where the parts are: the contact sensor's reading, the ground truth."""
         return self.station.configuration(root)
+
+    def camera_score(self, root) -> dict | None:
+        """The station's camera scored so far (None: no camera)."""
+        score = self.station.camera_score(root)
+        return None if score is None else score.to_json()
 
     def safety_function(self, root) -> SafetyFunctionLog | None:
         """The station's safety function's log (None: a station without the robot)."""
@@ -413,7 +423,7 @@ class _SafetySampler:
                 v=np.array(arm[n:]),
                 commanded=np.array(commanded),
                 opening=float(self._truth("rg2.state_measured").Eval(cell)[0]),
-                carrying=self._cell.GetOutputPort("configuration").Eval(cell).held(),
+                carrying=self._truth("configuration").Eval(cell).held(),
                 body=self._truth("operator.body").Eval(cell),
             )
         )
@@ -542,6 +552,7 @@ def _result(loop: ClosedLoop, wall: float, path, interrupted: bool) -> RunResult
         waited=status.clock.waited,
         replans=status.clear.replans,
         capped=status.capped,
+        camera=loop.cell.camera_score(root),
         faults=tuple(
             fault_records(
                 setup.scenario.faults, loop.cell.injected(root), status.detections, root.get_time()

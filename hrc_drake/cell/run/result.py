@@ -55,6 +55,10 @@ class RunResult:
     """Times the robot re-timed its plan because the body departed from its forecast."""
     capped: bool = False
     """The run ended by its own task cap (`run.max_steps`), its reason in `error`."""
+    camera: dict | None = None
+    """The camera configuration sensor's verdicts scored against the contact sensor's
+    (`sensors: {configuration: camera}`; `hrc_drake.cell.station.camera_score`); None: the
+    contact sensor."""
 
     @property
     def idle(self) -> tuple[float, ...]:
@@ -108,7 +112,13 @@ class RunResult:
             "handovers": self.handovers,
             "interaction": self.interaction,
             "separation": self.separation,
+            # Only with a camera: the contact sensor's runs print what they always did.
+            **({} if self.camera is None else {"configuration": self._configuration_json()}),
         }
+
+    def _configuration_json(self) -> dict:
+        """The configuration sensor and the camera's score (with a camera only)."""
+        return {"sensor": "camera", "camera": self.camera}
 
     def _safety_json(self) -> dict | None:
         """The run's own check (`violations`, `least_margin`, `body_contacts`), then the

@@ -9,8 +9,8 @@ operator with its body, and a camera. Its ports (`docs/station.md`):
 
 - inputs, what a controller commands: `ur3.position`, `ur3.velocity`, `rg2.opening`,
   `rg2.force`, `hri.prompt`;
-- outputs, what a real cell measures: `ur3.state_estimated`, `rg2.state_measured`,
-  `rg2.grip_detected`, `configuration`, `operator.body`, `hri.indication`;
+- outputs, what a real cell measures: `ur3.state_estimated`, `ur3.tcp_force`,
+  `rg2.state_measured`, `rg2.grip_detected`, `configuration`, `operator.body`, `hri.indication`;
 - outputs for the simulation only (runner, recordings, tests): `sim.welds`, `sim.plant_state`,
   `sim.contact_results`, `sim.body_poses`, `sim.query_object`, `sim.camera.rgb_image`.
 
@@ -60,6 +60,8 @@ from hrc_drake.cell.ports import NOBODY
 from hrc_drake.cell.robot_envelope import RobotEnvelope
 from hrc_drake.cell.scenario import cell_design, motion_options, plant_config, scene_graph_config
 from hrc_drake.cell.station.arm_servo import GravityCompensation, servo_actuators
+from hrc_drake.cell.station.camera import export_configuration
+from hrc_drake.cell.station.camera_verdicts import check_camera_noise
 from hrc_drake.cell.station.cell_station import CellStation
 from hrc_drake.cell.station.contacts import geometry_owners, owner_pairs
 from hrc_drake.cell.station.desk import add_bins, desk_script
@@ -77,6 +79,7 @@ from hrc_drake.cell.station.sensors import export_measured
 from hrc_drake.cell.station.sim_operator import SimulatedOperator
 from hrc_drake.cell.station.slot_monitor import SlotMonitor
 from hrc_drake.cell.station.welds import Bolts
+from hrc_drake.cell.station.wrist import add_tcp_force
 from hrc_drake.cell_models import CellDesign, add_cell_models
 from hrc_drake.motion.poses import IN_TRAY, CellFrames, layout_poses
 from hrc_drake.motion.scene import read_cell_frames
@@ -84,6 +87,7 @@ from hrc_drake.obstacle_models import DEBRIS, OBSTACLE
 from hrc_drake.robot_models import set_rg2_opening
 from hrc_drake.robot_names import GRIPPER, UR3, UR3_JOINTS
 from hrc_drake.scenario.schema import Activity, CameraSettings, Scenario
+from hrc_drake.scenario.sensors import camera_model
 from hrc_drake.tasks.assembly import SpecError
 from hrc_drake.tasks.decide import Operator
 from hrc_drake.tasks.graph import StateSpace, generate_states
@@ -118,6 +122,9 @@ def check_station_scenario(scenario: Scenario, design: CellDesign) -> None:
     for key, values in (("initial_positions", station.ur3.initial_positions),):
         if values and len(values) != len(UR3_JOINTS):
             raise ValueError(f"station.ur3.{key}: give {len(UR3_JOINTS)} joint positions [rad]")
+    camera = camera_model(scenario.sensors)
+    if camera is not None:
+        check_camera_noise(camera.noise, camera.angle_noise)
 
 
 def _set_servo_gains(plant: MultibodyPlant, instances, scenario: Scenario) -> None:
@@ -202,8 +209,8 @@ def _add_arm(
 ) -> SafetyFunction:
     """`ur3.position` and `ur3.velocity` into the arm's servo through the safety function
     (returned; its measurements are connected once the station has them,
-    `_connect_safety_function`); `ur3.state_estimated`, `safety.stop` and `safety.mode` out,
-    `safety.unlock` in."""
+    `_connect_safety_function`); `ur3.state_estimated`, `ur3.tcp_force` (the wrist load,
+    `hrc_drake.cell.station.wrist`), `safety.stop` and `safety.mode` out, `safety.unlock` in."""
     function = builder.AddNamedSystem(
         "safety_function",
         SafetyFunction(
@@ -222,6 +229,8 @@ def _add_arm(
     for name in ("safety.stop", "safety.mode"):
         builder.ExportOutput(function.GetOutputPort(name), name)
     export_measured(builder, plant.get_state_output_port(ur3), "ur3.state_estimated", scenario)
+    gripper = plant.GetModelInstanceByName(GRIPPER)
+    export_measured(builder, add_tcp_force(builder, plant, gripper), "ur3.tcp_force", scenario)
     weight = builder.AddNamedSystem("ur3_gravity", GravityCompensation(plant, ur3))
     builder.Connect(plant.get_state_output_port(ur3), weight.get_input_port())
     builder.Connect(weight.get_output_port(), plant.get_actuation_input_port(ur3))
@@ -381,14 +390,16 @@ def _export_sim_ports(builder: DiagramBuilder, plant: MultibodyPlant, scene_grap
     builder.ExportOutput(scene_graph.get_query_output_port(), "sim.query_object")
 
 
-def _add_part_sensors(builder, plant, scene_graph, frames, parts, person) -> None:
-    """The configuration sensor (exported as `configuration`) and, for the simulated operator
-    only, which parts rest out of the gripper (a bolt takes once its part rests)."""
+def _add_part_sensors(builder, plant, scene_graph, frames, parts, person, scenario) -> None:
+    """The configuration sensor (exported as `configuration`: the contact sensor's reading, or
+    a camera's, `export_configuration`) and, for the simulated operator only, which parts rest
+    out of the gripper (a bolt takes once its part rests)."""
     sensor = builder.AddNamedSystem("configuration_sensor", SlotMonitor(plant, scene_graph, frames))
     builder.Connect(plant.get_contact_results_output_port(), sensor.GetInputPort("contact_results"))
     builder.Connect(plant.get_body_poses_output_port(), sensor.GetInputPort("body_poses"))
     builder.Connect(scene_graph.get_query_output_port(), sensor.GetInputPort("query_object"))
-    builder.ExportOutput(sensor.GetOutputPort("slot_configuration"), "configuration")
+    export_configuration(builder, sensor, plant, scenario)
+    # The simulated operator bolts where the part truly sits: the contact sensor's reading.
     builder.Connect(
         sensor.GetOutputPort("slot_configuration"), person.GetInputPort("configuration")
     )
@@ -441,7 +452,7 @@ def make_cell_station(
     person = _add_operator(builder, plant, scene_graph, parts, scenario, operator, body_script)
     if injector is not None:  # it counts tasks from the prompts the station shows
         builder.ConnectInput("hri.prompt", injector.GetInputPort("hri.prompt"))
-    _add_part_sensors(builder, plant, scene_graph, frames, parts, person)
+    _add_part_sensors(builder, plant, scene_graph, frames, parts, person, scenario)
     if scenario.station.robot:
         _connect_safety_function(builder)
     builder.ExportOutput(person.GetOutputPort("bolts"), "sim.welds")

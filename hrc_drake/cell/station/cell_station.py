@@ -22,6 +22,7 @@ from pydrake.multibody.plant import (
 from pydrake.systems.framework import Context, Diagram
 
 from hrc_drake.cell.ports import CellConfiguration, PartStatus, placement_transform
+from hrc_drake.cell.station.camera import CAMERA_SYSTEM
 from hrc_drake.cell.station.faults import FaultInjector
 from hrc_drake.cell.station.sim_operator import SimulatedOperator
 from hrc_drake.cell.station.welds import Bolts, Weld
@@ -66,9 +67,20 @@ class CellStation:
         return self.plant.get_body(self.plant.GetBodyIndices(self.instances[part])[0])
 
     def configuration(self, context: Context) -> CellConfiguration:
-        """The configuration sensor's reading in the root `context`."""
+        """Where the parts truly are in the root `context`: the contact sensor's reading, the
+        simulator's ground truth (the `configuration` port's, or `sim.configuration` beside a
+        camera's, `sensors: {configuration: camera}`)."""
         station_context = self.diagram.GetMyContextFromRoot(context)
-        return self.diagram.GetOutputPort("configuration").Eval(station_context)
+        name = "sim.configuration" if self.diagram.HasOutputPort("sim.configuration") else None
+        return self.diagram.GetOutputPort(name or "configuration").Eval(station_context)
+
+    def camera_score(self, context: Context):
+        """The camera's verdicts scored against the contact sensor's so far, in the root
+        `context` (`hrc_drake.cell.station.camera_score.CameraScore`); None without a camera."""
+        if not self.diagram.HasSubsystemNamed(CAMERA_SYSTEM):
+            return None
+        camera = self.diagram.GetSubsystemByName(CAMERA_SYSTEM)
+        return camera.score(camera.GetMyContextFromRoot(context))
 
     def safety_function_state(self, context: Context):
         """The safety function's `SafetyFunctionState` in the root `context` (None: no robot)."""

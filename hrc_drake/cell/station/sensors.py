@@ -73,7 +73,7 @@ def quantise(values: np.ndarray, quantum: float) -> np.ndarray:
     return values if quantum <= 0 else np.round(values / quantum) * quantum
 
 
-class _SampledSensor(LeafSystem):
+class SampledSensor(LeafSystem):
     """What both sensors share: the events, the state and the stamp (see the module
     docstring). A subclass declares `input` and the `reading` output with `_declare_reading`,
     and says how a sample is corrupted (`_corrupt`)."""
@@ -101,6 +101,17 @@ class _SampledSensor(LeafSystem):
         `SampledBody` for the tracked body; the base sampler is never used alone."""
         raise NotImplementedError(f"{type(self).__name__} does not say how it reads a value")
 
+    def _measure(self, context):
+        """What the sensor samples now: its first input port's value (a subclass that reads
+        more says so)."""
+        return self.get_input_port(0).Eval(context)
+
+    def _follow(self, previous, value, now: float):
+        """The sample kept for a reading `value` taken at `now`, given the `previous` sample's
+        (None: none yet): the reading itself, unless a subclass carries something from frame
+        to frame (the camera's verdicts)."""
+        return value
+
     def _take(self, context, state, first: bool) -> None:
         now = context.get_time()
         old = self.state(context)
@@ -108,12 +119,13 @@ class _SampledSensor(LeafSystem):
         rng.bit_generator.state = old.rng
         # Every sample draws its dropout and its noise, lost or not: the streams stay aligned.
         lost = rng.random() < self.model.dropout and not first
-        value = self._corrupt(self.get_input_port(0).Eval(context), rng)
+        value = self._corrupt(self._measure(context), rng)
         current = old.reading(now)
         kept = tuple(s for s in old.samples if s is current or s.due > now + _EPS)
         if not lost:
             due = now if first else now + self.model.latency
-            kept += (Sample(now, due, value),)
+            previous = old.samples[-1].value if old.samples else None
+            kept += (Sample(now, due, self._follow(previous, value, now)),)
         new = SensorState(rng.bit_generator.state, kept)
         state.get_mutable_abstract_state(self._state).set_value(new)
 
@@ -131,7 +143,7 @@ class _SampledSensor(LeafSystem):
         output.SetAtIndex(0, float("nan") if sample is None else sample.time)
 
 
-class SampledVector(_SampledSensor):
+class SampledVector(SampledSensor):
     """A sensor on a vector port of `size` (even: a value, then its rate). Input `input`;
     outputs `reading` (vector `size`; zeros before the first sample) and `stamp` (1)."""
 
@@ -157,7 +169,7 @@ class SampledVector(_SampledSensor):
         output.SetFromVector(np.zeros(2 * self._half) if sample is None else sample.value)
 
 
-class SampledBody(_SampledSensor):
+class SampledBody(SampledSensor):
     """The body tracker's sensor. Input `input` (BodySpheres); outputs `reading` (BodySpheres
     with its `stamp`; NOBODY before the first sample) and `stamp` (1)."""
 
@@ -213,6 +225,7 @@ def export_measured(builder: DiagramBuilder, source: OutputPort, name: str, scen
 __all__ = [
     "Sample",
     "SampledBody",
+    "SampledSensor",
     "SampledVector",
     "SensorState",
     "export_measured",

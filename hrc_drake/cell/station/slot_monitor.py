@@ -13,6 +13,7 @@ fell on the table, lies askew on the plate or rests in the gripper is found wher
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -70,6 +71,27 @@ class SlotTolerances:
 
 
 @dataclass(frozen=True)
+class SeatGeometry:
+    """What the SlotMonitor knows of the cell beside contact: where the seats are on the plate
+    (`slots`: slot k -> X_plate_slot, in the plate's body `plate_body`) and on each host part
+    (`hosts`: host instance -> its rows, (row frame, X_host_row)), each part's symbol, span and
+    grasp frame (X_part_grasp), the gripper's tcp (its body and X_body_tcp; None without the
+    robot), the tray homes ((symbol, X_W_home)) and the spec's token of a seated placement
+    (`token(part, slots, host)`). A configuration sensor that sees only poses decides from it
+    (`hrc_drake.cell.station.camera_verdicts`)."""
+
+    plate_body: int
+    slots: tuple[tuple[int, RigidTransform], ...]
+    hosts: tuple[tuple[str, tuple[tuple[str, RigidTransform], ...]], ...]
+    symbols: dict[str, str]
+    spans: dict[str, int]
+    grasps: dict[str, RigidTransform]
+    tcp: tuple[int, RigidTransform] | None
+    homes: tuple[tuple[str, RigidTransform], ...]
+    token: Callable[[str, tuple[int, ...], str | None], str | None]
+
+
+@dataclass(frozen=True)
 class _Seat:
     name: str  # frame name, e.g. "slot_2", "row_1"
     body_index: object  # BodyIndex of the body that carries it
@@ -77,7 +99,7 @@ class _Seat:
     floor: GeometryId
 
 
-def _pose_error(X_ref: RigidTransform, X: RigidTransform) -> tuple[float, float, float, float]:
+def pose_error(X_ref: RigidTransform, X: RigidTransform) -> tuple[float, float, float, float]:
     """(horizontal, vertical, tilt, yaw modulo pi) of X relative to X_ref, in X_ref's frame."""
     X_rel = X_ref.InvertAndCompose(X)
     p = X_rel.translation()
@@ -88,7 +110,8 @@ def _pose_error(X_ref: RigidTransform, X: RigidTransform) -> tuple[float, float,
     return float(math.hypot(p[0], p[1])), abs(float(p[2])), tilt, yaw_mod
 
 
-def _rotation_angle(X_ref: RigidTransform, X: RigidTransform) -> tuple[float, float]:
+def rotation_angle(X_ref: RigidTransform, X: RigidTransform) -> tuple[float, float]:
+    """(distance, rotation angle) of X from X_ref."""
     X_rel = X_ref.InvertAndCompose(X)
     angle = X_rel.rotation().ToAngleAxis().angle()
     return float(np.linalg.norm(X_rel.translation())), float(angle)
@@ -233,6 +256,23 @@ class SlotMonitor(LeafSystem):
         """Model instance -> spec part symbol."""
         return dict(self._symbols)
 
+    def seat_geometry(self) -> SeatGeometry:
+        """The cell's seats, homes and grasps as this monitor reads them (see SeatGeometry)."""
+        return SeatGeometry(
+            plate_body=int(next(iter(self._slots.values())).body_index),
+            slots=tuple((k, seat.X_BS) for k, seat in sorted(self._slots.items())),
+            hosts=tuple(
+                (host, tuple((seat.name, seat.X_BS) for seat in seats))
+                for host, seats in self._host_seats.items()
+            ),
+            symbols=dict(self._symbols),
+            spans=dict(self._span),
+            grasps=dict(self._X_BG),
+            tcp=None if self._tcp is None else (int(self._tcp[0]), self._tcp[1]),
+            homes=tuple(self._homes),
+            token=self._token,
+        )
+
     def _touches(self, contacts: ContactResults) -> dict[str, set[GeometryId]]:
         touching: dict[str, set[GeometryId]] = {p: set() for p in self._parts}
         for a, b in contact_pairs(contacts):
@@ -261,7 +301,7 @@ class SlotMonitor(LeafSystem):
                         touching[part].add(floor)
 
     def _within_seat(self, X_W_seat: RigidTransform, X_W_part: RigidTransform) -> bool:
-        xy, z, tilt, yaw = _pose_error(X_W_seat, X_W_part)
+        xy, z, tilt, yaw = pose_error(X_W_seat, X_W_part)
         t = self._tol
         return xy <= t.seat_xy and z <= t.seat_z and tilt <= t.seat_tilt and yaw <= t.seat_yaw
 
@@ -332,7 +372,7 @@ class SlotMonitor(LeafSystem):
             return False
         body_index, X_BT = self._tcp
         X_W_tcp = poses[int(body_index)] @ X_BT
-        distance, angle = _rotation_angle(X_W_tcp, X_WP @ self._X_BG[part])
+        distance, angle = rotation_angle(X_W_tcp, X_WP @ self._X_BG[part])
         if distance > self._tol.held_position:
             return False
         # The flanges are symmetric under a half turn about the approach axis.
@@ -342,7 +382,7 @@ class SlotMonitor(LeafSystem):
         for symbol, X_WH in self._homes:
             if symbol != self._symbols[part]:
                 continue
-            xy, z, tilt, yaw = _pose_error(X_WH, X_WP)
+            xy, z, tilt, yaw = pose_error(X_WH, X_WP)
             if math.hypot(xy, z) <= self._tol.tray_position and max(tilt, yaw) <= (
                 self._tol.tray_angle
             ):
@@ -399,8 +439,11 @@ __all__ = [
     "CellConfiguration",
     "PartPlacement",
     "PartStatus",
+    "SeatGeometry",
     "SlotMonitor",
     "SlotTolerances",
     "placement_transform",
+    "pose_error",
     "pose_tuple",
+    "rotation_angle",
 ]
