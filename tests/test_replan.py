@@ -4,6 +4,8 @@ plan service's worker (issue 17: grip-lost and no-seat recoveries)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RotationMatrix
@@ -207,6 +209,28 @@ def test_a_start_by_a_placed_part_first_moves_the_tool_straight_up(planner):
     )
     assert plan.motions[0].name == "up, clear of the cell"
     np.testing.assert_allclose(plan.positions(0.0), by_the_plate, rtol=0, atol=5e-5 + 1e-12)
+    validate_plan(plan, planner)
+
+
+def test_a_start_clear_with_the_fingers_wide_but_not_narrower_first_moves_straight_up(planner):
+    # Where the arm was going down to the square flange in the tray, its fingers open 106 mm
+    # for it, when the operator said undo (stochastic-long, step 2): clear of the flange with
+    # the fingers that wide, but the undo's pick opens them to 61 mm for F1, and narrower the
+    # RG2's pads stand lower, into the flange. The plan lifts the tool clear first, the fingers
+    # keeping their opening, and only then moves them.
+    s23 = planner.plan_task({"F1"}, "S23", layout={"oval_flange_1": "F1"})
+    down = next(m for m in s23.motions if m.name == "down to grasp")
+    t = down.start + 0.26
+    q, wide = s23.positions(t), s23.gripper_opening(t)
+    need = planner.options.clearance + planner.options.clearance_margin
+    layout = s23.phases[0].layout
+    assert planner.scene(replace(layout, opening=wide)).min_distance(q)[0] >= need
+    assert planner.scene(replace(layout, opening=0.061)).min_distance(q)[0] < need
+    plan = planner.plan_task({"F1"}, UNDO, last_token="F1", q_start=q, start_opening=wide)
+    up = plan.motions[0]
+    assert up.name == "up, clear of the cell"
+    for tau in np.linspace(0.0, up.duration, 5):
+        assert plan.gripper_opening(tau) == pytest.approx(wide)
     validate_plan(plan, planner)
 
 

@@ -292,7 +292,7 @@ class MotionPlanner:
         scene.set_allowed_contacts(())
         clear, near, start_scene = None, (), self._start_scene(scene, measured)
         if measured.start is not None:
-            clear, near = clear_start(start_scene, q_start, opts, frames, task)
+            clear, near = clear_start(start_scene, q_start, opts, frames, task, then=scene)
             q_start = q_start if clear is None else clear[-1]
             for where in {id(s): s for s in (start_scene, scene)}.values():
                 check_start(where, q_start, self.limits, opts, task)
