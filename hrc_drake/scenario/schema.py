@@ -361,7 +361,9 @@ class GripperConfig:
         grip_force: N, the gripping force the controller commands (the RG2 takes 3-40 N); the
             part is carried by the pads' friction alone. 20 N holds the heaviest part of the
             flange case (the 0.57 kg square flange, 5.6 N) with a margin of 4.8 at rest
-            (benchmarks/reports/contact.md: the largest carry acceleration without slip).
+            (benchmarks/reports/contact.md: the largest carry acceleration without slip,
+            measured with the earlier prismatic fingers; the RG2's linkage adds the part's
+            weight to the squeeze, `rg2_kinematics.pad_travel_rate`).
         kp, kd: the simulated finger servo's PD gains per finger [N/m, N·s/m], at the pads at
             a 45 mm opening (the servo drives the RG2's one crank: `gripper.crank_gain`); the
             servo pushes with at most the commanded force
