@@ -54,6 +54,7 @@ from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_opti
 from hrc_drake.cell.station import make_cell_station, station_scenario
 from hrc_drake.motion.plan import Stage
 from hrc_drake.motion.poses import default_layout
+from hrc_drake.robot_models import set_rg2_opening
 from hrc_drake.robot_names import GRIPPER, UR3, UR3_JOINTS
 from hrc_drake.scenario.schema import Scenario
 from hrc_drake.tasks.spec import load_spec
@@ -230,7 +231,7 @@ class _Grip:
         plant_context = plant.GetMyMutableContextFromRoot(context)
         ur3, rg2 = station.instances[UR3], station.instances[GRIPPER]
         plant.SetPositions(plant_context, ur3, self.q0)
-        plant.SetPositions(plant_context, rg2, [self.width / 2] * 2)
+        set_rg2_opening(plant, plant_context, self.width, rg2)
         plant.SetFreeBodyPose(plant_context, station.part_body(self.part), self.X_W_part)
         squeeze = motion_options(station.scenario).grip_squeeze
         station.hold_robot(context, opening=self.width - squeeze, force=force)

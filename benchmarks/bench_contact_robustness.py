@@ -170,6 +170,7 @@ def creep(time_step: float, modulus: float, hold: float) -> dict:
     from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
     from hrc_drake.cell.station import make_cell_station
     from hrc_drake.motion.plan import LIFT, Stage
+    from hrc_drake.robot_models import set_rg2_opening
     from hrc_drake.robot_names import GRIPPER, UR3
     from hrc_drake.tasks.spec import load_spec
 
@@ -189,7 +190,7 @@ def creep(time_step: float, modulus: float, hold: float) -> dict:
     plant_context = plant.GetMyMutableContextFromRoot(context)
     width = float(station.frames.widths[part])
     plant.SetPositions(plant_context, station.instances[UR3], plan.positions(t0))
-    plant.SetPositions(plant_context, station.instances[GRIPPER], [width / 2] * 2)
+    set_rg2_opening(plant, plant_context, width, station.instances[GRIPPER])
     tcp = plant.GetFrameByName("tcp", station.instances[GRIPPER])
     X_W_part = tcp.CalcPoseInWorld(plant_context) @ station.frames.grasps[part].inverse()
     plant.SetFreeBodyPose(plant_context, station.part_body(part), X_W_part)

@@ -38,7 +38,7 @@ from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.run.run import run_scenario
 from hrc_drake.cell.scenario import LEAN, cell_design, load_cell_scenario, motion_options
 from hrc_drake.cell.station.build import make_cell_station
-from hrc_drake.robot_models import RG2_FINGER_JOINTS
+from hrc_drake.robot_models import RG2_MAX_OPENING, set_rg2_opening
 from hrc_drake.robot_names import UR3_JOINTS
 from hrc_drake.scenario.load import table2_scenarios
 from hrc_drake.tasks.spec import load_spec
@@ -151,9 +151,8 @@ class _Replaced:
         plant, context = self.plant, self.plant_context
         plant.SetPositions(context, self.robot[0], sample.q)
         plant.SetVelocities(context, self.robot[0], sample.v)
-        opening = 0.055 if sample.opening is None else sample.opening / 2
-        for name in RG2_FINGER_JOINTS:
-            plant.GetJointByName(name, self.robot[1]).set_translation(context, opening)
+        opening = RG2_MAX_OPENING / 2 if sample.opening is None else sample.opening
+        set_rg2_opening(plant, context, opening, self.robot[1])
         part = sample.intent.carrying
         if part is not None:
             X_W_tcp = plant.GetFrameByName("tcp", self.robot[1]).CalcPoseInWorld(context)

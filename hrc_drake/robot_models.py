@@ -9,7 +9,9 @@ from __future__ import annotations
 from pydrake.multibody.parsing import LoadModelDirectives, Parser, ProcessModelDirectives
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex
+from pydrake.systems.framework import Context
 
+from hrc_drake import rg2_kinematics
 from hrc_drake.resources import models_dir, package_uri
 
 # The names (model instances, joints) live in a Drake-free module: the scenario check needs them;
@@ -18,15 +20,12 @@ from hrc_drake.resources import models_dir, package_uri
 from hrc_drake.robot_names import GRIPPER, UR3
 
 UR3_EFFORT_LIMITS: tuple[float, ...] = (56.0, 56.0, 28.0, 12.0, 12.0, 12.0)
-RG2_MAX_OPENING = 0.110
+RG2_MAX_OPENING = rg2_kinematics.STROKE
 # The RG2's gripping force range (OnRobot RG driver message definitions and product quick
 # reference; shared/reference/ur3-rg2.md): the simulated gripper clips its command to it, the
 # Modbus driver refuses a command outside it.
 RG2_MIN_FORCE = 3.0  # N
 RG2_MAX_FORCE = 40.0  # N
-# Pad centre from the RG2's mounting face at a 45 mm opening (the oval flanges' width), by
-# forward kinematics of OnRobot/onrobot-ros2 onrobot_rg2.urdf; our fixed tcp stands there.
-RG2_PAD_CENTRE_AT_45_MM = 0.2105
 # The UR3's own link surface radii (Universal_Robots_ROS2_Description, meshes/ur3/collision):
 # the collision shapes are these plus a few millimetres, not the UR5 radii of ROS
 # physical_parameters.yaml.
@@ -38,7 +37,11 @@ UR3_SURFACE_RADII: dict[str, float] = {
     "wrist_2_link": 0.032,
     "wrist_3_link": 0.032,
 }
-RG2_FINGER_JOINTS: tuple[str, ...] = ("left_finger_joint", "right_finger_joint")
+# The gripper model's linkage joints (hrc_drake.rg2_kinematics): the actuated crank first.
+RG2_JOINTS: tuple[str, ...] = tuple(rg2_kinematics.JOINT_RATIOS)
+RG2_DRIVE_JOINT = rg2_kinematics.DRIVE
+# The left finger opens along +y of rg2_base, the right along -y (models/rg2/rg2.sdf).
+RG2_OPENING_AXIS = (0.0, 1.0, 0.0)
 
 ROBOT_DIRECTIVES = "cell/robot.dmd.yaml"
 
@@ -60,3 +63,25 @@ def add_robot(plant: MultibodyPlant) -> tuple[ModelInstanceIndex, ModelInstanceI
     directives = LoadModelDirectives(directives_path)
     ProcessModelDirectives(directives, plant, parser)
     return plant.GetModelInstanceByName(UR3), plant.GetModelInstanceByName(GRIPPER)
+
+
+def set_rg2_opening(
+    plant: MultibodyPlant, context: Context | None, opening: float, gripper=None
+) -> None:
+    """Put the gripper's linkage at `opening` [m] between the pads: in `context` (the plant's),
+    or as the plant's default positions when `context` is None. `gripper`: its model instance
+    (default: the one named `rg2`)."""
+    gripper = plant.GetModelInstanceByName(GRIPPER) if gripper is None else gripper
+    for name, angle in rg2_kinematics.joint_angles(opening).items():
+        joint = plant.GetJointByName(name, gripper)
+        if context is None:
+            joint.set_default_angle(angle)
+        else:
+            joint.set_angle(context, angle)
+
+
+def rg2_opening(plant: MultibodyPlant, context: Context, gripper=None) -> float:
+    """The opening between the gripper's pads [m] in `context` (the plant's), from its crank."""
+    gripper = plant.GetModelInstanceByName(GRIPPER) if gripper is None else gripper
+    angle = plant.GetJointByName(RG2_DRIVE_JOINT, gripper).get_angle(context)
+    return rg2_kinematics.opening_at(angle)

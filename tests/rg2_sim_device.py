@@ -22,16 +22,14 @@ import numpy as np
 from pydrake.geometry import Box
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction
-from pydrake.multibody.tree import PdControllerGains
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
 from hrc_drake.cell.scenario import plant_config, scene_graph_config
-from hrc_drake.cell.station.arm_servo import servo_actuators
 from hrc_drake.cell.station.faults import STILL_RATE
-from hrc_drake.cell.station.gripper import add_gripper_ports
+from hrc_drake.cell.station.gripper import add_gripper_ports, set_finger_gains
 from hrc_drake.drivers.rg2_modbus import (
     ACTUAL_WIDTH,
     BUSY,
@@ -44,12 +42,12 @@ from hrc_drake.drivers.rg2_modbus import (
     WIDTH_PER_METRE,
 )
 from hrc_drake.resources import package_uri
-from hrc_drake.robot_models import make_parser
+from hrc_drake.rg2_kinematics import pad_height
+from hrc_drake.robot_models import make_parser, set_rg2_opening
 from hrc_drake.scenario.schema import Scenario
 
 UNIT = 65
 READ_HOLDING, WRITE_MULTIPLE = 3, 16  # Modbus function codes
-PAD_HEIGHT = 0.21  # the pads' centre along the approach axis (models/rg2/rg2.sdf)
 
 
 class SimulatedRg2:
@@ -66,20 +64,24 @@ class SimulatedRg2:
         if block_width is not None:  # compliant (the scene's default), the pads rigid
             plant.RegisterCollisionGeometry(
                 plant.world_body(),
-                RigidTransform([0.0, 0.0, PAD_HEIGHT]),
+                RigidTransform([0.0, 0.0, pad_height(block_width)]),  # where the pads meet it
                 Box(0.03, block_width, 0.02),
                 "block",
                 CoulombFriction(1.0, 1.0),
             )
-        for actuator in servo_actuators(plant, rg2):
-            actuator.set_controller_gains(PdControllerGains(p=gripper.kp, d=gripper.kd))
-        plant.set_gravity_enabled(rg2, False)  # as the station's servo
+        set_finger_gains(plant, rg2, gripper.kp, gripper.kd)
+        # Unlike the station's, the fingers here have their weight (the servo holds it, a few
+        # micrometres off): with nothing else in the plant, SAP needs an impulse that is not zero
+        # to converge with the linkage's couplers at rest (all of them zero, it may not: measured,
+        # 20 of 33 commands, 11 openings x 3 forces, failed once the fingers stopped; with the
+        # weight, none). The station's parts resting on the cell give it that impulse.
         plant.Finalize()
-        plant.SetDefaultPositions(rg2, [gripper.initial_opening / 2] * 2)
+        set_rg2_opening(plant, None, gripper.initial_opening, rg2)
         add_gripper_ports(builder, plant, rg2, gripper.kp)
         self._diagram = builder.Build()
         self._simulator = Simulator(self._diagram)
         self._context = self._simulator.get_mutable_context()
+        self.plant, self.plant_context = plant, plant.GetMyContextFromRoot(self._context)
         self.initial = (gripper.initial_opening, gripper.grip_force)
         self._simulator.Initialize()
 

@@ -76,7 +76,11 @@ def test_a_wrong_seat_is_retargeted_with_the_part_in_the_gripper():
         status = loop.status
         if status.step == 1 and status.question.indicated_at is not None and status.bolted is False:
             plan = status.plan
-            if plan is None or status.plan_time(t) < plan.t_in_place:
+            # Up to 50 ms before the plan's in-place instant: the flange sits half a millimetre
+            # lower in the fingers than planned (the pads sink into it, and the RG2's linkage
+            # turns their closing into travel along the approach), so it may touch its seat's
+            # floor a step or two early (measured: 11 ms).
+            if plan is None or status.plan_time(t) < plan.t_in_place - 0.05:
                 held.append(loop.cell.configuration(loop.root_context).status("oval_flange_1"))
                 context = plant.GetMyContextFromRoot(loop.root_context)
                 v = plant.GetVelocities(context, station.instances[UR3])

@@ -21,9 +21,9 @@ from hrc_drake.cell.station.sim_operator import bolt_weld
 from hrc_drake.cell.station.welds import Weld
 from hrc_drake.cell_models import CellDesign, CellModelError, add_cell_models
 from hrc_drake.hri.messages import Indication
-from hrc_drake.motion.poses import default_layout
+from hrc_drake.motion.poses import default_layout, tcp_pose
 from hrc_drake.resources import models_dir
-from hrc_drake.robot_models import add_robot, make_parser
+from hrc_drake.robot_models import RG2_JOINTS, add_robot, make_parser, set_rg2_opening
 from hrc_drake.scenario.schema import Scenario, ScenarioError
 from hrc_drake.tasks.graph import generate_states
 from hrc_drake.tasks.spec import load_spec
@@ -145,7 +145,8 @@ def test_whole_cell_builds_with_ports_and_constraints(cell, workcell):
         assert diagram.GetOutputPort(name).size() == size, name
     assert diagram.GetOutputPort("rg2.grip_detected").size() == 1
     # What each part may be bolted to: the ovals to the plate or the square's rows, the square
-    # to the plate. No grasp welds (no constraints at all): the fingers hold by friction.
+    # to the plate. No grasp welds: the fingers hold by friction; the only constraints are the
+    # gripper linkage's couplers.
     assert dict(cell.bolts.supports) == {
         "oval_flange_1": (PLATE, "square_flange"),
         "oval_flange_2": (PLATE, "square_flange"),
@@ -153,7 +154,7 @@ def test_whole_cell_builds_with_ports_and_constraints(cell, workcell):
     }
     assert cell.bolts.holds(Weld("oval_flange_1", "square_flange/row_2"))
     assert not cell.bolts.holds(Weld("square_flange", "square_flange/row_1"))
-    assert cell.plant.num_constraints() == 0
+    assert cell.plant.num_constraints() == len(RG2_JOINTS) - 1
     context = cell.create_default_context()
     plant_context = cell.plant.GetMyContextFromRoot(context)
     assert cell.bolts.bolted(plant_context) == set()
@@ -322,7 +323,7 @@ def test_a_bolt_fixes_a_part_where_it_sits_not_at_its_seat(workcell):
 def _arm_posture_with_tcp_at(X_W_tcp: RigidTransform) -> np.ndarray:
     """UR3 joint positions putting the gripper's tcp at `X_W_tcp` (IK on the robot alone)."""
     plant = MultibodyPlant(0.0)
-    _ur3, rg2 = add_robot(plant)
+    ur3, rg2 = add_robot(plant)
     plant.Finalize()
     ik = InverseKinematics(plant)
     tcp = plant.GetFrameByName("tcp", rg2)
@@ -331,9 +332,9 @@ def _arm_posture_with_tcp_at(X_W_tcp: RigidTransform) -> np.ndarray:
     ik.AddOrientationConstraint(
         tcp, RotationMatrix(), plant.world_frame(), X_W_tcp.rotation(), 1e-4
     )
-    ik.get_mutable_prog().SetInitialGuess(
-        ik.q(), np.concatenate([Scenario().station.ur3.ready, [0.04, 0.04]])
-    )
+    guess = plant.CreateDefaultContext()
+    plant.SetPositions(guess, ur3, Scenario().station.ur3.ready)
+    ik.get_mutable_prog().SetInitialGuess(ik.q(), plant.GetPositions(guess))
     result = Solve(ik.prog())
     assert result.is_success()
     return result.GetSolution(ik.q())[:6]
@@ -346,14 +347,13 @@ def _hold_above_slot_2(cell, part: str, force: float | None = None):
     plant = cell.plant
     default = plant.CreateDefaultContext()
     X_W_slot2 = plant.GetFrameByName("slot_2").CalcPoseInWorld(default)
-    X_PG = plant.GetFrameByName("grasp", cell.instances[part]).GetFixedPoseInBodyFrame()
     X_W_part = X_W_slot2 @ RigidTransform([0, 0, 0.0015])
-    q = _arm_posture_with_tcp_at(X_W_part @ X_PG)
+    q = _arm_posture_with_tcp_at(tcp_pose(cell.frames, part, X_W_part))
     context = cell.create_default_context()
     plant_context = plant.GetMyContextFromRoot(context)
     plant.SetPositions(plant_context, cell.instances["ur3"], q)
-    width = 0.045
-    plant.SetPositions(plant_context, cell.instances["rg2"], [width / 2, width / 2])
+    width = cell.frames.widths[part]
+    set_rg2_opening(plant, plant_context, width)
     plant.SetFreeBodyPose(plant_context, cell.part_body(part), X_W_part)
     cell.hold_robot(context, opening=width - 0.002, force=force)
     simulate_station(cell, context, SETTLE)

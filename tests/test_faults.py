@@ -21,6 +21,7 @@ from hrc_drake.hri.faults import (
 from hrc_drake.robot_names import UR3, UR3_JOINTS
 
 ROW1_STATES = [(), ("F1",), ("F1", "S23"), ("F1", "S23", "F03")]
+SLIPPERY = "physics: {contact: {static_friction: 0.15, dynamic_friction: 0.15}}"
 
 
 def _run(text: str, scenario: str = "row1-optimal", until: float = 120.0):
@@ -100,7 +101,7 @@ def test_faults_the_cell_cannot_fix_stop_the_task_and_hand_it_over(fault, task, 
 def test_a_lost_grip_lets_the_part_fall_and_the_robot_picks_it_up_from_where_it_lies():
     loop = build_closed_loop(
         load_cell_scenario(
-            "row1-optimal", [LEAN, NO_BODY, "{faults: [!GripLost {task: 1, after: 1.0}]}"]
+            "row1-optimal", [LEAN, NO_BODY, "{faults: [!GripLost {task: 1, after: 1.4}]}"]
         )
     )
     plant, station = loop.station.plant, loop.station
@@ -131,8 +132,9 @@ def test_a_part_that_fell_out_of_reach_is_handed_over_and_the_assembly_goes_on()
     # grasp of it, the task goes to the operator, who puts it in its seat and bolts it (5 s to
     # put it there by hand, run.handover_time, then the lean 0.5 s bolting), and the robot
     # goes on with the next task from where its arm stopped.
-    # (The robot waits for the indication: the fall depends on the carry's timing.)
-    text = "{interaction: {mode: wait}, faults: [!GripLost {task: 1, after: 0.5}]}"
+    # (Where it lands depends on the carry's timing and the fingers' motion as they let go: the
+    # RG2's pads swing up as they open.)
+    text = "{faults: [!GripLost {task: 1, after: 0.9}]}"
     loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, NO_BODY, text]))
     result = loop.run()
     assert result.done and result.error is None and result.states == ROW1_STATES
@@ -159,9 +161,9 @@ def test_a_part_that_fell_out_of_reach_is_handed_over_and_the_assembly_goes_on()
 
 
 def test_a_part_on_a_host_handed_over_is_seated_on_the_host_where_it_sits():
-    # The oval flange of task 3 (F03, on the square flange) lands upside down: the operator
-    # puts it in its row of the square, as the square measurably sits.
-    text = "{interaction: {mode: wait}, faults: [!GripLost {task: 3, after: 0.95}]}"
+    # The oval flange of task 3 (F03, on the square flange) lands on its side (1.7 rad): the
+    # operator puts it in its row of the square, as the square measurably sits.
+    text = "{interaction: {mode: wait}, faults: [!GripLost {task: 3, after: 0.85}]}"
     loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, NO_BODY, text]))
     result = loop.run()
     assert result.done and result.states == ROW1_STATES, result.error
@@ -172,10 +174,10 @@ def test_a_part_on_a_host_handed_over_is_seated_on_the_host_where_it_sits():
 
 
 def test_a_part_resting_tilted_within_half_a_radian_is_picked_again():
-    # Lost later in the carry of task 3, the flange comes to rest about 0.37 rad tilted (past
+    # Lost later in the carry of task 3, the flange comes to rest about 0.34 rad tilted (past
     # the 0.2 rad a grasp from above allowed): the gripper tilts with it, picks it and places
     # it; the robot recovers by itself.
-    text = "{interaction: {mode: wait}, faults: [!GripLost {task: 3, after: 0.85}]}"
+    text = "{interaction: {mode: wait}, faults: [!GripLost {task: 3, after: 0.95}]}"
     loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, NO_BODY, text]))
     plant, station = loop.station.plant, loop.station
     tilt, t = None, 0.0
@@ -337,8 +339,10 @@ def test_debris_in_the_pocket_keeps_the_part_off_its_seat_and_the_task_is_handed
 
 
 def test_a_grip_too_weak_for_the_part_slips_and_is_detected():
-    # The square flange (0.57 kg) slips at 3 N, the RG2's least force.
-    loop = _run("{station: {rg2: {grip_force: 3}}}")
+    # On slippery parts (0.15) the square flange (0.57 kg) slips at 3 N, the RG2's least force
+    # (on the cell's 0.5 the RG2's linkage squeezes it harder with its own weight, and it holds:
+    # tests/test_grasp.py).
+    loop = _run(f"{{station: {{rg2: {{grip_force: 3}}}}, {SLIPPERY}}}")
     # Each time it is picked up again it slips again, until the task is handed over; the
     # operator seats it, and the light oval flange of step 3 holds.
     assert loop.status.mode == Mode.DONE, loop.status.events

@@ -18,7 +18,7 @@ from hrc_drake.motion import (
     validate_plan,
 )
 from hrc_drake.motion.ik import solve_ik
-from hrc_drake.motion.poses import part_pose, tcp_pose
+from hrc_drake.motion.poses import part_pose, tcp_in_part, tcp_pose
 from hrc_drake.motion.scene import Layout, load_cell_frames
 from hrc_drake.motion.trajectory import free_path, path_clearance
 from hrc_drake.tasks.graph import generate_states
@@ -98,6 +98,21 @@ def test_gripper_opens_before_grasp_closes_on_the_part_and_opens_at_release(plan
     assert all(0.0 <= plan.gripper_opening(t) <= 0.110 for t in np.linspace(0, plan.duration, 50))
 
 
+def test_the_square_flange_is_grasped_where_the_opened_pads_reach_it(planner):
+    """At the end of the grasp (the fingers still open by the gap) the tcp stands 16.3 mm
+    further along the approach than the square flange's `grasp` frame: where the RG2's pads,
+    swung back at its 90 mm width, close on that frame (`tcp_in_part`)."""
+    plan = planner.plan_task(frozenset(), "S12")
+    scene = planner.scene(plan.phases[0].layout)
+    model = scene.plant.GetModelInstanceByName("square_flange")
+    X_part_grasp = scene.plant.GetFrameByName("grasp", model).GetFixedPoseInBodyFrame()
+    X_W_grasp = planner.frames.homes["square_flange"] @ X_part_grasp
+    X_tcp = scene.tcp_pose(plan.positions(plan.segment(Stage.GRASP).end))
+    np.testing.assert_allclose(
+        X_W_grasp.InvertAndCompose(X_tcp).translation(), [0.0, 0.0, 0.0163], atol=1e-3
+    )
+
+
 def test_part_is_at_its_target_when_in_place(planner):
     frames = planner.frames
     configuration = frozenset({"S12"})
@@ -160,14 +175,14 @@ def test_a_seat_inside_the_table_fails_on_minimum_distance(planner):
 
 
 def test_kto_adds_distance_constraints_when_the_direct_path_collides(planner):
-    # Tcp 25 mm above the seats, from over slot 1 to past the square on slots 2-3: the square
-    # stands in the way of any path that keeps that height.
+    # The pads 25 mm above the seats, from over slot 1 to past the square on slots 2-3: the
+    # square stands in the way of any path that keeps that height.
     scene = planner.scene(Layout.of({"S23": "square_flange"}, None, 0.061))
     R = scene.tcp_pose(planner.q_home).rotation()
     seat = planner.frames.seats[1].translation()
 
     def posture(y):
-        X = RigidTransform(R, [seat[0], y, seat[2] + 0.025])
+        X = tcp_in_part(RigidTransform(R, [seat[0], y, seat[2] + 0.025]), 0.061)
         return solve_ik(
             scene,
             X,

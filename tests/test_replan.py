@@ -4,6 +4,8 @@ plan service's worker (issue 17: grip-lost and no-seat recoveries)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RotationMatrix
@@ -196,22 +198,49 @@ def test_an_ordinary_request_plans_and_caches_as_before(planner, on_the_table):
 
 
 def test_a_start_by_a_placed_part_first_moves_the_tool_straight_up(planner):
-    # Where the arm stopped holding F1 in its seat: the fingers by the part and the plate, closer
-    # than the planner's clearance. The next plan lifts the tool clear before anything else.
+    # Where the arm stopped holding F1 in its seat: the fingers, closed on it, by the part and
+    # the plate, closer than the planner's clearance. The next plan lifts the tool clear before
+    # anything else (the fingers keep their opening until then: opened for the square flange,
+    # the RG2's pads would stand 30 mm higher).
     f1 = planner.plan_task(frozenset(), "F1")
-    by_the_plate = f1.positions(f1.t_in_place)
-    plan = planner.plan_task({"F1"}, "S23", layout={"oval_flange_1": "F1"}, q_start=by_the_plate)
+    by_the_plate, closed = f1.positions(f1.t_in_place), f1.gripper_opening(f1.t_in_place)
+    plan = planner.plan_task(
+        {"F1"}, "S23", layout={"oval_flange_1": "F1"}, q_start=by_the_plate, start_opening=closed
+    )
     assert plan.motions[0].name == "up, clear of the cell"
     np.testing.assert_allclose(plan.positions(0.0), by_the_plate, rtol=0, atol=5e-5 + 1e-12)
     validate_plan(plan, planner)
 
 
+def test_a_start_clear_with_the_fingers_wide_but_not_narrower_first_moves_straight_up(planner):
+    # Where the arm was going down to the square flange in the tray, its fingers open 106 mm
+    # for it, when the operator said undo (stochastic-long, step 2): clear of the flange with
+    # the fingers that wide, but the undo's pick opens them to 61 mm for F1, and narrower the
+    # RG2's pads stand lower, into the flange. The plan lifts the tool clear first, the fingers
+    # keeping their opening, and only then moves them.
+    s23 = planner.plan_task({"F1"}, "S23", layout={"oval_flange_1": "F1"})
+    down = next(m for m in s23.motions if m.name == "down to grasp")
+    t = down.start + 0.26
+    q, wide = s23.positions(t), s23.gripper_opening(t)
+    need = planner.options.clearance + planner.options.clearance_margin
+    layout = s23.phases[0].layout
+    assert planner.scene(replace(layout, opening=wide)).min_distance(q)[0] >= need
+    assert planner.scene(replace(layout, opening=0.061)).min_distance(q)[0] < need
+    plan = planner.plan_task({"F1"}, UNDO, last_token="F1", q_start=q, start_opening=wide)
+    up = plan.motions[0]
+    assert up.name == "up, clear of the cell"
+    for tau in np.linspace(0.0, up.duration, 5):
+        assert plan.gripper_opening(tau) == pytest.approx(wide)
+    validate_plan(plan, planner)
+
+
 def test_a_part_lying_askew_on_the_tray_is_refused_when_a_finger_would_touch_the_tray(planner):
     # Where a square flange came to rest on the tray's edge after a lost grip (measured in a
-    # faulted run): going down to it, the right finger would touch the tray. The planner says so
+    # faulted run, row 1 with !GripLost {task: 2}): closing on it, the right finger would touch
+    # the tray (the RG2's pads come down 13 mm as they close on its 90 mm). The planner says so
     # instead of planning a grasp the cell would see as a collision.
     lying = pose_from_values(
-        (0.21138, -0.19335, 0.020764, 0.596849, -0.068999, -0.046955, 0.798001)
+        (0.232473, -0.175711, 0.022043, 0.771955, -0.104027, -0.060447, 0.624188)
     )
     with pytest.raises(UnreachableError, match=r"fingers going down to it would touch the cell"):
         planner.plan_task({"F1"}, "S23", instance="square_flange", source_pose=lying, q_start=None)

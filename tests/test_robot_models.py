@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,16 +15,30 @@ from pydrake.systems.framework import DiagramBuilder
 from hrc_drake.cell.scenario import load_cell_scenario
 from hrc_drake.cell.station.build import make_cell_station
 from hrc_drake.resources import package_uri
+from hrc_drake.rg2_kinematics import (
+    MAX_ANGLE,
+    TCP_HEIGHT,
+    URDF_MAX_ANGLE,
+    crank_angle,
+    opening_at,
+    opening_rate,
+    pad_height,
+)
 from hrc_drake.robot_models import (
-    RG2_FINGER_JOINTS,
+    RG2_DRIVE_JOINT,
+    RG2_JOINTS,
+    RG2_MAX_FORCE,
     RG2_MAX_OPENING,
-    RG2_PAD_CENTRE_AT_45_MM,
     UR3_EFFORT_LIMITS,
     UR3_SURFACE_RADII,
     add_robot,
     make_parser,
+    set_rg2_opening,
 )
 from hrc_drake.robot_names import UR3_JOINTS, UR3_VELOCITY_LIMITS
+
+sys.path.insert(0, str(Path(__file__).parent))
+from rg2_sim_device import SimulatedRg2
 
 # Standard DH of the UR3 (CB3), Universal Robots' DH article: (a, d, alpha) per joint.
 UR3_DH = (
@@ -158,9 +174,9 @@ class RobotScene:
         self.plant_context = self.plant.GetMyContextFromRoot(self.context)
         self.inspector = self.scene_graph.model_inspector()
 
-    def set(self, q: np.ndarray, finger: float = RG2_MAX_OPENING / 2) -> None:
+    def set(self, q: np.ndarray, opening: float = RG2_MAX_OPENING) -> None:
         self.plant.SetPositions(self.plant_context, self.ur3, q)
-        self.plant.SetPositions(self.plant_context, self.rg2, [finger, finger])
+        set_rg2_opening(self.plant, self.plant_context, opening, self.rg2)
 
     def colliding_pairs(self) -> list[tuple[str, str]]:
         query = self.scene_graph.get_query_output_port().Eval(
@@ -182,16 +198,19 @@ def scene() -> RobotScene:
 
 
 def test_both_models_parse_offline_with_their_actuators(scene: RobotScene) -> None:
+    """The RG2 has one motor: one actuator, on the crank, whose effort limit squeezes with the
+    RG2's 40 N where the lever is longest (closed); its three other joints follow it."""
     plant = scene.plant
     assert plant.num_actuators(scene.ur3) == 6
-    assert plant.num_actuators(scene.rg2) == 2
-    assert plant.num_positions() == 8
-    for name in RG2_FINGER_JOINTS:
-        joint = plant.GetJointByName(name, scene.rg2)
-        np.testing.assert_allclose(joint.position_lower_limits(), [0.0])
-        np.testing.assert_allclose(joint.position_upper_limits(), [RG2_MAX_OPENING / 2])
-        actuator = plant.GetJointActuatorByName(name, scene.rg2)
-        assert actuator.effort_limit() == pytest.approx(40.0)
+    assert plant.num_actuators(scene.rg2) == 1
+    assert plant.num_positions() == 6 + len(RG2_JOINTS)
+    assert plant.num_constraints() == len(RG2_JOINTS) - 1  # the linkage's couplers
+    crank = plant.GetJointByName(RG2_DRIVE_JOINT, scene.rg2)
+    np.testing.assert_allclose(crank.position_lower_limits(), [0.0])
+    np.testing.assert_allclose(crank.position_upper_limits(), [MAX_ANGLE], atol=1e-4)
+    actuator = plant.GetJointActuatorByName(RG2_DRIVE_JOINT, scene.rg2)
+    needed = RG2_MAX_FORCE * opening_rate(0.0)
+    assert needed <= actuator.effort_limit() <= needed * 1.01
 
 
 def test_gripper_mass_and_frames(scene: RobotScene) -> None:
@@ -204,35 +223,89 @@ def test_gripper_mass_and_frames(scene: RobotScene) -> None:
     X_tool0_tcp = plant.CalcRelativeTransform(
         context, plant.GetFrameByName("tool0", scene.ur3), plant.GetFrameByName("tcp", scene.rg2)
     )
-    # The tcp is where the RG2's pads are at the oval flanges' 45 mm width (within 1 mm).
-    np.testing.assert_allclose(
-        X_tool0_tcp.translation(), [0.0, 0.0, RG2_PAD_CENTRE_AT_45_MM], atol=1e-3
-    )
+    # The tcp is where the RG2's pads are at the oval flanges' 45 mm width.
+    np.testing.assert_allclose(X_tool0_tcp.translation(), [0.0, 0.0, TCP_HEIGHT], atol=1e-6)
     np.testing.assert_allclose(X_tool0_tcp.rotation().matrix(), np.eye(3), atol=1e-12)
 
 
-def test_finger_insides_open_by_the_sum_of_the_joints(scene: RobotScene) -> None:
+def _pad_faces(scene: RobotScene) -> dict[str, np.ndarray]:
+    """Each finger's pad: the centre of its inside face (toward the other pad), in rg2_base."""
     plant, inspector = scene.plant, scene.inspector
-    pads = {}
-    for name in ("left_finger", "right_finger"):
+    base = plant.GetFrameByName("rg2_base", scene.rg2)
+    faces = {}
+    for name, sign in (("left_finger", 1.0), ("right_finger", -1.0)):
         body = plant.GetBodyByName(name, scene.rg2)
-        for geometry in plant.GetCollisionGeometriesForBody(body):
-            if inspector.GetName(geometry).endswith("pad"):
-                pads[name] = geometry
-    tcp = plant.GetFrameByName("tcp", scene.rg2)
-    for q_left, q_right in [(0.0, 0.0), (0.02, 0.035), (0.055, 0.055)]:
-        scene.set(HOME)
-        plant.SetPositions(scene.plant_context, scene.rg2, [q_left, q_right])
-        inside_y = []
-        for name, sign in (("left_finger", 1.0), ("right_finger", -1.0)):
-            body = plant.GetBodyByName(name, scene.rg2)
-            X_tcp_body = plant.CalcRelativeTransform(scene.plant_context, tcp, body.body_frame())
-            X_body_pad = inspector.GetPoseInFrame(pads[name])
-            half_width = inspector.GetShape(pads[name]).size()[1] / 2
-            centre = (X_tcp_body @ X_body_pad).translation()
-            inside_y.append(centre[1] - sign * half_width)
-            assert abs(centre[2]) < 1e-12
-        assert inside_y[0] - inside_y[1] == pytest.approx(q_left + q_right, abs=1e-12)
+        (pad,) = [
+            g
+            for g in plant.GetCollisionGeometriesForBody(body)
+            if inspector.GetName(g).endswith("pad")
+        ]
+        X = body.body_frame().CalcPose(scene.plant_context, base) @ inspector.GetPoseInFrame(pad)
+        np.testing.assert_allclose(X.rotation().matrix(), np.eye(3), atol=1e-12)  # parallel
+        faces[name] = X.translation() - [0.0, sign * inspector.GetShape(pad).size()[1] / 2, 0.0]
+    return faces
+
+
+# Forward kinematics of OnRobot/onrobot-ros2 onrobot_rg2.urdf, computed apart from the model
+# (the fingertip frames' height from the mounting face at each opening between them), and the
+# reference's pad-centre figures (shared/reference/ur3-rg2.md: 0.216 m closed, 0.215 / 0.214 /
+# 0.2105 m at 20 / 30 / 45 mm, 0.182 m fully open, i.e. at the URDF's limit, 106.6 mm).
+URDF_PAD_HEIGHTS = {0.0: 0.21478, 0.045: 0.21107, 0.09: 0.19475, 0.1066: 0.18092}
+REFERENCE_PAD_HEIGHTS = {0.0: 0.216, 0.02: 0.215, 0.03: 0.214, 0.045: 0.2105, 0.1066: 0.182}
+
+
+def test_the_linkage_opens_the_pads_and_brings_them_back_toward_the_flange(
+    scene: RobotScene,
+) -> None:
+    """At every opening the pads' faces stand that far apart, mirrored about the centre plane,
+    parallel, at the pads' height of rg2_kinematics, which is OnRobot's URDF's: the pads
+    travel 16.3 mm toward the flange from the oval flanges' 45 mm to the square flange's 90 mm
+    (issue 31 said about 19 mm: a straight line from 45 mm to fully open; the arc is flatter
+    near closed), 33.9 mm over the URDF's stroke, 38.6 mm over the model's 110 mm."""
+    heights = {}
+    for opening in (0.0, 0.02, 0.03, 0.045, 0.06, 0.09, 0.1066, RG2_MAX_OPENING):
+        scene.set(HOME, opening)
+        left, right = _pad_faces(scene).values()
+        assert left[1] - right[1] == pytest.approx(opening, abs=1e-9)
+        np.testing.assert_allclose(left * [1, -1, 1], right, atol=1e-9)  # mirrored
+        assert left[2] == pytest.approx(pad_height(opening), abs=1e-9)
+        heights[opening] = float(left[2])
+        angle = scene.plant.GetJointByName(RG2_DRIVE_JOINT).get_angle(scene.plant_context)
+        assert opening_at(angle) == pytest.approx(opening, abs=1e-12)
+    for opening, height in URDF_PAD_HEIGHTS.items():
+        assert heights[opening] == pytest.approx(height, abs=1e-5), opening
+    for opening, height in REFERENCE_PAD_HEIGHTS.items():
+        assert heights[opening] == pytest.approx(height, abs=1.5e-3), opening
+    assert heights[0.045] - heights[0.09] == pytest.approx(0.0163, abs=2e-4)
+    assert crank_angle(0.1066) == pytest.approx(URDF_MAX_ANGLE, abs=1e-3)
+    assert heights[0.0] - heights[0.1066] == pytest.approx(0.034, abs=5e-4)  # the reference's
+
+
+def test_one_motor_moves_both_fingers_together_and_the_pads_along_the_approach() -> None:
+    """The simulated RG2 (SAP, the station's servo on its one actuated crank), told to open to
+    90 mm, then to close to 45 mm: at every step the pads stay mirrored about the centre plane
+    and parallel, on the linkage's arc, the opening it measures is their gap, and where they
+    settle they have travelled 16.3 mm along the approach axis."""
+    device = SimulatedRg2()
+    plant, context = device.plant, device.plant_context
+    base = plant.GetFrameByName("rg2_base")
+    fingers = [plant.GetBodyByName(name) for name in ("left_finger", "right_finger")]
+    settled, t = {}, 0.0
+    for target in (0.09, 0.045):
+        for _ in range(60):
+            t += 0.01
+            opening, _, _ = device.advance(target, 20.0, t)
+            left, right = (f.body_frame().CalcPose(context, base) for f in fingers)
+            for X in (left, right):  # the finger frame is on its pad's face centre
+                assert rotation_angle(X.rotation().matrix(), np.eye(3)) < 1e-4
+            gap = left.translation()[1] - right.translation()[1]
+            assert left.translation()[1] + right.translation()[1] == pytest.approx(0.0, abs=5e-5)
+            assert left.translation()[2] == pytest.approx(right.translation()[2], abs=5e-5)
+            assert left.translation()[2] == pytest.approx(pad_height(gap), abs=5e-5)
+            assert opening == pytest.approx(gap, abs=1e-4)
+        assert opening == pytest.approx(target, abs=1e-4)
+        settled[target] = float(left.translation()[2])
+    assert settled[0.045] - settled[0.09] == pytest.approx(0.0163, abs=2e-4)
 
 
 # Contact values no other scenario uses, so that they can only come from this one.
@@ -306,11 +379,11 @@ def test_wrist_links_are_filtered_from_each_other(scene: RobotScene) -> None:
     [np.zeros(6), HOME, TOOL_DOWN, np.array([0.5, -2.0, 2.2, -1.8, -1.57, 0.3])],
     ids=["zero", "home", "tool_down", "reach_over_plate"],
 )
-@pytest.mark.parametrize("finger", [0.0, RG2_MAX_OPENING / 2], ids=["closed", "open"])
+@pytest.mark.parametrize("opening", [0.0, RG2_MAX_OPENING], ids=["closed", "open"])
 def test_no_self_collision_at_typical_configurations(
-    scene: RobotScene, q: np.ndarray, finger: float
+    scene: RobotScene, q: np.ndarray, opening: float
 ) -> None:
-    scene.set(q, finger)
+    scene.set(q, opening)
     assert scene.colliding_pairs() == []
 
 

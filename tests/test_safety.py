@@ -26,7 +26,7 @@ from hrc_drake.cell.station.build import make_cell_station, station_scenario
 from hrc_drake.cell.station.operator_body import ReachInto
 from hrc_drake.motion.plan import Stage
 from hrc_drake.motion.poses import part_pose
-from hrc_drake.robot_models import RG2_FINGER_JOINTS
+from hrc_drake.robot_models import set_rg2_opening
 from hrc_drake.scenario.safety import SafetyConfig
 from hrc_drake.scenario.schema import BodyConfig, Scenario, ScenarioError
 
@@ -145,8 +145,7 @@ def _exact_separations(station, q, opening, carrying, centres):
     root = station.diagram.CreateDefaultContext()
     context = plant.GetMyMutableContextFromRoot(root)
     plant.SetPositions(context, station.instances["ur3"], q)
-    for name in RG2_FINGER_JOINTS:
-        plant.GetJointByName(name).set_translation(context, opening / 2)
+    set_rg2_opening(plant, context, opening)
     if carrying is not None:
         X_W_tcp = plant.GetFrameByName("tcp").CalcPoseInWorld(context)
         body = plant.get_body(plant.GetBodyIndices(station.instances[carrying])[0])

@@ -6,11 +6,12 @@ function (`hrc_drake.cell.station.safety_function`) and the run's check each bui
 Like a real controller or safety controller, each has its own kinematic model: a MultibodyPlant of
 the cell parsed from the project's models (`add_cell_models`), of which it uses the UR3, the
 gripper and the parts' shapes. At construction every collision shape of the robot, and of each
-part as it sits in the gripper (the gripper's `tcp` at the part's `grasp` frame), becomes a convex
-primitive in numpy (`RobotEnvelope`): a box, a cylinder (a disc swept along z), a capsule or a
-sphere, each the shape itself, so the distance from a point is exact; an ellipsoid or a mesh
-becomes its enclosing box. Fingers whose opening is not measured take the box they sweep over
-their whole travel. So the distance is never more than the true one.
+part as it sits in the gripper (its pads at the part's `grasp` frame, `CellFrames.grasps`),
+becomes a convex primitive in numpy (`RobotEnvelope`): a box, a cylinder (a disc swept along z),
+a capsule or a sphere, each the shape itself, so the distance from a point is exact; an
+ellipsoid or a mesh becomes its enclosing box. The gripper's linkage, when its opening is not
+measured, takes the box each of its shapes sweeps over the whole stroke. So the distance is never
+more than the true one.
 
 Apart from the monitors because this is geometry and kinematics, the same whatever the standard
 asks: `hrc_drake.cell.ssm` turns these distances and speeds into ISO/TS 15066's separation.
@@ -27,12 +28,16 @@ from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.framework import DiagramBuilder
 
 from hrc_drake.cell_models import CellDesign, add_cell_models
-from hrc_drake.motion.scene import TCP
-from hrc_drake.robot_models import RG2_FINGER_JOINTS
+from hrc_drake.motion.scene import TCP, read_cell_frames
+from hrc_drake.robot_models import RG2_JOINTS, RG2_MAX_OPENING, set_rg2_opening
 from hrc_drake.robot_names import GRIPPER, UR3, UR3_JOINTS
 
-GRASP = "grasp"  # the frame of a part where the gripper's tcp holds it (cell_models)
 _TINY = 1e-12  # keeps the divisions by a length finite where it vanishes
+# The linkage's sweep is taken at this many openings over the stroke; its boxes grow by
+# SWEEP_MARGIN, more than a shape's corner strays off its sampled arc between two samples
+# (< 0.02 mm: 0.07 m from a pivot, 0.04 rad apart).
+SWEEP_SAMPLES = 33
+SWEEP_MARGIN = 1e-4  # m
 _YZX, _ZXY = [1, 2, 0], [2, 0, 1]
 
 
@@ -88,9 +93,14 @@ def primitive(shape, name: str = "") -> tuple[RigidTransform, np.ndarray, float,
     )
 
 
-def _swept(half: np.ndarray, disc: float, rounding: float, axis_C: np.ndarray, travel: float):
-    """Half extents of the box that holds a shape swept ±travel/2 along `axis_C`."""
-    return half + np.array([disc, disc, 0.0]) + rounding + np.abs(axis_C) * travel / 2
+def _swept(half: np.ndarray, disc: float, rounding: float, moves: list[RigidTransform]):
+    """(X_CS, half extents) of the box S that holds a shape (in its frame C) moved by each of
+    `moves` (X_C C', C' the shape's frame moved), grown by SWEEP_MARGIN."""
+    box = half + np.array([disc, disc, 0.0]) + rounding
+    corners = box * np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)])
+    points = np.vstack([(X.rotation().matrix() @ corners.T).T + X.translation() for X in moves])
+    low, high = points.min(axis=0), points.max(axis=0)
+    return RigidTransform((low + high) / 2), (high - low) / 2 + SWEEP_MARGIN
 
 
 class RobotEnvelope:
@@ -114,10 +124,8 @@ class RobotEnvelope:
         self._arm_v = np.array(
             [plant.GetJointByName(name, arm).velocity_start() for name in UR3_JOINTS]
         )
-        self.fingers = [plant.GetJointByName(name, gripper) for name in RG2_FINGER_JOINTS]
-        self._travel = [
-            (f.position_lower_limits()[0], f.position_upper_limits()[0]) for f in self.fingers
-        ]
+        self._gripper = gripper
+        self._sweeps = self._linkage_sweeps()
         robot = [
             plant.get_body(index)
             for model in (arm, gripper)
@@ -133,8 +141,11 @@ class RobotEnvelope:
             swept: Primitives.join([self._body_shapes(inspector, body, swept) for body in robot])
             for swept in (False, True)
         }
+        held = read_cell_frames(plant, scene_graph, self.context, design).grasps
         self._parts = {
-            part.name: self._part_shapes(inspector, plant.GetModelInstanceByName(part.name))
+            part.name: self._part_shapes(
+                inspector, plant.GetModelInstanceByName(part.name), held[part.name]
+            )
             for part in design.parts
         }
         self._sets: dict[tuple[str | None, bool], Primitives] = {}
@@ -154,31 +165,44 @@ class RobotEnvelope:
             body = joint.parent_body()
         return len(self.links)
 
+    def _linkage_sweeps(self) -> dict[int, list[RigidTransform]]:
+        """Each body the gripper's linkage moves -> its poses over the stroke, relative to its
+        pose at mid-stroke (where `pose` puts it when the opening is not measured)."""
+        plant, context = self.plant, self.context
+        moved = {plant.GetJointByName(name, self._gripper).child_body() for name in RG2_JOINTS}
+        base = plant.GetFrameByName("rg2_base", self._gripper)
+
+        def poses(opening: float) -> dict[int, RigidTransform]:
+            set_rg2_opening(plant, context, opening, self._gripper)
+            return {int(b.index()): b.body_frame().CalcPose(context, base) for b in moved}
+
+        mid = poses(RG2_MAX_OPENING / 2)
+        samples = [poses(w) for w in np.linspace(0.0, RG2_MAX_OPENING, SWEEP_SAMPLES)]
+        return {i: [X.inverse() @ at[i] for at in samples] for i, X in mid.items()}
+
     def _body_shapes(self, inspector, body, swept: bool) -> Primitives:
-        """The collision shapes of `body`; with `swept`, a finger's over its whole travel."""
-        finger = next((f for f in self.fingers if f.child_body().index() == body.index()), None)
+        """The collision shapes of `body`; with `swept`, a linkage body's over the stroke."""
+        moves = self._sweeps.get(int(body.index())) if swept else None
         rows = []
         for gid in self.plant.GetCollisionGeometriesForBody(body):
             name = inspector.GetName(gid)
             X_GC, half, disc, rounding = primitive(inspector.GetShape(gid), name)
             X_BC = inspector.GetPoseInFrame(gid) @ X_GC
-            if swept and finger is not None:
-                low, high = self._travel[self.fingers.index(finger)]
-                # The axis is in the joint's parent-side frame, parallel to its child-side one.
-                R_BM = finger.frame_on_child().GetFixedPoseInBodyFrame().rotation()
-                axis_C = (X_BC.rotation().inverse() @ R_BM) @ np.asarray(finger.translation_axis())
-                half = _swept(half, disc, rounding, axis_C, high - low)
-                disc = rounding = 0.0
+            if moves is not None:
+                # The shape moved with its body, seen from its own frame at mid-stroke.
+                X_CS, half = _swept(
+                    half, disc, rounding, [X_BC.inverse() @ X @ X_BC for X in moves]
+                )
+                X_BC, disc, rounding = X_BC @ X_CS, 0.0, 0.0
             rows.append((name, X_BC, half, disc, rounding))
         return self._primitives(rows, self._row[body.index()], self._link_of(body))
 
-    def _part_shapes(self, inspector, model) -> Primitives:
+    def _part_shapes(self, inspector, model, X_part_tcp: RigidTransform) -> Primitives:
         """A part's collision shapes as the gripper holds it: on the body of the `tcp` frame,
-        with the tcp at the part's `grasp` frame."""
+        with the tcp at `X_part_tcp` (`CellFrames.grasps`)."""
         plant = self.plant
         (index,) = plant.GetBodyIndices(model)
-        X_part_grasp = plant.GetFrameByName(GRASP, model).GetFixedPoseInBodyFrame()
-        X_B_part = self._tcp.GetFixedPoseInBodyFrame() @ X_part_grasp.inverse()
+        X_B_part = self._tcp.GetFixedPoseInBodyFrame() @ X_part_tcp.inverse()
         rows = []
         for gid in plant.GetCollisionGeometriesForBody(plant.get_body(index)):
             name = inspector.GetName(gid)
@@ -217,12 +241,13 @@ class RobotEnvelope:
 
     def pose(self, q: np.ndarray, opening: float | None) -> tuple[np.ndarray, np.ndarray]:
         """Forward kinematics at arm positions `q` (UR3_JOINTS order) and the gripper `opening`
-        (None: mid-travel): (R_WB n×3×3, p_WB n×3) of `bodies`."""
+        (None: mid-stroke): (R_WB n×3×3, p_WB n×3) of `bodies`."""
         plant, context = self.plant, self.context
         plant.SetPositions(context, self._arm, q)
-        for finger, (low, high) in zip(self.fingers, self._travel, strict=True):
-            each = (low + high) / 2 if opening is None else min(max(opening / 2, low), high)
-            finger.set_translation(context, each)
+        opening = (
+            RG2_MAX_OPENING / 2 if opening is None else min(max(opening, 0.0), RG2_MAX_OPENING)
+        )
+        set_rg2_opening(plant, context, opening, self._gripper)
         X = np.array([plant.EvalBodyPoseInWorld(context, b).GetAsMatrix34() for b in self.bodies])
         return X[:, :, :3], X[:, :, 3]
 

@@ -10,7 +10,7 @@ check that the UR3 reaches every grasp of the spec before any run (`reach_check`
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from pydrake.math import RigidTransform
@@ -77,6 +77,7 @@ class _Pick:
     lift: tuple[tuple[str, str], ...]
     clear: list[np.ndarray] | None = None  # straight up from a start too close to the cell
     near: tuple[tuple[str, str], ...] = ()  # the contacts allowed going up
+    start_scene: PlanningScene | None = None  # going up: the fingers at their start opening
 
 
 @dataclass(frozen=True)
@@ -289,11 +290,12 @@ class MotionPlanner:
         lift = tuple(pair for s in supports for pair in ((part, s), (GRIPPER, s)))
         X_pregrasp = offset_along_approach(X_grasp, opts.approach_distance)
         scene.set_allowed_contacts(())
-        clear, near = None, ()
+        clear, near, start_scene = None, (), self._start_scene(scene, measured)
         if measured.start is not None:
-            clear, near = clear_start(scene, q_start, opts, frames, task)
+            clear, near = clear_start(start_scene, q_start, opts, frames, task, then=scene)
             q_start = q_start if clear is None else clear[-1]
-            check_start(scene, q_start, self.limits, opts, task)
+            for where in {id(s): s for s in (start_scene, scene)}.values():
+                check_start(where, q_start, self.limits, opts, task)
         try:
             q_pregrasp = self._ik(scene, X_pregrasp, q_start, task, "pre-grasp")
         except UnreachableError:
@@ -306,9 +308,32 @@ class MotionPlanner:
         scene.set_allowed_contacts(hand)
         down = straight_waypoints(scene, q_pregrasp, X_grasp, opts, task=task, waypoint="grasp")
         if measured.source is not None:
-            check_fingers_clear(scene, part, down, task)
+            self._check_loose_fingers(scene, move, measured, down)
         scene.set_allowed_contacts(())
-        return _Pick(scene, q_pregrasp, approach, down, hand, lift, clear, near)
+        return _Pick(scene, q_pregrasp, approach, down, hand, lift, clear, near, start_scene)
+
+    def _start_scene(self, scene: PlanningScene, measured: Measured) -> PlanningScene:
+        """The pick's scene with the fingers where they start: a gripper keeps its opening
+        until the arm is clear of the cell, and the RG2's pads stand lower the narrower they
+        are (hrc_drake.rg2_kinematics)."""
+        if measured.start is None or measured.start_opening is None:
+            return scene
+        return self.scene(replace(scene.layout, opening=round(measured.start_opening, 6)))
+
+    def _check_loose_fingers(self, scene, move: TaskMove, measured: Measured, down) -> None:
+        """UnreachableError when, going down to a part lying loose or closing on it, a finger
+        would touch what the part lies on: the RG2's pads come down as they close, so closed
+        on the part the fingers stand lower than they went down."""
+        part = move.instance
+        check_fingers_clear(scene, part, down, move.task)
+        closed = Layout.of(
+            move.before,
+            None,
+            self.frames.widths[part],
+            {part: pose_from_values(measured.source)},
+            measured.obstacle,
+        )
+        check_fingers_clear(self.scene(closed), part, down[-1:], move.task)
 
     def _plan(self, configuration: frozenset[str], move: TaskMove, measured: Measured) -> Plan:
         opts, part = self.options, move.instance
@@ -345,8 +370,9 @@ class MotionPlanner:
         timed = self._timed
         t0 = line.t
         if pick.clear is not None:
-            line.move("up, clear of the cell", timed(pick.scene, spline_through(pick.clear)))
-            line.phase(t0, pick.scene.layout, pick.near)
+            up = pick.start_scene or pick.scene
+            line.move("up, clear of the cell", timed(up, spline_through(pick.clear)))
+            line.phase(t0, up.layout, pick.near)
         t1 = line.t
         line.move(f"{start} to pre-grasp", timed(pick.scene, pick.approach[0]), pick.approach)
         line.phase(t1, pick.scene.layout, ())

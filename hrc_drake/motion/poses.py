@@ -6,7 +6,9 @@ places (`AssemblySpec.placement`), and
   (they share their orientation);
 - a part on a host over base slot k sits on the host's row over k: `X_W_host · X_host_row_j`,
   j = the position of k among the slots the host covers (`row_1` over the lowest);
-- the gripper's `tcp` takes the part's `grasp` frame.
+- the gripper's pads hold a part with their centre at its `grasp` frame; the pads travel along
+  the approach axis with the opening (`hrc_drake.rg2_kinematics`), so the `tcp` (the pads'
+  centre at a 45 mm opening) stands where `tcp_in_part` says for the width the grasp closes on.
 The cell station (initial poses, bolt welds), the motion layer and the SlotMonitor's nominal
 seats all use these functions.
 """
@@ -21,6 +23,7 @@ from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RigidTransform
 
 from hrc_drake.cell_models import CellDesign
+from hrc_drake.rg2_kinematics import pad_offset
 from hrc_drake.tasks.assembly import AssemblySpec
 from hrc_drake.tasks.tokens import UNDO, Placement
 
@@ -55,7 +58,9 @@ class CellFrames:
         seats: base slot k -> X_W_slot_k.
         homes: part instance -> X_W_part at rest in the tray (`home_<instance>`).
         rows: host part symbol -> row j -> X_host_row_j.
-        grasps: part instance -> X_part_grasp.
+        grasps: part instance -> X_part_tcp, the gripper's tcp in the part's frame when it holds
+            the part: `tcp_in_part` of the part's `grasp` frame at its width (a cell read
+            without the gripper: the `grasp` frame itself).
         widths: part instance -> width between the fingers when held [m].
         tray: X_W_tray, the tray's body frame.
     """
@@ -157,8 +162,19 @@ def default_layout(
     return layout
 
 
+def tcp_in_part(X_part_grasp: RigidTransform, opening: float) -> RigidTransform:
+    """X_part_tcp: where the gripper's `tcp` stands, in a part's frame, when its pads hold the
+    part with their centre at its `grasp` frame and the fingers `opening` [m] apart.
+
+    The one tcp rule of the project. The RG2's pads swing back toward the flange as they open
+    (`hrc_drake.rg2_kinematics.pad_offset`, 0 at the tcp's own 45 mm), so for a wider part the
+    tcp, fixed on the gripper, goes further along its approach axis (+z): 16.3 mm at 90 mm."""
+    return X_part_grasp @ RigidTransform([0.0, 0.0, -pad_offset(opening)])
+
+
 def tcp_pose(frames: CellFrames, instance: str, X_W_part: RigidTransform) -> RigidTransform:
-    """X_W_tcp when holding `instance` at X_W_part (the tcp takes the part's `grasp` frame)."""
+    """X_W_tcp when holding `instance` at X_W_part (`CellFrames.grasps`: its pads at the part's
+    `grasp` frame, closed on its width)."""
     return X_W_part @ frames.grasps[instance]
 
 
@@ -234,5 +250,6 @@ __all__ = [
     "quantize_opening",
     "quantize_pose",
     "seat_pose",
+    "tcp_in_part",
     "tcp_pose",
 ]

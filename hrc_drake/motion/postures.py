@@ -51,12 +51,22 @@ def home_posture(frames: CellFrames, scene: PlanningScene) -> np.ndarray:
 
 
 def clear_start(
-    scene: PlanningScene, q: np.ndarray, options: MotionOptions, frames: CellFrames, task: str
+    scene: PlanningScene,
+    q: np.ndarray,
+    options: MotionOptions,
+    frames: CellFrames,
+    task: str,
+    then: PlanningScene | None = None,
 ):
-    """(postures, allowed contacts) moving the tcp straight up by the approach distance
-    from a start posture closer to the cell than the optimisers' margin (the arm stopped
-    with its fingers by a part or a surface), or (None, ()) when the start is clear."""
-    if scene.min_distance(q)[0] >= options.clearance + options.clearance_margin:
+    """(postures, allowed contacts) moving the tcp straight up by the approach distance, in
+    `scene` (the fingers at their start opening, which they keep on the way up), from a start
+    posture closer to the cell than the optimisers' margin (the arm stopped with its fingers by
+    a part or a surface), or (None, ()) when the start is clear. `then`: the scene the plan goes
+    on in, the fingers at the pick's opening; a start too close in it is lifted clear too,
+    since the fingers move to that opening as the arm leaves (the RG2's pads come down as they
+    close: fingers clear of a part when open wide can touch it narrower)."""
+    need = options.clearance + options.clearance_margin
+    if all(s.min_distance(q)[0] >= need for s in (scene, then) if s is not None):
         return None, ()
     X = scene.tcp_pose(q)
     up_by = np.array([0.0, 0.0, options.approach_distance])

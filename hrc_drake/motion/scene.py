@@ -2,8 +2,8 @@
 
 A planning scene has no simulation: every part is welded where the layout puts it (the tray home,
 a seat, a measured pose where it lies loose, or the gripper's tcp at its grasp pose, so a carried
-part is robot geometry), the fingers are welded at one opening, and the only degrees of freedom
-are the six UR3 joints.
+part is robot geometry), the gripper's linkage is welded at one opening, and the only degrees of
+freedom are the six UR3 joints.
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
+from pydrake.common.eigen_geometry import AngleAxis
 from pydrake.geometry import (
     Box,
     Capsule,
@@ -23,21 +24,27 @@ from pydrake.geometry import (
     Mesh,
     Sphere,
 )
-from pydrake.math import RigidTransform
+from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
 from pydrake.multibody.tree import FixedOffsetFrame
 from pydrake.systems.framework import DiagramBuilder
 
 from hrc_drake.cell_models import CellDesign, add_cell_models, check_cell_models
-from hrc_drake.motion.poses import CellFrames, part_pose, pose_from_values, pose_values
+from hrc_drake.motion.poses import (
+    CellFrames,
+    part_pose,
+    pose_from_values,
+    pose_values,
+    tcp_in_part,
+)
 from hrc_drake.obstacle_models import add_fixed_obstacle, far_below
-from hrc_drake.robot_models import RG2_FINGER_JOINTS, RG2_MAX_OPENING
+from hrc_drake.rg2_kinematics import joint_angles
+from hrc_drake.robot_models import RG2_JOINTS, RG2_MAX_OPENING, RG2_OPENING_AXIS
 from hrc_drake.robot_names import GRIPPER, UR3, UR3_JOINTS
 from hrc_drake.workpiece_sdf import PLATE, TRAY
 
 ROBOT = UR3
 TCP = "tcp"
-FINGER_JOINTS = RG2_FINGER_JOINTS
 MAX_OPENING = RG2_MAX_OPENING
 # Wrist links sit right against the gripper mount; their capsules may touch it (calibration).
 _WRIST_LINKS = ("wrist_1_link", "wrist_2_link", "wrist_3_link")
@@ -52,19 +59,27 @@ def part_body(plant: MultibodyPlant, instance: str):
     return plant.get_body(bodies[0])
 
 
-def _free_finger(plant: MultibodyPlant, joint_name: str) -> FixedOffsetFrame:
-    """Replace a prismatic finger joint by a weld to a frame whose pose sets the opening."""
+def _weld_linkage(plant: MultibodyPlant) -> dict[str, tuple[FixedOffsetFrame, np.ndarray]]:
+    """Replace each joint of the gripper's linkage by a weld to a frame whose pose (a turn by the
+    joint's angle about its axis) sets the opening: joint name -> (frame, axis)."""
     gripper = plant.GetModelInstanceByName(GRIPPER)
-    joint = plant.GetJointByName(joint_name, gripper)
-    for index in plant.GetJointActuatorIndices():
+    # The models' only constraints are the linkage's couplers, which the welds replace.
+    for constraint in plant.GetConstraintIds():
+        plant.RemoveConstraint(constraint)
+    for index in plant.GetJointActuatorIndices():  # (per instance: empty before Finalize)
         actuator = plant.get_joint_actuator(index)
-        if actuator.joint().index() == joint.index():
+        if actuator.model_instance() == gripper:
             plant.RemoveJointActuator(actuator)
-    parent, child = joint.frame_on_parent(), joint.frame_on_child()
-    plant.RemoveJoint(joint)
-    frame = plant.AddFrame(FixedOffsetFrame(f"{joint_name}_weld", parent, RigidTransform()))
-    plant.WeldFrames(frame, child, RigidTransform())
-    return frame
+    welds = {}
+    for name in RG2_JOINTS:
+        joint = plant.GetJointByName(name, gripper)
+        parent, child = joint.frame_on_parent(), joint.frame_on_child()
+        axis = np.asarray(joint.revolute_axis())
+        plant.RemoveJoint(joint)
+        frame = plant.AddFrame(FixedOffsetFrame(f"{name}_weld", parent, RigidTransform()))
+        plant.WeldFrames(frame, child, RigidTransform())
+        welds[name] = (frame, axis)
+    return welds
 
 
 @dataclass(frozen=True)
@@ -120,8 +135,9 @@ class SceneModel:
     """The cell's diagram with one part (or none) welded to the gripper.
 
     Everything else that a layout changes is a parameter: each other part is welded to a
-    world-fixed frame, each finger to a frame on the gripper, whose poses a PlanningScene sets in
-    its own context. So one parse serves every layout with the same carried part.
+    world-fixed frame, each link of the gripper's linkage to a frame on its parent, whose poses
+    a PlanningScene sets in its own context. So one parse serves every layout with the same
+    carried part.
     """
 
     def __init__(self, frames: CellFrames, carried: str | None):
@@ -130,12 +146,7 @@ class SceneModel:
         builder = DiagramBuilder()
         plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
         add_cell_models(plant, frames.design)
-        gripper = plant.GetModelInstanceByName(GRIPPER)
-        self.finger_axes = {
-            name: np.asarray(plant.GetJointByName(name, gripper).translation_axis())
-            for name in FINGER_JOINTS
-        }
-        self.finger_frames = {name: _free_finger(plant, name) for name in FINGER_JOINTS}
+        self.linkage = _weld_linkage(plant)
         self.part_frames: dict[str, FixedOffsetFrame] = {}
         world = plant.world_frame()
         for instance in frames.design.instance_names:
@@ -219,9 +230,10 @@ class PlanningScene:
         self.context = model.diagram.CreateDefaultContext()
         self.plant_context = self.plant.GetMyMutableContextFromRoot(self.context)
         self.sg_context = self.scene_graph.GetMyMutableContextFromRoot(self.context)
-        for name, frame in model.finger_frames.items():
-            X = RigidTransform(0.5 * layout.opening * model.finger_axes[name])
-            frame.SetPoseInParentFrame(self.plant_context, X)
+        for name, angle in joint_angles(min(max(layout.opening, 0.0), MAX_OPENING)).items():
+            frame, axis = model.linkage[name]
+            R = RotationMatrix(AngleAxis(angle, axis))
+            frame.SetPoseInParentFrame(self.plant_context, RigidTransform(R))
         placed = dict(layout.placed)
         loose = {instance: pose_from_values(values) for instance, values in layout.loose}
         tokens = layout.configuration
@@ -342,7 +354,8 @@ def _support(shape, direction: np.ndarray) -> float:
 
 
 def load_cell_frames(design: CellDesign) -> CellFrames:
-    """Read seat, tray and part frames (and the parts' grasp widths) from the cell's models."""
+    """Read seat, tray and part frames (and the parts' grasp widths and tcp poses) from the
+    cell's models."""
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
     add_cell_models(plant, design)
@@ -356,7 +369,8 @@ def read_cell_frames(
     plant: MultibodyPlant, scene_graph, plant_context, design: CellDesign
 ) -> CellFrames:
     """The cell's frames in a finalized plant holding `design`'s models (CellModelError if the
-    models do not fit the spec). Grasp widths need the gripper; without it they are empty."""
+    models do not fit the spec). Grasp widths need the gripper; without it they are empty, and
+    each part's tcp pose is its `grasp` frame."""
     check_cell_models(plant, scene_graph, design)
 
     def world_pose(model: str, frame: str) -> RigidTransform:
@@ -392,6 +406,7 @@ def read_cell_frames(
             hi = np.maximum(hi, offset + _support(shape, R @ axis_part))
             lo = np.minimum(lo, offset - _support(shape, R @ -axis_part))
         widths[instance] = float(hi - lo)
+        grasps[instance] = tcp_in_part(X_part_grasp, widths[instance])
     tray = plant.GetBodyByName(TRAY, plant.GetModelInstanceByName(TRAY))
     return CellFrames(
         design, seats, homes, rows, grasps, widths, tray.EvalPoseInWorld(plant_context)
@@ -401,9 +416,7 @@ def read_cell_frames(
 def _finger_axis_in_tcp(plant: MultibodyPlant, plant_context) -> np.ndarray:
     """Unit direction the left finger opens along, in the tcp frame."""
     gripper = plant.GetModelInstanceByName(GRIPPER)
-    joint = plant.GetJointByName(FINGER_JOINTS[0], gripper)
-    X_W_J = joint.frame_on_parent().CalcPoseInWorld(plant_context)
-    X_W_tcp = plant.GetFrameByName(TCP, gripper).CalcPoseInWorld(plant_context)
-    axis_W = X_W_J.rotation() @ np.asarray(joint.translation_axis())
-    axis = X_W_tcp.rotation().inverse() @ axis_W
+    R_W_base = plant.GetFrameByName("rg2_base", gripper).CalcPoseInWorld(plant_context).rotation()
+    R_W_tcp = plant.GetFrameByName(TCP, gripper).CalcPoseInWorld(plant_context).rotation()
+    axis = R_W_tcp.inverse() @ R_W_base @ np.asarray(RG2_OPENING_AXIS)
     return axis / np.linalg.norm(axis)

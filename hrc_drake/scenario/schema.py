@@ -361,18 +361,24 @@ class GripperConfig:
         grip_force: N, the gripping force the controller commands (the RG2 takes 3-40 N); the
             part is carried by the pads' friction alone. 20 N holds the heaviest part of the
             flange case (the 0.57 kg square flange, 5.6 N) with a margin of 4.8 at rest
-            (benchmarks/reports/contact.md: the largest carry acceleration without slip).
-        kp, kd: the simulated finger servo's PD gains [N/m, N·s/m]; the servo pushes with at
-            most the commanded force (`hrc_drake.cell.station.gripper.FingerServo`), and with all
-            of it once a finger stalls `force / kp` short of its target: 40 N (the RG2's most) at
-            the 1 mm each finger is commanded past the part (`motion.options.grip_squeeze`, 2 mm).
+            (benchmarks/reports/contact.md: the largest carry acceleration without slip,
+            measured with the earlier prismatic fingers; the RG2's linkage adds the part's
+            weight to the squeeze, `rg2_kinematics.pad_travel_rate`).
+        kp, kd: the simulated finger servo's PD gains per finger [N/m, N·s/m], at the pads at
+            a 45 mm opening (the servo drives the RG2's one crank: `gripper.crank_gain`); the
+            servo pushes with at most the commanded force
+            (`hrc_drake.cell.station.gripper.FingerServo`), and with all of it once a finger
+            stalls `force / kp` short of its target. The fingers are commanded 1 mm each past the
+            part (`motion.options.grip_squeeze`, 2 mm), of which the pads' give into the part
+            and the linkage's couplers take some (0.3 mm each at 20 N on an oval flange): 60000
+            squeezes it with 30 N of a 30 N command, 33 N of 40.
         grip_tolerance: m; a measured opening farther than this from the width of the part the
             gripper should hold means it holds nothing (or something else).
     """
 
     initial_opening: float = 0.088
     grip_force: float = 20.0
-    kp: float = 40000.0
+    kp: float = 60000.0
     kd: float = 40.0
     grip_tolerance: float = 0.004
 

@@ -66,7 +66,7 @@ from hrc_drake.cell.station.cell_station import CellStation
 from hrc_drake.cell.station.contacts import geometry_owners, owner_pairs
 from hrc_drake.cell.station.desk import add_bins, desk_script
 from hrc_drake.cell.station.faults import FaultInjector, SilentOperator
-from hrc_drake.cell.station.gripper import add_gripper_ports
+from hrc_drake.cell.station.gripper import add_gripper_ports, set_finger_gains
 from hrc_drake.cell.station.obstacle import (
     SeatPositions,
     filter_obstacle_contacts,
@@ -84,6 +84,7 @@ from hrc_drake.cell_models import CellDesign, add_cell_models
 from hrc_drake.motion.poses import IN_TRAY, CellFrames, layout_poses
 from hrc_drake.motion.scene import read_cell_frames
 from hrc_drake.obstacle_models import DEBRIS, OBSTACLE
+from hrc_drake.robot_models import set_rg2_opening
 from hrc_drake.robot_names import GRIPPER, UR3, UR3_JOINTS
 from hrc_drake.scenario.schema import Activity, CameraSettings, Scenario
 from hrc_drake.scenario.sensors import camera_model
@@ -137,8 +138,7 @@ def _set_servo_gains(plant: MultibodyPlant, instances, scenario: Scenario) -> No
     arm_actuators = servo_actuators(plant, instances[UR3])
     for actuator, kp, kd in zip(arm_actuators, arm.kp, arm.kd, strict=True):
         actuator.set_controller_gains(PdControllerGains(p=kp, d=kd))
-    for actuator in servo_actuators(plant, instances[GRIPPER]):
-        actuator.set_controller_gains(PdControllerGains(p=gripper.kp, d=gripper.kd))
+    set_finger_gains(plant, instances[GRIPPER], gripper.kp, gripper.kd)
     # The arm's servo compensates its links' weight (`hrc_drake.cell.station.arm_servo`), as a UR
     # controller does; the gripper's fingers are servoed without a weight model. Held parts
     # still weigh on both.
@@ -200,9 +200,7 @@ def _add_plant(
         if arm_start is None:
             arm_start = arm.initial_positions or arm.ready
         plant.SetDefaultPositions(instances[UR3], [float(x) for x in arm_start])
-        plant.SetDefaultPositions(
-            instances[GRIPPER], [scenario.station.rg2.initial_opening / 2] * 2
-        )
+        set_rg2_opening(plant, None, scenario.station.rg2.initial_opening, instances[GRIPPER])
     return plant, scene_graph, instances, bolts, frames
 
 

@@ -30,6 +30,7 @@ from hrc_drake.cell_models import CellDesign
 from hrc_drake.hri.messages import Prompt
 from hrc_drake.motion.poses import CellFrames, layout_poses, part_pose
 from hrc_drake.obstacle_models import DEBRIS, DEBRIS_PARK
+from hrc_drake.robot_models import rg2_opening
 from hrc_drake.robot_names import GRIPPER, UR3
 from hrc_drake.scenario.schema import Scenario
 from hrc_drake.tasks.tokens import UNDO
@@ -262,7 +263,7 @@ class CellStation:
         self.diagram.GetInputPort("ur3.position").FixValue(context, q)
         self.diagram.GetInputPort("ur3.velocity").FixValue(context, np.zeros_like(q))
         if opening is None:
-            opening = float(np.sum(self.plant.GetPositions(plant_context, self.instances[GRIPPER])))
+            opening = rg2_opening(self.plant, plant_context, self.instances[GRIPPER])
         self.diagram.GetInputPort("rg2.opening").FixValue(context, [opening])
         if force is None:
             force = self.scenario.station.rg2.grip_force

@@ -180,7 +180,7 @@ class SlotMonitor(LeafSystem):
         self._symbols = {p.name: p.symbol for p in design.parts}
         inspector = scene_graph.model_inspector()
         self._read_plate(plant, inspector)
-        self._read_parts(plant, inspector, design.host_tags)
+        self._read_parts(plant, inspector, design.host_tags, frames.grasps)
         # The tray is welded: its homes are fixed world poses.
         self._homes = [(self._symbols[part], X_WH) for part, X_WH in frames.homes.items()]
         self._read_gripper(plant)
@@ -209,12 +209,13 @@ class SlotMonitor(LeafSystem):
             raise ValueError("SlotMonitor: the base plate has no slot_k_seat collision geometry")
         self._plate_geometries = set(plant.GetCollisionGeometriesForBody(body))
 
-    def _read_parts(self, plant: MultibodyPlant, inspector, host_tags) -> None:
+    def _read_parts(self, plant: MultibodyPlant, inspector, host_tags, grasps) -> None:
         self._parts: dict[str, object] = {}  # instance -> body
         self._part_geometries: dict[str, set[GeometryId]] = {}
         self._bosses: dict[str, list[GeometryId]] = {}
         self._span: dict[str, int] = {}
-        self._X_BG: dict[str, RigidTransform] = {}  # grasp frame in the part body
+        # The gripper's tcp in the part's body when it holds the part (CellFrames.grasps).
+        self._X_BG: dict[str, RigidTransform] = {}
         # Geometry -> the part instance it belongs to (parts are one body each).
         self._owner = {
             gid: owner.model
@@ -230,8 +231,8 @@ class SlotMonitor(LeafSystem):
                 g for n, g in _named_geometries(plant, inspector, body).items() if n[:4] == "boss"
             ]
             self._span[name] = self._spec.part(self._symbols[name]).footprint
-            if plant.HasFrameNamed("grasp", model):
-                self._X_BG[name] = plant.GetFrameByName("grasp", model).GetFixedPoseInBodyFrame()
+            if name in grasps:
+                self._X_BG[name] = grasps[name]
         self._host_seats = {
             name: _seats_of(plant, inspector, plant.GetModelInstanceByName(name), self._parts[name])
             for name in host_tags
