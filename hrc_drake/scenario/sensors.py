@@ -97,7 +97,12 @@ class SensorModel:
     def stale_after(self) -> float:
         """The age [s] past which a reading is stale: one period plus the latency's bound
         (a reading is between `latency` and `latency + period` old while none is lost)."""
-        return self.period + max(self.latency, self.max_latency)
+        return self.period + self.latency_bound
+
+    @property
+    def latency_bound(self) -> float:
+        """The longest a reading takes to arrive [s]: `max_latency`, at least `latency`."""
+        return max(self.latency, self.max_latency)
 
 
 # The `realistic` preset, the one statement of its figures (docs/station.md cites them):

@@ -70,7 +70,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 
 from hrc_drake.cell.link.channels import COMMANDS, SIM_CONTACTS, Port
 from hrc_drake.scenario.schema import Scenario
-from hrc_drake.scenario.sensors import PORTS, camera_model, sensor_models
+from hrc_drake.scenario.sensors import PORTS, SensorModel, camera_model, sensor_models
 
 STALE_PERIODS = 3  # periods of its channel a reading may be old before it is stale
 STALE_MARGIN = 0.05  # s: a message's trip and the reader's own period, on top
@@ -141,14 +141,17 @@ def check_pace(pace: float, flag: str = "--realtime") -> float:
     return pace
 
 
+def _channel_models(scenario: Scenario) -> dict[str, SensorModel]:
+    """The measured channels whose sensor model `scenario`'s `sensors:` states, with it."""
+    models = sensor_models(scenario.sensors)
+    found = {channel: models.get(PORTS[key]) for channel, key in SENSOR_KEYS.items()}
+    return {channel: model for channel, model in found.items() if model is not None}
+
+
 def channel_rates(scenario: Scenario) -> dict[str, float]:
     """Each channel's publishing rate [Hz] in `scenario` (see the module docstring)."""
     rates = dict(DEVICE_RATES)
-    models = sensor_models(scenario.sensors)
-    for channel, key in SENSOR_KEYS.items():
-        model = models.get(PORTS[key])
-        if model is not None:
-            rates[channel] = model.rate
+    rates.update({channel: m.rate for channel, m in _channel_models(scenario).items()})
     camera = camera_model(scenario.sensors)
     if camera is not None:
         # A camera's poses come at its own few hertz; publishing faster would repeat them.
@@ -162,13 +165,7 @@ def channel_latencies(scenario: Scenario) -> dict[str, float]:
     """Each measured channel's latency bound [s, simulated time] where a sensor model of
     `scenario` states one: a reading is stamped when it was measured, so it arrives that much
     old on time."""
-    models = sensor_models(scenario.sensors)
-    latencies = {}
-    for channel, key in SENSOR_KEYS.items():
-        model = models.get(PORTS[key])
-        if model is not None:
-            latencies[channel] = max(model.latency, model.max_latency)
-    return latencies
+    return {channel: m.latency_bound for channel, m in _channel_models(scenario).items()}
 
 
 def stale_after(rate: float, pace: float, latency: float = 0.0) -> float:
