@@ -11,9 +11,13 @@ robot collisions, separation violations (the robot moving under its own command 
 S_p) and, apart, the steps an outside force (a push) moved the arm closer than S_p.
 
 Usage: ``python benchmarks/bench_faults.py [--seeds 10] [--workers 2] [--lean] [--modulus PA]
-[--kinds no-seat,...]`` (with ``--lean`` the report is printed, not written; with ``--modulus``
-the parts' hydroelastic modulus is that instead of the scenario's 5e6 Pa and the report is
-written to ``faults_E<PA>.md``; ``--kinds`` runs only those cases).
+[--camera] [--kinds no-seat,...]`` (with ``--lean`` the report is printed, not written; with
+``--modulus`` the parts' hydroelastic modulus is that instead of the scenario's 5e6 Pa and the
+report is written to ``faults_E<PA>.md``; with ``--camera`` every measured port is read through
+the `realistic` sensor models and the parts' verdicts come from the camera
+(`{sensors: {preset: realistic, configuration: camera}}`), the camera's false and missed
+detections and wrong-slot verdicts against the contact sensor are counted, and the report is
+written to ``faults_camera.md``; ``--kinds`` runs only those cases).
 """
 
 from __future__ import annotations
@@ -58,6 +62,7 @@ def should_recover(case: str) -> bool:
 
 
 REPORT = Path(__file__).parent / "reports" / "faults.md"
+CAMERA_TEXT = "{sensors: {preset: realistic, configuration: camera}}"
 
 
 def fault_entry(case: str, seed: int, tasks: int) -> str:
@@ -136,6 +141,7 @@ def one_run(job: tuple) -> dict:
         ),
         "handovers": result.handovers,
         "events": list(result.events),
+        "camera": result.camera,
     }
 
 
@@ -166,9 +172,41 @@ def summary_rows(runs: list[dict]) -> list[str]:
                 f"{len(recovered)}/{len(reachable)} | "
                 f"{np.mean(lost) if lost else 0:.2f} | {max(lost) if lost else 0:.2f} | "
                 f"{sum(r['collisions'] for r in mine)} | {sum(r['violations'] for r in mine)} | "
-                f"{sum(r['imposed'] for r in mine)} |"
+                f"{sum(r['imposed'] for r in mine)} |{camera_cells(mine)}"
             )
     return rows
+
+
+def camera_cells(runs: list[dict]) -> str:
+    """The camera's columns of a row: false and missed detections and wrong-slot verdicts
+    against the contact sensor, summed over `runs` (empty without the camera)."""
+    scores = [r["camera"] for r in runs if r.get("camera")]
+    if not scores:
+        return ""
+    keys = ("false_detections", "missed_detections", "wrong_slot")
+    return "".join(f" {sum(c[k] for c in scores)} |" for k in keys)
+
+
+def camera_note(runs: list[dict]) -> list[str]:
+    """With the camera: what its columns count, and each false or missed detection."""
+    events = [
+        f"- {r['cell']} seed {r['seed']} `{r['entry']}`: {event}"
+        for r in runs
+        if r.get("camera")
+        for event in r["camera"]["events"]
+    ]
+    if not any(r.get("camera") for r in runs):
+        return []
+    return [
+        "*camera*: the camera's `seated` and `misplaced` verdicts scored against the contact "
+        "sensor's, the simulator's ground truth (`configuration.camera` of a run's JSON; "
+        "`hrc_drake/cell/station/camera_score.py`): *false*, a verdict the truth never showed; "
+        "*missed*, a verdict of the truth the camera never reported; *wrong slot*, a false "
+        "`seated` while the part sat in another seat.",
+        "",
+        *(events or ["The camera made no false or missed detection."]),
+        "",
+    ]
 
 
 def violations_note(runs: list[dict]) -> list[str]:
@@ -202,13 +240,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--lean", action="store_true", help="0.5 s holds: a quick look")
     parser.add_argument("--modulus", type=float, help="the parts' hydroelastic modulus [Pa]")
+    parser.add_argument(
+        "--camera", action="store_true", help="realistic sensors and the camera's verdicts"
+    )
     parser.add_argument("--kinds", help="comma-separated cases to run (default: all)")
     args = parser.parse_args(argv)
     cases = CASES if args.kinds is None else args.kinds.split(",")
     unknown = sorted(set(cases) - set(CASES))
     if unknown:
         parser.error(f"--kinds: unknown {', '.join(unknown)}; the cases are {', '.join(CASES)}")
-    extra = () if args.modulus is None else (modulus_text(args.modulus),)
+    extra = (() if args.modulus is None else (modulus_text(args.modulus),)) + (
+        (CAMERA_TEXT,) if args.camera else ()
+    )
     jobs = []
     for cell in CELLS:
         tasks = run_tasks(cell, args.lean)
@@ -218,13 +261,20 @@ def main(argv: list[str] | None = None) -> int:
                 jobs.append((cell, case, seed, entry, args.lean, extra))
     runs, wall = run_pool(one_run, jobs, args.workers)
     text = report(runs, args, wall)
-    out = REPORT if args.modulus is None else REPORT.with_name(f"faults_E{args.modulus:g}.md")
+    out = report_path(args)
     if args.lean:
         print(text)  # a quick look: the report keeps the full settings' figures
     else:
         atomic_write_text(out, text)
         print(f"{text}\nwritten to {out}")
     return 0
+
+
+def report_path(args) -> Path:
+    """Where the report of `args` goes: faults.md, faults_E<PA>.md, faults_camera.md."""
+    suffix = "" if args.modulus is None else f"_E{args.modulus:g}"
+    suffix += "_camera" if args.camera else ""
+    return REPORT.with_name(f"faults{suffix}.md")
 
 
 def report(runs: list[dict], args, wall: float) -> str:
@@ -234,10 +284,14 @@ def report(runs: list[dict], args, wall: float) -> str:
     settings = "lean (0.5 s holds)" if args.lean else "full (5 s holds, TCP <= 0.25 m/s)"
     if args.modulus is not None:
         settings += f"; hydroelastic modulus {args.modulus:g} Pa"
+    if args.camera:
+        settings += f"; `{CAMERA_TEXT}`"
     options = (" --lean" if args.lean else "") + (
         f" --modulus {args.modulus:g}" if args.modulus is not None else ""
     )
-    options += f" --kinds {args.kinds}" if args.kinds else ""
+    options += (" --camera" if args.camera else "") + (
+        f" --kinds {args.kinds}" if args.kinds else ""
+    )
     lines = [
         "# Faults: detected and survived",
         "",
@@ -266,11 +320,13 @@ def report(runs: list[dict], args, wall: float) -> str:
         "",
         "| cell | kind | the cell should | runs | injected | detected | out of reach | "
         "recovered | lost, mean [s] | lost, max [s] | collisions | separation violations | "
-        "moved from outside |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "moved from outside |" + (" camera: false | missed | wrong slot |" if args.camera else ""),
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        + ("---|" * 3 if args.camera else ""),
         *summary_rows(runs),
         "",
         *violations_note(runs),
+        *camera_note(runs),
         "## Runs",
         "",
         "| cell | seed | fault | detected at [s] | recovery | terminal | collisions | "

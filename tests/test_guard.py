@@ -11,6 +11,7 @@ from hrc_drake.cell.controller.guard import (
     DescentGuard,
     GuardSettings,
     GuardState,
+    Retreat,
     height_above_place,
 )
 from hrc_drake.motion.plan import Plan, Segment, Stage
@@ -57,6 +58,22 @@ def _descend(loads, settings: GuardSettings | None = None, plan_start=0.0):
         if trip is not None:
             return state, trip, tau
     return state, None, None
+
+
+def test_the_back_off_commands_the_velocity_of_its_own_path():
+    """The retreat up the descent gives the servo its velocity (the derivative of its
+    positions), zero while it holds and after it ends: a zero velocity command had the servo's
+    damping drag the arm 0.048 rad behind, and the tracking check stop the recovery."""
+    plan = _plan()
+    retreat = Retreat(plan, tuple(plan.positions(1.6)), 1.6, 1.0, start=5.0, end=5.9)
+    step = 1e-5
+    for now in (5.1, 5.45, 5.8):
+        numeric = (retreat.positions(now + step) - retreat.positions(now - step)) / (2 * step)
+        np.testing.assert_allclose(retreat.velocities(now), numeric, atol=1e-6)
+    # Midway, 1.5x its mean speed: 0.6 plan-s of a 0.099 rad/s descent over 0.9 s.
+    assert np.linalg.norm(retreat.velocities(5.45)) == pytest.approx(0.099, rel=0.01)
+    for now in (4.0, 6.0):
+        np.testing.assert_array_equal(retreat.velocities(now), np.zeros(6))
 
 
 def test_the_height_above_the_place_is_read_from_the_plan():

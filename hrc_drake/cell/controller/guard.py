@@ -139,6 +139,18 @@ class Retreat:
         s = s * s * (3.0 - 2.0 * s)
         return self.plan.positions(self.tau_from + (self.tau_to - self.tau_from) * s)
 
+    def velocities(self, now: float) -> np.ndarray:
+        """The arm's commanded joint velocities at `now`, the time derivative of `positions`:
+        the servo is given them as along any plan (a zero velocity command would have its
+        damping drag the arm up to 0.05 rad behind, the tracking check's tolerance)."""
+        span = max(self.end - self.start, 1e-9)
+        if not self.start <= now <= self.end:
+            return np.zeros(len(self.q_hold))
+        s = (now - self.start) / span
+        tau = self.tau_from + (self.tau_to - self.tau_from) * s * s * (3.0 - 2.0 * s)
+        rate = (self.tau_to - self.tau_from) * 6.0 * s * (1.0 - s) / span
+        return self.plan.trajectory.EvalDerivative(tau, 1).ravel() * rate
+
 
 class DescentGuard:
     """The guarded descent (see the module docstring) with `settings`."""

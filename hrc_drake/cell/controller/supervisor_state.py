@@ -299,8 +299,8 @@ class SupervisorStatus:
         """What the arm and the gripper are commanded at `now`."""
         plan = self.plan
         if self.mode == Mode.SETTLE and self.retreat is not None:
-            q = self.retreat.positions(now)
-            return ArmCommand(q, np.zeros(len(q)), self.opening_hold)
+            retreat = self.retreat
+            return ArmCommand(retreat.positions(now), retreat.velocities(now), self.opening_hold)
         if self.mode != Mode.EXECUTE or plan is None:
             q = np.asarray(self.q_hold, dtype=float)
             return ArmCommand(q, np.zeros(len(q)), self.opening_hold)
