@@ -186,8 +186,14 @@ def test_a_failing_cell_run_is_listed_and_replays_alone(tmp_path, toy_costs, cap
     args += ["--decider", "mpc", "--operator-model", "mistake-prone", "--param", "p=0.5"]
     args += ["--costs", str(costs), "--scenario-text", NO_BODY]
     # Two lean tasks take well over 10 s: each run stops within its second task.
-    assert main([*args, "--scenario-text", "{run: {max_sim_time: 10}}"]) == 0
-    report = json.loads(capsys.readouterr().out)
+    # A failing run fails the command, with one line on stderr.
+    assert main([*args, "--scenario-text", "{run: {max_sim_time: 10}}"]) == 1
+    out, err = capsys.readouterr()
+    report = json.loads(out)
+    assert err.strip().splitlines()[-1] == (
+        "hrc-drake evaluate: 2 of 2 cell runs failed "
+        "(each listed under failures, with the command that replays it)"
+    )
     assert report["completed"] == 0
     assert [f["run"] for f in report["failures"]] == [0, 1]
     failure = report["failures"][1]

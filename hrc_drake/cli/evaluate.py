@@ -350,7 +350,9 @@ def _run_evaluation(args, setup: Setup, runs: int, workers: int | None) -> dict:
 
 def _report(args, report: dict, plot: Path | None) -> int:
     """Plot the times (`--plot`), print the report (as JSON with `--json`) and return the exit
-    status: EXIT_INTERRUPTED, with one line on stderr, when Ctrl-C cut the runs short."""
+    status: EXIT_INTERRUPTED, with one line on stderr, when Ctrl-C cut the runs short; 1, with
+    one line on stderr, when a cell run failed (as `simulate` exits 1 for a run that stopped:
+    a script must not read a failing evaluation as a good one); else 0."""
     if plot is not None and report["completed"]:
         plot_times(report, plot)
     report.pop("times")
@@ -364,6 +366,14 @@ def _report(args, report: dict, plot: Path | None) -> int:
         done, asked = report["runs"], report["runs_requested"]
         print(f"hrc-drake evaluate: interrupted after {done} of {asked} runs", file=sys.stderr)
         return EXIT_INTERRUPTED
+    failing = report.get("failures")
+    if failing:
+        print(
+            f"hrc-drake evaluate: {len(failing)} of {report['runs']} cell runs failed "
+            "(each listed under failures, with the command that replays it)",
+            file=sys.stderr,
+        )
+        return 1
     return 0
 
 
