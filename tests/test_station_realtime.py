@@ -37,14 +37,15 @@ from hrc_drake.cell.link.realtime import (
     SILENCE,
     LinkClock,
     UpdateClock,
+    age,
     channel_latencies,
     channel_rates,
     judge,
     silent,
     stale_after,
 )
-from hrc_drake.cell.link.realtime_client import make_realtime_station_interface
-from hrc_drake.cell.link.realtime_server import ArmSegment
+from hrc_drake.cell.link.realtime_client import make_realtime_station_interface, restamp
+from hrc_drake.cell.link.realtime_server import ArmSegment, measured_at
 from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
 from hrc_drake.cell.link.station_server import CellStationServer
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
@@ -149,6 +150,31 @@ def test_the_link_clock_stamps_the_wall_time_a_simulated_instant_stands_for():
     wall[0] = 9_000_000
     # 1 s of simulated time at pace 2 is half a second of the wall clock, however late it is.
     assert clock.stamp(2.0) == 5_500_000 and clock.now() == 9_000_000
+
+
+def test_a_camera_verdict_and_a_body_keep_their_measurement_time_across_the_link():
+    """The station stamps a body and a camera's configuration when they were measured, the
+    controller puts that back on its own clock (now less the message's age): a verdict from a
+    frame before the parts came to rest is not taken as current (it was, as if made now)."""
+    from hrc_drake.cell.ports import NOBODY, CellConfiguration
+
+    wall = [5_000_000]
+    station = LinkClock(1.0, lambda: wall[0])
+    station.start(0.0)
+    frame = CellConfiguration(stamp=11.8)  # the camera's newest agreeing frame
+    message = lm.configuration_message(station.stamp(measured_at(12.0, frame)), frame)
+    assert message.utime == 5_000_000 + 11_800_000  # its frame's, not the publish's 12.0 s
+    assert measured_at(12.0, CellConfiguration()) == 12.0  # the contact sensor: now
+    assert measured_at(12.0, NOBODY) == 12.0
+    # The controller, at its 12.05 s, hears it 0.25 s old on the shared clock.
+    (decoded,) = lm.configuration_value(message)
+    assert decoded.stamp is None  # the message alone carries no stamp of the reading's own
+    now = message.utime + 250 * MS
+    seen = restamp(decoded, 12.05, age(message.utime, now), 1.0)
+    assert seen.stamp == pytest.approx(11.8)
+    assert not seen.current_at(11.9) and seen.current_at(11.8)
+    # At half pace, 0.25 s of wall time is 0.125 s of simulated time.
+    assert restamp(decoded, 12.05, 0.25, 0.5).stamp == pytest.approx(11.925)
 
 
 def test_a_late_station_walks_to_the_newest_command_at_its_commanded_pace():

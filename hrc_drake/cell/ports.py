@@ -90,8 +90,9 @@ class CellConfiguration:
     obstacle: tuple[float, ...] = ()
     # Up to when the verdicts are known to hold [s, station time]: a camera's newest frame
     # whose every part's view agreed with the verdict reported (`hrc_drake.cell.station.camera`).
-    # None: now (the contact sensor, exact at every step, or a reading over LCM, whose message
-    # carries no such time).
+    # None: now (the contact sensor, exact at every step, or a reading over the lockstep link,
+    # whose message carries the exchange's time; the real-time link carries it and restamps it,
+    # `hrc_drake.cell.link.realtime`).
     stamp: float | None = None
 
     def __deepcopy__(self, memo) -> CellConfiguration:
@@ -134,7 +135,8 @@ class BodySpheres:
     [m/s]; `groups` are the index ranges [start, end) of the body's parts (hand, forearm, upper
     arm, torso, head), each part within the sphere `bound(group)`. `stamp` is when the tracker
     took this reading [s, station time], set by a sensor model (`sensors:`); None: now (an
-    exact tracker, or a reading over LCM, whose message carries no measurement time)."""
+    exact tracker, or a reading over the lockstep link, whose message carries the exchange's
+    time; the real-time link carries it, `hrc_drake.cell.link.realtime`)."""
 
     centres: np.ndarray
     radii: np.ndarray

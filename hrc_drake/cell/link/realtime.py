@@ -12,8 +12,12 @@ each channel it hears, whatever came before.
 Unix epoch (`wall_utime`): the wall-clock time the sender's simulated instant stands for
 (`LinkClock`: the wall time the sender started at, plus its simulated time since over the
 pace), the instant the station measured (the tracked body: when its tracker took the reading,
-`BodySpheres.stamp`) or the controller commanded. A side on time stamps the wall clock now; a
-side that fell behind stamps late, and the other side sees it as late. Both processes read the
+`BodySpheres.stamp`; a camera's configuration: its newest frame whose verdicts it reports,
+`CellConfiguration.stamp`) or the controller commanded; the reader puts those two back on its
+own clock (now less their age, `STAMPED_CHANNELS`), so that the separation monitor allows for
+the body's age and the controller waits for verdicts made after a part came to rest, as in one
+process. A side on time stamps the wall clock now; a side that fell behind stamps late, and the
+other side sees it as late. Both processes read the
 same clock on one host (on two hosts, synchronised by PTP or NTP, their offset adds to every
 age). The two simulators start within a message's trip of each other (the station starts
 stepping at the controller's first command) and each keeps its own simulated time, which no
@@ -98,6 +102,9 @@ SENSOR_KEYS = {
 }
 # The readings whose staleness stops the robot: the arm's and the tracked body's.
 WATCHED = ("UR3_STATUS", "OPERATOR_BODY")
+# The readings stamped when they were measured rather than when published, whose reader
+# restamps them on its own clock (`BodySpheres.stamp`, `CellConfiguration.stamp`).
+STAMPED_CHANNELS = ("OPERATOR_BODY", "CELL_CONFIGURATION")
 ARM_COMMAND = "UR3_COMMAND"
 
 
@@ -376,6 +383,7 @@ __all__ = [
     "SILENCE",
     "STALE_MARGIN",
     "STALE_PERIODS",
+    "STAMPED_CHANNELS",
     "WATCHED",
     "LinkClock",
     "MessageEncoder",

@@ -48,6 +48,7 @@ from hrc_drake.cell.link.lockstep import (
 )
 from hrc_drake.cell.link.realtime import (
     SILENCE,
+    STAMPED_CHANNELS,
     LinkClock,
     MessageEncoder,
     RealtimeFigures,
@@ -61,8 +62,14 @@ from hrc_drake.cell.link.realtime import (
     wall_utime,
 )
 from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
-from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.scenario.schema import Scenario
+
+
+def restamp(reading, now: float, seconds_old: float, pace: float):
+    """`reading` (`BodySpheres`, `CellConfiguration`) stamped at simulated time `now` less its
+    age, `seconds_old` of wall time over the `pace`: when it was measured, on this side's
+    clock."""
+    return replace(reading, stamp=now - seconds_old * pace)
 
 
 class RealtimeSession:
@@ -205,8 +212,8 @@ class RealtimeReadings(LeafSystem):
     def _declare_output(self, channel: str, index: int, port: Port, deps: set) -> None:
         def calc(context, output):
             value = self._decoded[channel].Eval(context)[index]
-            if isinstance(value, BodySpheres):
-                value = self._restamped(context, value)
+            if channel in STAMPED_CHANNELS:
+                value = self._restamped(context, value, channel)
             if port.size is not None:
                 output.SetFromVector(value)
             else:
@@ -233,11 +240,12 @@ class RealtimeReadings(LeafSystem):
         judged = judge(self._stamps(context), now, self._rates, self._pace, self._latencies)
         value.set_value((now, judged))
 
-    def _restamped(self, context, body: BodySpheres) -> BodySpheres:
-        """`body` stamped on this simulator's clock: now less its age, in simulated seconds."""
+    def _restamped(self, context, reading, channel: str):
+        """`reading` (a body, a configuration) of `channel` stamped on this simulator's clock:
+        now less its message's age, in simulated seconds (`restamp`)."""
         now = self._judged.Eval(context)[0]
-        stamp = self._messages["OPERATOR_BODY"].Eval(context).utime
-        return replace(body, stamp=context.get_time() - age(stamp, now) * self._pace)
+        utime = self._messages[channel].Eval(context).utime
+        return restamp(reading, context.get_time(), age(utime, now), self._pace)
 
     def _calc_target(self, context, output) -> None:
         message = self._messages["UR3_STATUS"].Eval(context)
@@ -331,4 +339,5 @@ __all__ = [
     "RealtimeSession",
     "command_encoder",
     "make_realtime_station_interface",
+    "restamp",
 ]

@@ -65,6 +65,7 @@ from hrc_drake.cell.link.lockstep import (
 from hrc_drake.cell.link.realtime import (
     ARM_COMMAND,
     SILENCE,
+    STAMPED_CHANNELS,
     LinkClock,
     MessageEncoder,
     silent,
@@ -218,10 +219,18 @@ def initial_hold(station: Diagram) -> dict[str, object]:
     }
 
 
+def measured_at(t: float, reading) -> float:
+    """The simulated instant a reading published at `t` stands for: its own `stamp` where it
+    carries one (a tracked body: when the tracker took it; a camera's configuration: its newest
+    frame whose verdicts it reports), else `t`."""
+    taken = getattr(reading, "stamp", None)
+    return t if taken is None else taken
+
+
 def _encoder(channel: StationChannel, clock: LinkClock) -> MessageEncoder:
     """The encoder of a measured channel, stamped with the wall-clock time its simulated
-    instant stands for: the arm's status with the command it followed, the body when its
-    tracker took it (its `stamp`)."""
+    instant stands for: the arm's status with the command it followed, the body and the
+    configuration when they were measured (`measured_at`)."""
     if channel.channel == "UR3_STATUS":
 
         def status(clock, t, values):
@@ -232,13 +241,12 @@ def _encoder(channel: StationChannel, clock: LinkClock) -> MessageEncoder:
 
         target = Port("target", 2 * N_JOINTS)
         return MessageEncoder((*channel.ports, target), channel.message, status, clock)
-    if channel.channel == "OPERATOR_BODY":
+    if channel.channel in STAMPED_CHANNELS:
 
-        def body(clock, t, values):
-            taken = values[0].stamp
-            return channel.encode(clock.stamp(t if taken is None else taken), *values)
+        def stamped(clock, t, values):
+            return channel.encode(clock.stamp(measured_at(t, values[0])), *values)
 
-        return MessageEncoder(channel.ports, channel.message, body, clock)
+        return MessageEncoder(channel.ports, channel.message, stamped, clock)
     return MessageEncoder(
         channel.ports,
         channel.message,
@@ -526,5 +534,6 @@ __all__ = [
     "RealtimeCommands",
     "RealtimeStationServer",
     "initial_hold",
+    "measured_at",
     "serve_realtime_station",
 ]
