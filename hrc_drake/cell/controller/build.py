@@ -60,9 +60,10 @@ MEASURED = (
     "hri.indication",
 )
 COMMANDED = (*ARM_PORTS, "hri.prompt")
-# What only a station over the real-time link measures beside the station's ports: the command
-# the arm followed when measured (RTDE's `target_q`) and whether an arm or body reading is stale
-# (`hrc_drake.cell.link.realtime`). Unconnected in one process and in the lockstep.
+# What a station may measure beside its ports: the command the arm followed when measured
+# (RTDE's `target_q`: the simulated station's and the real-time link's; the lockstep does not
+# carry it) and whether an arm or body reading is stale (the real-time link's,
+# `hrc_drake.cell.link.realtime`). Unconnected where the station has no such port.
 LINK_READINGS = ("ur3.target", "link.stale")
 # What the robot takes from a person rather than from its controller (a UR's pendant).
 PENDANT = ("safety.unlock",)
@@ -224,8 +225,8 @@ def make_controller(
 def connect_controller(builder: DiagramBuilder, station, controller) -> None:
     """Wire a station and a controller (both added to `builder`) by their port names: the
     station's measured outputs into the controller, its commands back (a controller without a
-    separation monitor leaves the tracked body unread; a station that is not over the
-    real-time link leaves its `LINK_READINGS` unconnected)."""
+    separation monitor leaves the tracked body unread; the `LINK_READINGS` a station has no
+    port for are left unconnected)."""
     for name in MEASURED:
         if controller.HasInputPort(name):
             builder.Connect(station.GetOutputPort(name), controller.GetInputPort(name))

@@ -51,7 +51,7 @@ from pydrake.multibody.plant import (
 from pydrake.multibody.tree import BodyIndex, PdControllerGains
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Context, DiagramBuilder, LeafSystem
-from pydrake.systems.primitives import ConstantValueSource
+from pydrake.systems.primitives import ConstantValueSource, Demultiplexer
 from pydrake.systems.sensors import CameraConfig, RgbdSensor
 
 from hrc_drake.atomic import atomic_write_text
@@ -230,8 +230,14 @@ def _add_arm(
     # The real-time link's watchdog (`hrc_drake.cell.link.realtime_server`); unconnected, never.
     builder.ExportInput(function.GetInputPort("command_stale"), "ur3.command_stale")
     # What the servo follows (the command, or the function's brake or blend): RTDE's target_q
-    # and target_qd, which the real-time link sends beside the measurement.
+    # and target_qd, which the real-time link sends beside the measurement; its positions are
+    # `ur3.target`, which the controller's tracking check compares the arm with (in a stop
+    # the servo follows the brake, not the plan).
     builder.ExportOutput(function.GetOutputPort("desired_state"), "sim.ur3.target")
+    joints = len(UR3_JOINTS)
+    target = builder.AddNamedSystem("ur3_target", Demultiplexer([joints, joints]))
+    builder.Connect(function.GetOutputPort("desired_state"), target.get_input_port())
+    builder.ExportOutput(target.get_output_port(0), "ur3.target")
     for name in ("safety.stop", "safety.mode"):
         builder.ExportOutput(function.GetOutputPort(name), name)
     export_measured(builder, plant.get_state_output_port(ur3), "ur3.state_estimated", scenario)
