@@ -293,8 +293,7 @@ class Supervisor(LeafSystem):
 
     def _check_tracking(self, s: SupervisorStatus, cell: Readings, now: float) -> None:
         """Stop when a joint is farther from its command than the tolerance: the command its
-        servo followed when measured (`ur3.target`, RTDE's `target_q`: in a stop, the brake), else
-        the last."""
+        servo followed when measured (`ur3.target`, RTDE's `target_q`), else the last."""
         if s.mode in (Mode.DONE, Mode.FAILED):
             return
         q = cell.arm_q()
