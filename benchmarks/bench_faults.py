@@ -121,7 +121,12 @@ def one_run(job: tuple) -> dict:
 
     cell, kind, seed, entry, lean, *extra = job
     texts = [*_texts(cell, lean), *(extra[0] if extra else ()), f"{{faults: [{entry}]}}"]
-    result = pooled_loop(load_cell_scenario(CELLS[cell], texts), cell).run()
+    try:
+        result = pooled_loop(load_cell_scenario(CELLS[cell], texts), cell).run()
+    except RuntimeError as err:
+        # The simulation itself failed (Drake's error, e.g. a pose gone NaN): a finding of
+        # the run, reported, not the end of the benchmark.
+        return crashed_run(cell, kind, seed, entry, err)
     (record,) = result.faults
     safety = result.safety
     return {
@@ -143,6 +148,39 @@ def one_run(job: tuple) -> dict:
         "events": list(result.events),
         "camera": result.camera,
     }
+
+
+def crashed_run(cell: str, kind: str, seed: int, entry: str, err: Exception) -> dict:
+    """The figures of a run whose simulation failed: nothing detected or recovered, and the
+    error's first line."""
+    record = {"injected_at": None, "detected_at": None, "recovered": False, "recovery": None}
+    return {
+        "cell": cell,
+        "kind": kind,
+        "seed": seed,
+        "entry": entry,
+        "record": {**record, "seconds_lost": 0.0},
+        "terminal": False,
+        "collisions": 0,
+        "violations": 0,
+        "imposed": 0,
+        "sim_time": float("nan"),
+        "out_of_reach": False,
+        "handovers": 0,
+        "events": [],
+        "camera": None,
+        "crashed": str(err).strip().splitlines()[0],
+    }
+
+
+def crash_note(runs: list[dict]) -> list[str]:
+    """A line per run whose simulation failed (none: nothing)."""
+    crashed = [r for r in runs if r.get("crashed")]
+    if not crashed:
+        return []
+    lines = [f"{len(crashed)} run(s) failed in the simulation itself (counted as not injected):"]
+    lines += [f"- {r['cell']} seed {r['seed']} `{r['entry']}`: {r['crashed']}" for r in crashed]
+    return [*lines, ""]
 
 
 def out_of_reach(error: str | None) -> bool:
@@ -326,6 +364,7 @@ def report(runs: list[dict], args, wall: float) -> str:
         *summary_rows(runs),
         "",
         *violations_note(runs),
+        *crash_note(runs),
         *camera_note(runs),
         "## Runs",
         "",
@@ -334,7 +373,8 @@ def report(runs: list[dict], args, wall: float) -> str:
         "|---|---|---|---|---|---|---|---|---|",
         *(
             f"| {r['cell']} | {r['seed']} | `{r['entry']}` | {r['record']['detected_at']} | "
-            f"{r['record']['recovery'] or '—'}{' (out of reach)' if r['out_of_reach'] else ''} | "
+            f"{'crashed' if r.get('crashed') else r['record']['recovery'] or '—'}"
+            f"{' (out of reach)' if r['out_of_reach'] else ''} | "
             f"{'yes' if r['terminal'] else 'no'} | "
             f"{r['collisions']} | {r['violations']} | {r['imposed']} |"
             for r in runs
