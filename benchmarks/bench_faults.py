@@ -315,21 +315,24 @@ def report_path(args) -> Path:
     return REPORT.with_name(f"faults{suffix}.md")
 
 
+def run_settings(args) -> tuple[str, str]:
+    """(the settings in words, the command's options) of `args`."""
+    settings = "lean (0.5 s holds)" if args.lean else "full (5 s holds, TCP <= 0.25 m/s)"
+    options = " --lean" if args.lean else ""
+    if args.modulus is not None:
+        settings += f"; hydroelastic modulus {args.modulus:g} Pa"
+        options += f" --modulus {args.modulus:g}"
+    if args.camera:
+        settings += f"; `{CAMERA_TEXT}`"
+        options += " --camera"
+    return settings, options + (f" --kinds {args.kinds}" if args.kinds else "")
+
+
 def report(runs: list[dict], args, wall: float) -> str:
     """The report's Markdown."""
     from importlib.metadata import version
 
-    settings = "lean (0.5 s holds)" if args.lean else "full (5 s holds, TCP <= 0.25 m/s)"
-    if args.modulus is not None:
-        settings += f"; hydroelastic modulus {args.modulus:g} Pa"
-    if args.camera:
-        settings += f"; `{CAMERA_TEXT}`"
-    options = (" --lean" if args.lean else "") + (
-        f" --modulus {args.modulus:g}" if args.modulus is not None else ""
-    )
-    options += (" --camera" if args.camera else "") + (
-        f" --kinds {args.kinds}" if args.kinds else ""
-    )
+    settings, options = run_settings(args)
     lines = [
         "# Faults: detected and survived",
         "",
