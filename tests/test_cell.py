@@ -132,7 +132,8 @@ def test_whole_cell_builds_with_ports_and_constraints(cell, workcell):
     # measures, and beside them only the simulator's own (`sim.*`).
     inputs, outputs = _port_names(diagram, inputs=True), _port_names(diagram, inputs=False)
     assert {n for n in inputs if not n.startswith("sim.")} == {*COMMANDED, *PENDANT, *WATCHDOG}
-    assert {n for n in outputs if not n.startswith("sim.")} == set(MEASURED)
+    # Beside them, what its servo followed (RTDE's `target_q`), one of the `LINK_READINGS`.
+    assert {n for n in outputs if not n.startswith("sim.")} == {*MEASURED, "ur3.target"}
     assert set(SIM_PORTS) <= outputs
     for name, size in (
         ("ur3.position", 6),

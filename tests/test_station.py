@@ -25,7 +25,8 @@ def test_every_catalogue_scenario_builds_a_station_with_the_ports_of_a_real_cell
     outputs = {diagram.get_output_port(i).get_name() for i in range(diagram.num_output_ports())}
     # What a controller may use is exactly the contract; the rest is marked simulation-only.
     assert {n for n in inputs if not n.startswith("sim.")} == {*COMMANDED, *PENDANT, *WATCHDOG}
-    assert {n for n in outputs if not n.startswith("sim.")} == set(MEASURED)
+    # Beside them, what its servo followed (RTDE's `target_q`), one of the `LINK_READINGS`.
+    assert {n for n in outputs if not n.startswith("sim.")} == {*MEASURED, "ur3.target"}
     assert diagram.GetInputPort("ur3.position").size() == 6
     assert diagram.GetOutputPort("rg2.state_measured").size() == 2
 
