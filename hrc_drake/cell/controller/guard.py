@@ -131,24 +131,27 @@ class Retreat:
     def __deepcopy__(self, memo) -> Retreat:
         return self  # immutable (Drake copies abstract values often)
 
+    def _timing(self, now: float) -> tuple[float, float]:
+        """(the plan time the retreat stands at at `now`, its rate [plan s per s]): a
+        smoothstep from `tau_from` at `start` to `tau_to` at `end`, still outside them."""
+        span = max(self.end - self.start, 1e-9)
+        s = float(np.clip((now - self.start) / span, 0.0, 1.0))
+        tau = self.tau_from + (self.tau_to - self.tau_from) * s * s * (3.0 - 2.0 * s)
+        return tau, (self.tau_to - self.tau_from) * 6.0 * s * (1.0 - s) / span
+
     def positions(self, now: float) -> np.ndarray:
         """The arm's commanded joint positions at simulated time `now`."""
         if now < self.start:
             return np.asarray(self.q_hold, dtype=float)
-        s = float(np.clip((now - self.start) / max(self.end - self.start, 1e-9), 0.0, 1.0))
-        s = s * s * (3.0 - 2.0 * s)
-        return self.plan.positions(self.tau_from + (self.tau_to - self.tau_from) * s)
+        return self.plan.positions(self._timing(now)[0])
 
     def velocities(self, now: float) -> np.ndarray:
         """The arm's commanded joint velocities at `now`, the time derivative of `positions`:
         the servo is given them as along any plan (a zero velocity command would have its
         damping drag the arm up to 0.05 rad behind, the tracking check's tolerance)."""
-        span = max(self.end - self.start, 1e-9)
         if not self.start <= now <= self.end:
             return np.zeros(len(self.q_hold))
-        s = (now - self.start) / span
-        tau = self.tau_from + (self.tau_to - self.tau_from) * s * s * (3.0 - 2.0 * s)
-        rate = (self.tau_to - self.tau_from) * 6.0 * s * (1.0 - s) / span
+        tau, rate = self._timing(now)
         return self.plan.trajectory.EvalDerivative(tau, 1).ravel() * rate
 
 
