@@ -31,6 +31,8 @@ import sys
 import time
 from pathlib import Path
 
+from cell_pool import CAMERA_TEXT
+
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.run.run import run_scenario, scenario_policy
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
@@ -46,7 +48,6 @@ SETTINGS = {
     False: "lean",
     True: "at full settings (5 s holds), timed on a second run whose plans are cached",
 }
-CAMERA_TEXT = "{sensors: {preset: realistic, configuration: camera}}"
 
 
 def expected_names(scenario) -> list[str]:

@@ -29,7 +29,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from cell_pool import pooled_loop, run_pool
+from cell_pool import CAMERA_TEXT, pooled_loop, run_pool
 
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.hri.faults import FAULT_CLASSES, SIMULATED, FaultKind
@@ -62,7 +62,6 @@ def should_recover(case: str) -> bool:
 
 
 REPORT = Path(__file__).parent / "reports" / "faults.md"
-CAMERA_TEXT = "{sensors: {preset: realistic, configuration: camera}}"
 
 
 def fault_entry(case: str, seed: int, tasks: int) -> str:

@@ -8,6 +8,9 @@ import time
 from collections.abc import Callable, Sequence
 
 _PLANNERS: dict = {}
+# The scenario text of a cell with late, noisy readings on every measured port and the camera's
+# verdicts in place of contact's (`bench_camera.py`, `bench_faults.py --camera`).
+CAMERA_TEXT = "{sensors: {preset: realistic, configuration: camera}}"
 
 
 def pooled_loop(scenario, key: str):
