@@ -9,19 +9,26 @@ from pydrake.systems.analysis import Simulator
 
 from hrc_drake.cell.controller.intent import MotionIntent
 from hrc_drake.cell.controller.separation import (
+    NEAR_AHEAD,
     BodyAge,
     ControllerSeparationMonitor,
     SafetyLog,
     SeparationReading,
     assess,
     log_step,
+    planned_scales,
 )
 from hrc_drake.cell.person import CHAIN_GAP, body_pose
 from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.robot_envelope import RobotEnvelope, nearest_points
 from hrc_drake.cell.run.run import run_scenario, shared_planner
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario, motion_options
-from hrc_drake.cell.ssm import allowed_scale
+from hrc_drake.cell.ssm import (
+    NEAR_DISTANCE,
+    allowed_scale,
+    person_travel,
+    separation_constant,
+)
 from hrc_drake.cell.station.build import make_cell_station, station_scenario
 from hrc_drake.cell.station.operator_body import ReachInto
 from hrc_drake.motion.plan import Stage
@@ -331,6 +338,33 @@ def test_allowed_scale_vectorised_matches_each_entrys_root():
     assert allowed_scale(np.array([]), np.array([]), np.array([]), np.array([])) == 1.0
     # No room left over the constant terms: standing still is all that keeps S_p.
     assert allowed_scale([0.1], [0.1], [0.0], [0.2]) == 0.0
+
+
+def test_planned_scales_are_each_pairs_largest_scale_that_keeps_s_p():
+    """Per pair: 1 where full speed keeps S_p within the room, 0 where standing still does
+    not, and between them the bisected scale, within its tolerance of the root (the pairs are
+    bisected apart from the others, so each must be checked against its own S_p)."""
+    rng = np.random.default_rng(11)
+    config = SafetyConfig()
+    shape = (4, 30)
+    v_h = rng.uniform(-0.5, 1.6, shape)
+    gap = rng.uniform(0.0, 1.5, shape)
+    v_r1 = rng.uniform(0.0, 1.0, shape)
+    t_rp, t_s1 = 0.12, 0.4
+    room = gap - config.slow_band
+    scales = planned_scales(v_h, gap, v_r1, t_rp, t_s1, config, room)
+
+    def s_p(s):
+        window = t_rp + t_s1 * s
+        travel = person_travel(v_h, gap, window, config, NEAR_DISTANCE + NEAR_AHEAD)
+        return travel + v_r1 * s * t_rp + v_r1 * s * s * t_s1 / 2 + separation_constant(config)
+
+    full, blocked = s_p(1.0) <= room, s_p(0.0) > room
+    assert full.any() and blocked.any() and (~full & ~blocked).any()
+    assert np.all(scales[full] == 1.0) and np.all(scales[blocked] == 0.0)
+    between = ~full & ~blocked
+    assert np.all(s_p(scales)[between] <= room[between])
+    assert np.all(s_p(scales + 2e-4)[between] > room[between])
 
 
 def test_the_monitor_system_reads_only_measured_ports_and_logs_each_period(cell):

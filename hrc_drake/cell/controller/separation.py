@@ -147,18 +147,28 @@ def planned_scales(v_h, gap, v_r1, t_rp: float, t_s1: float, config: SafetyConfi
     13855's near speed `NEAR_AHEAD` sooner than 0.5 m, so that it slows before the safety
     function's S_h steps up there."""
     near, const = NEAR_DISTANCE + NEAR_AHEAD, separation_constant(config)
+    shape = np.broadcast_shapes(*(np.shape(x) for x in (v_h, gap, v_r1, room)))
+    v_h, gap, v_r1, room = (
+        np.broadcast_to(np.asarray(x, dtype=float), shape) for x in (v_h, gap, v_r1, room)
+    )
 
-    def s_p(s):
+    def s_p(s, v_h, gap, v_r1):
         travel = person_travel(v_h, gap, t_rp + t_s1 * s, config, near)
         return travel + v_r1 * s * t_rp + v_r1 * s * s * t_s1 / 2 + const
 
-    lo, hi = np.zeros(np.shape(gap)), np.ones(np.shape(gap))
-    full, blocked = s_p(hi) <= room, s_p(lo) > room
-    for _ in range(_BISECTIONS):
-        mid = (lo + hi) / 2
-        fits = s_p(mid) <= room
-        lo, hi = np.where(fits, mid, lo), np.where(fits, hi, mid)
-    return np.where(full, 1.0, np.where(blocked, 0.0, lo))
+    full = s_p(1.0, v_h, gap, v_r1) <= room
+    scales = np.where(full, 1.0, 0.0)
+    # Bisect only the pairs between the two ends: most pairs are far enough for full speed.
+    open_ = ~full & (s_p(0.0, v_h, gap, v_r1) <= room)
+    if open_.any():
+        v_h, gap, v_r1, room = v_h[open_], gap[open_], v_r1[open_], room[open_]
+        lo, hi = np.zeros(len(gap)), np.ones(len(gap))
+        for _ in range(_BISECTIONS):
+            mid = (lo + hi) / 2
+            fits = s_p(mid, v_h, gap, v_r1) <= room
+            lo, hi = np.where(fits, mid, lo), np.where(fits, hi, mid)
+        scales[open_] = lo
+    return scales
 
 
 def assess(

@@ -85,6 +85,9 @@ class SampledSensor(LeafSystem):
             AbstractValue.Make(SensorState(generator_state(seed, model.seed_offset)))
         )
         self._prerequisites = {self.time_ticket(), self.abstract_state_ticket(self._state)}
+        # One generator object, its state set from the context at each sample: making one per
+        # sample would seed it from the OS first, which cost more than the rest of a sample.
+        self._rng = np.random.Generator(np.random.PCG64(0))
         self.DeclareVectorOutputPort(
             "stamp", BasicVector(1), self._calc_stamp, prerequisites_of_calc=self._prerequisites
         )
@@ -115,7 +118,7 @@ class SampledSensor(LeafSystem):
     def _take(self, context, state, first: bool) -> None:
         now = context.get_time()
         old = self.state(context)
-        rng = np.random.Generator(np.random.PCG64())
+        rng = self._rng
         rng.bit_generator.state = old.rng
         # Every sample draws its dropout and its noise, lost or not: the streams stay aligned.
         lost = rng.random() < self.model.dropout and not first
