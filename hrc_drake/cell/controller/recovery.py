@@ -263,11 +263,13 @@ class FaultRecovery:
     ) -> SupervisorStatus:
         """Note the robot's safety system stopping the arm (the plan stops on its path) and
         letting it go (it resumes where it stopped, the task state untouched). A protective
-        stop is a fault found (a `Detection`); a safeguard stop is the separation kept."""
+        stop is a fault found (a `Detection`); a safeguard stop clears by itself, and the
+        controller, which reads only the safety mode as a UR reports it, does not name its cause
+        (the separation, or commands that stopped coming: the station's run log says which)."""
         if stop == s.recovery.stopped or s.mode in (Mode.DONE, Mode.FAILED):
             return s
         if stop and mode == SafetyMode.SAFEGUARD_STOP:
-            event = f"{now:.2f}: safeguard stop (the separation): the robot stops on its path"
+            event = f"{now:.2f}: safeguard stop: the robot stops on its path until it clears"
             return s.noted(event, recovery=replace(s.recovery, stopped=True))
         if stop:
             event = f"{now:.2f}: protective stop: the robot stops on its path"
