@@ -325,8 +325,16 @@ class _HoldStill(LeafSystem):
 ROW1 = ["--scenario", "row1-optimal", "--lean"]
 
 
-def _station(url: str) -> SimulateProcess:
-    station = SimulateProcess(*ROW1, "--lcm", url, "--realtime", "--json", command="station")
+# The pace of the full pair run: CI runs another test worker beside the pair's two processes
+# on two cores, and at the wall clock's own pace a station starved of CPU fell behind it there
+# (the controller then judged the fingers before they had closed). At half the pace both keep
+# their clock; the 100 Hz figures at pace 1 on a quiet machine are the benchmark's
+# (`benchmarks/bench_realtime.py`).
+PAIR_PACE = "0.5"
+
+
+def _station(url: str, *pace: str) -> SimulateProcess:
+    station = SimulateProcess(*ROW1, "--lcm", url, "--realtime", *pace, "--json", command="station")
     station.wait_for_line(r"^station row1-optimal: serving on ", timeout=120)
     return station
 
@@ -391,9 +399,9 @@ def test_a_real_time_pair_runs_row_1():
     survives the trip (`faults`, `safety.function`); the JSON's `realtime` has the controller's
     figures (its period near the scenario's, not asserted any closer: no timed asserts)."""
     url = _udpm_url()
-    station = _station(url)
+    station = _station(url, PAIR_PACE)
     try:
-        controller = SimulateProcess(*ROW1, "--station-lcm", url, "--realtime", "--json")
+        controller = SimulateProcess(*ROW1, "--station-lcm", url, "--realtime", PAIR_PACE, "--json")
         code, out, lines = controller.finish(timeout=600)
         s_code, s_out, s_lines = station.finish(timeout=60)
     finally:
@@ -405,14 +413,15 @@ def test_a_real_time_pair_runs_row_1():
     assert result["collisions"] == 0 and result["error"] is None
     assert result["faults"] == [] and result["safety"]["function"] is not None
     paced = result["realtime"]
-    period = Scenario().run.period
-    assert paced["pace"] == 1.0 and paced["target_period"] == pytest.approx(period)
+    pace = float(PAIR_PACE)
+    period = Scenario().run.period / pace  # s of wall time between updates
+    assert paced["pace"] == pace and paced["target_period"] == pytest.approx(period)
     assert paced["updates"] > 100 and 0.5 * period < paced["period"] < 2 * period
     assert {"p50", "p99", "max"} <= set(paced["jitter"]) and paced["missed_deadlines"] >= 0
     assert paced["stale_stops"] == len([e for e in paced["stale_events"] if "stops" in e])
     report = json.loads(s_out)
     assert report["scenario"] == "row1-optimal" and report["commands"] > 100
-    assert report["realtime"]["pace"] == 1.0
+    assert report["realtime"]["pace"] == float(PAIR_PACE)
     assert report["safety_function"] == result["safety"]["function"]
 
 
