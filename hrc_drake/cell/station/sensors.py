@@ -86,7 +86,7 @@ class SampledSensor(LeafSystem):
         )
         self._prerequisites = {self.time_ticket(), self.abstract_state_ticket(self._state)}
         # One generator object, its state set from the context at each sample: making one per
-        # sample would seed it from the OS first, which cost more than the rest of a sample.
+        # sample seeds it from the OS first, about half of what a sample took of its own.
         self._rng = np.random.Generator(np.random.PCG64(0))
         self.DeclareVectorOutputPort(
             "stamp", BasicVector(1), self._calc_stamp, prerequisites_of_calc=self._prerequisites
