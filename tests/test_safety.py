@@ -9,13 +9,13 @@ from pydrake.systems.analysis import Simulator
 
 from hrc_drake.cell.controller.intent import MotionIntent
 from hrc_drake.cell.controller.separation import (
-    NEAR_AHEAD,
     BodyAge,
     ControllerSeparationMonitor,
     SafetyLog,
     SeparationReading,
     assess,
     log_step,
+    planned_distance,
     planned_scales,
 )
 from hrc_drake.cell.person import CHAIN_GAP, body_pose
@@ -23,12 +23,7 @@ from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.robot_envelope import RobotEnvelope, nearest_points
 from hrc_drake.cell.run.run import run_scenario, shared_planner
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario, motion_options
-from hrc_drake.cell.ssm import (
-    NEAR_DISTANCE,
-    allowed_scale,
-    person_travel,
-    separation_constant,
-)
+from hrc_drake.cell.ssm import allowed_scale
 from hrc_drake.cell.station.build import make_cell_station, station_scenario
 from hrc_drake.cell.station.operator_body import ReachInto
 from hrc_drake.motion.plan import Stage
@@ -355,9 +350,7 @@ def test_planned_scales_are_each_pairs_largest_scale_that_keeps_s_p():
     scales = planned_scales(v_h, gap, v_r1, t_rp, t_s1, config, room)
 
     def s_p(s):
-        window = t_rp + t_s1 * s
-        travel = person_travel(v_h, gap, window, config, NEAR_DISTANCE + NEAR_AHEAD)
-        return travel + v_r1 * s * t_rp + v_r1 * s * s * t_s1 / 2 + separation_constant(config)
+        return planned_distance(s, v_h, gap, v_r1, t_rp, t_s1, config)
 
     full, blocked = s_p(1.0) <= room, s_p(0.0) > room
     assert full.any() and blocked.any() and (~full & ~blocked).any()

@@ -139,22 +139,26 @@ class SafetyLog:
         }
 
 
+def planned_distance(s, v_h, gap, v_r1, t_rp: float, t_s1: float, config: SafetyConfig):
+    """S_p(s) [m] per pair of a plan at speed scale `s` (see `planned_scales`)."""
+    travel = person_travel(v_h, gap, t_rp + t_s1 * s, config, NEAR_DISTANCE + NEAR_AHEAD)
+    return travel + v_r1 * s * t_rp + v_r1 * s * s * t_s1 / 2 + separation_constant(config)
+
+
 def planned_scales(v_h, gap, v_r1, t_rp: float, t_s1: float, config: SafetyConfig, room):
     """Per pair, the largest speed scale s ∈ [0, 1] of the plan at which S_p(s) ≤ `room`, by
     bisection (S_p grows with s): the person's travel over T_r + sampling + T_s(s), T_s(s) =
     s `t_s1`, from their tracked speed toward the robot `v_h`, the robot's speed toward them
-    s `v_r1` over T_r + sampling (`t_rp`) and its stopping distance. The plan takes ISO
-    13855's near speed `NEAR_AHEAD` sooner than 0.5 m, so that it slows before the safety
-    function's S_h steps up there."""
-    near, const = NEAR_DISTANCE + NEAR_AHEAD, separation_constant(config)
+    s `v_r1` over T_r + sampling (`t_rp`) and its stopping distance (`planned_distance`). The
+    plan takes ISO 13855's near speed `NEAR_AHEAD` sooner than 0.5 m, so that it slows before
+    the safety function's S_h steps up there."""
     shape = np.broadcast_shapes(*(np.shape(x) for x in (v_h, gap, v_r1, room)))
     v_h, gap, v_r1, room = (
         np.broadcast_to(np.asarray(x, dtype=float), shape) for x in (v_h, gap, v_r1, room)
     )
 
     def s_p(s, v_h, gap, v_r1):
-        travel = person_travel(v_h, gap, t_rp + t_s1 * s, config, near)
-        return travel + v_r1 * s * t_rp + v_r1 * s * s * t_s1 / 2 + const
+        return planned_distance(s, v_h, gap, v_r1, t_rp, t_s1, config)
 
     full = s_p(1.0, v_h, gap, v_r1) <= room
     scales = np.where(full, 1.0, 0.0)
@@ -380,6 +384,7 @@ __all__ = [
     "assess",
     "log_step",
     "plan_moves",
+    "planned_distance",
     "planned_scales",
     "reading_age",
     "stale_reading",
