@@ -145,6 +145,29 @@ def test_never_later_than_monitoring_alone_after_any_wait_against_an_exact_forec
         assert profile.arrival <= alone.arrival + 1e-9
 
 
+def _blocks_then_stands_beside(until: float = 4.0) -> Occupancy:
+    """A hand on the path (x = 0.6) until `until`, then beside it for good (0.4 m off x = 0.5),
+    near enough that the monitor slows the arm as it passes, whenever that is."""
+    times = np.arange(0.0, 12.0, STEP)
+    centres = np.array([[[0.6, 0.0, 0.0] if t < until else [0.5, 0.4, 0.0]] for t in times])
+    return Occupancy(times, centres, np.array([0.05]), np.zeros_like(centres))
+
+
+def test_clear_only_waits_only_where_a_wait_clears_the_motion():
+    """Separation alone: a wait after which the monitor still slows the motion is not taken
+    (the cheapest wait would be); a wait that clears it is, as without `clear_only`."""
+    plan = _plan()
+    stands = _blocks_then_stands_beside()
+    cheapest = time_around(plan, 0.0, 0.0, stands, _graded, max_wait=6.0)
+    assert len(cheapest) == 1 and cheapest[0].until > 0.0  # the premise: it would wait
+    assert time_around(plan, 0.0, 0.0, stands, _graded, 6.0, clear_only=True) == ()
+    assert time_around(plan, 0.0, 0.0, stands, _graded, 6.0, slowing_ok=True, clear_only=True) == ()
+    leaves = _sits(at=0.6, until=2.0)
+    clearing = time_around(plan, 0.0, 0.0, leaves, _graded, max_wait=6.0)
+    assert len(clearing) == 1
+    assert time_around(plan, 0.0, 0.0, leaves, _graded, 6.0, clear_only=True) == clearing
+
+
 def test_with_a_reaction_time_it_keeps_below_the_limit_while_it_could_still_be_stopping():
     """A hand far off that comes onto the path at 2 s: with T_r the arm keeps below the limit
     the monitor will set over the next T_r + T_s, not only the one it sets now."""

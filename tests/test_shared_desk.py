@@ -342,3 +342,23 @@ def test_the_robot_keeps_clear_of_the_desks_bins_in_every_placement_plan():
                 closest = min(closest, nearest_points(shapes, R, p, tops).distance.min())
     assert plans == 19
     assert closest >= 0.01, closest
+
+
+@pytest.mark.parametrize("contact_speed, clear_only", [(0.0, True), (0.25, False)])
+def test_with_separation_alone_predictive_waits_only_where_a_wait_clears_the_motion(
+    contact_speed, clear_only
+):
+    """`safety.contact_speed: 0` (the monitor keeps S_p by itself) makes predictive separation
+    take only the waits that clear a motion (`KeepClearSettings.clear_only`)."""
+    from hrc_drake.cell.controller.build import keep_clear_settings
+    from hrc_drake.cell.robot_envelope import RobotEnvelope
+    from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
+    from hrc_drake.tasks.spec import load_spec
+
+    text = f"{{safety: {{contact_speed: {contact_speed}}}}}"
+    scenario = load_cell_scenario("shared-desk", [text])
+    design = cell_design(scenario, load_spec(scenario.assembly_path))
+    settings = keep_clear_settings(
+        scenario, design, RobotEnvelope(design), motion_options(scenario)
+    )
+    assert settings.forecast is not None and settings.clear_only is clear_only

@@ -9,9 +9,11 @@ the shortest wait after which the monitor is forecast never to slow the motion (
 the protective separation against the forecast body, starting at each delay of `RUNNING_LATE`),
 or, if there is none within `max_wait` (or the caller allows slowing), the wait that costs
 least: the wait plus the time the monitor is forecast to add to the motion (`forecast_delay`),
-weighed `STOP_PENALTY` times for the braking and restarting it leaves out. The arm waits where
-its motions meet, so every trajectory it follows is still the validated plan; monitoring stays
-underneath and acts on the body as measured. The forecast's own timing spread
+weighed `STOP_PENALTY` times for the braking and restarting it leaves out. With `clear_only`
+the arm waits only where a wait clears the motion: a wait that leaves it slowed all the same
+is a bet on the forecast delay, which separation alone does not win (see `time_around`). The
+arm waits where its motions meet, so every trajectory it follows is still the validated plan;
+monitoring stays underneath and acts on the body as measured. The forecast's own timing spread
 (`hrc_drake.cell.controller.forecast.OperatorForecast`) covers a person early or late.
 """
 
@@ -134,6 +136,7 @@ def time_around(
     end_tau: float | None = None,
     spent: tuple[float, float] | None = None,
     slowing_ok: bool = False,
+    clear_only: bool = False,
 ) -> tuple[Hold, ...]:
     """The waits of the motions of `plan` that start at or after plan time `tau` (the arm is
     there at `now`) and before `end_tau` (None: the plan's end), as `Hold`s (see the module
@@ -142,7 +145,13 @@ def time_around(
     forecast that keeps moving cannot hold the arm for ever. `slowing_ok`: the caller knows the
     forecast hand only goes away from the arm (the tracker saw it in the last bin of its
     fetch), so each wait is the cheapest, even if the monitor is then forecast to slow the
-    motion."""
+    motion. `clear_only`: a motion waits only as long as clears it (with `slowing_ok`, only if
+    that costs less than going at once); where no wait within `max_wait` clears it, it goes
+    at once and the monitor slows it. For separation alone (`safety.contact_speed: 0`), where
+    the monitor keeps S_p by itself: there, on lean `shared-desk` runs, the forecast put the
+    monitor's delay 2-3 s a task above what the monitor took (the arm creeps on where the
+    forecast has it stand), so the cheapest waits made the assembly about 10 % longer than
+    monitoring alone (docs/shared-desk.md)."""
     end_tau = plan.duration if end_tau is None else end_tau
     holds: list[Hold] = []
     shift = 0.0
@@ -167,6 +176,8 @@ def time_around(
                     best_wait = float(wait)
                 break
             cost = wait + STOP_PENALTY * lost
+            if clear_only and wait > 0.0:
+                continue  # only a wait that clears the motion is taken, against going now
             if cost < best_cost - _EPS:
                 best_wait, best_cost = float(wait), cost
         if best_wait > 0.0:

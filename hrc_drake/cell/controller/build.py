@@ -160,6 +160,9 @@ def keep_clear_settings(
         safety.timing,
         acceleration,
         safety.reaction_time,
+        # With separation alone the monitor keeps S_p without the waits; a wait that leaves the
+        # motion slowed all the same only lengthened the assembly (time_around's docstring).
+        clear_only=safety.contact_speed <= 0.0,
     )
 
 

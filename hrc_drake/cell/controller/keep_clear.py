@@ -26,7 +26,9 @@ a body unlike the forecast), the plan is timed again from there (counted in `sli
 
 Once the tracker shows the hand in the last bin of its fetch, from where it only goes back to
 rest, away from the robot, each wait (`wait` timing) is the cheapest one: the arm may go on
-slowed beside the hand instead of waiting until it has left.
+slowed beside the hand instead of waiting until it has left. With separation alone
+(`safety.contact_speed: 0`) the monitor keeps S_p by itself, and a wait is taken only where it
+clears the motion of the forecast body (`KeepClearSettings.clear_only`).
 
 Before the first task it fits the forecast to the person the tracker shows at rest: the hand
 they work with and where it rests.
@@ -67,7 +69,9 @@ class KeepClearSettings:
     """What predictive separation needs: the operator's forecast and the speed scale the
     monitor would allow (`ScaleFn`); both None: reactive (monitoring alone). `max_wait`,
     `departure`, `timing` and `reaction_time` (T_r) are `SafetyConfig`'s; `acceleration`, the
-    arm's joint acceleration limit [rad/s²] (the ramp of a path timing)."""
+    arm's joint acceleration limit [rad/s²] (the ramp of a path timing); `clear_only`: the
+    monitor keeps S_p by itself (separation alone), so a wait is taken only where it clears a
+    motion (`hrc_drake.motion.clearance.time_around`)."""
 
     forecast: OperatorForecast | None = None
     scale: ScaleFn | None = None
@@ -76,6 +80,7 @@ class KeepClearSettings:
     timing: str = Timing.WAIT.value
     acceleration: float = 5.0
     reaction_time: float = 0.1
+    clear_only: bool = False
 
 
 class KeepClear:
@@ -91,6 +96,7 @@ class KeepClear:
         self._max_wait, self._departure = settings.max_wait, settings.departure
         self._path_time = settings.timing == Timing.PATH_TIME
         self._acceleration, self._reaction = settings.acceleration, settings.reaction_time
+        self._clear_only = settings.clear_only
 
     def _anchor(self, s: SupervisorStatus) -> Anchor | None:
         """The indication the forecast starts from: the operator's, or the one predicted."""
@@ -240,6 +246,7 @@ class KeepClear:
             end_tau,
             spent=spent,
             slowing_ok=self._at_last_bin(s),
+            clear_only=self._clear_only,
         )
         return holds, ()
 
