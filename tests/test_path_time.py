@@ -221,24 +221,54 @@ def test_the_speed_changes_within_the_joint_acceleration_limit():
         assert change <= max(bound * 1.05, 1.0 / LEVELS) + 1e-9
 
 
-def test_the_plan_timing_waits_at_the_start_or_caps_the_speed_along_the_motion():
+def test_the_plan_timing_caps_the_speed_where_it_goes_slower_than_the_monitor_allows():
     plan = _plan()
+    # Under way at full speed at plan time 0.5, a hand near the path's end until 3 s: the arm
+    # stops at once, back from the hand (where the monitor alone would go on), and goes on
+    # when the hand has left.
+    sits = _sits(0.8, 3.0)
     timing = path_time_around(
-        plan, 0.0, 0.0, 0.0, _sits(0.6, 2.0), _graded, max_wait=6.0, acceleration=ACCELERATION
+        plan, 0.5, 0.0, 1.0, sits, _graded, max_wait=6.0, acceleration=ACCELERATION
     )
-    assert timing.holds == ()  # it sets off at once (see above)
+    assert timing.holds == ()  # under way: no wait at a rest point
     (cap,) = timing.caps
-    assert (cap.tau0, cap.tau1, cap.start) == (0.0, DURATION, 0.0)
-    assert min(cap.speeds) < 0.5
+    assert (cap.tau0, cap.tau1, cap.start) == (0.5, DURATION, 0.0)
+    assert min(cap.speeds) == 0.0
     # The cap is the lower of this step's speed and the next one's, 1 past the timing.
-    k = int(np.argmin(cap.speeds))
-    assert speed_cap(timing.caps, (k - 1) * STEP + 0.01, 1.0) == min(cap.speeds[k - 1 : k + 1])
+    k = int(np.argmax(np.array(cap.speeds) > 0.0))
+    assert 0.0 == speed_cap(timing.caps, (k - 1) * STEP + 0.01, 1.0) < cap.speeds[k]
+    assert speed_cap(timing.caps, k * STEP + 0.01, 1.0) == min(cap.speeds[k : k + 2])
     assert speed_cap(timing.caps, 100.0, 1.0) == 1.0
-    assert speed_cap(timing.caps, 0.0, DURATION + 1.0) == 1.0  # off the motion
-    # An arm behind its timing slips; on time it does not.
-    now = (k + 0.5) * STEP
+    assert speed_cap(timing.caps, 0.0, 0.2) == 1.0  # off the timed part
+    # An arm off its timing slips; on time it does not.
+    now = (k - 0.5) * STEP
     assert slip(timing.caps, now, cap.tau_at(now)) == pytest.approx(0.0)
-    assert slip(timing.caps, now, cap.tau_at(now) - 0.3) == pytest.approx(0.3)
+    assert slip(timing.caps, now, cap.tau_at(now) + 0.3) == pytest.approx(0.3)
+
+
+def test_the_cap_leaves_the_steps_at_the_monitors_limit_to_the_monitor():
+    """Where the timing goes as fast as the monitor allows against the forecast, the cap is 1
+    (the monitor's own, unquantised limit governs); where it goes slower by choice, the cap is
+    its speed."""
+    plan = _plan()
+    sits = _sits(0.6, 2.0)
+    path = motion_path(plan, 0.0, plan.duration)
+    profile = time_path(path, 0.0, sits, _graded, ACCELERATION, longest=6.0)
+    # at_limit: the level the monitor allows at the step's pose (the nearest sampled one) is
+    # no higher than the one taken.
+    for t, tau, s, at_limit in zip(
+        profile.times, profile.taus, profile.speeds, profile.at_limit, strict=True
+    ):
+        p = int(np.argmin(np.abs(path.taus - tau)))
+        i = sits.at(t)
+        allowed = _graded(path.q[p], path.qdot[p], None, sits.centres[i], sits.radii, None)
+        assert at_limit == (int(np.floor(allowed * LEVELS + 1e-6)) <= round(s * LEVELS))
+    assert profile.at_limit.any() and not profile.at_limit.all()
+    timing = path_time_around(plan, 0.0, 0.0, 0.0, sits, _graded, 6.0, ACCELERATION)
+    (cap,) = timing.caps
+    speeds = np.array(cap.speeds)
+    assert np.all(speeds[profile.at_limit] == 1.0)
+    assert np.array_equal(speeds[~profile.at_limit], profile.speeds[~profile.at_limit])
 
 
 def test_a_hand_on_the_path_past_the_longest_wait_is_waited_for_at_most_that_long():
