@@ -149,9 +149,8 @@ def time_around(
     that costs less than going at once); where no wait within `max_wait` clears it, it goes
     at once and the monitor slows it. For separation alone (`safety.contact_speed: 0`), where
     the monitor keeps S_p by itself: there, on lean `shared-desk` runs, the forecast put the
-    monitor's delay 2-3 s a task above what the monitor took (the arm creeps on where the
-    forecast has it stand), so the cheapest waits made the assembly about 10 % longer than
-    monitoring alone (docs/shared-desk.md)."""
+    monitor's delay 2-3 s a task above what the monitor took, and the cheapest waits made the
+    assembly 5-11 % longer than monitoring alone (docs/shared-desk.md)."""
     end_tau = plan.duration if end_tau is None else end_tau
     holds: list[Hold] = []
     shift = 0.0
