@@ -11,8 +11,14 @@ predictive's mean time over the fastest monitoring-alone configuration with 0 vi
 monitoring alone at constant speed, and the price of safety (predictive over monitoring off) per
 population and interaction mode.
 
+With ``--separation-alone`` every configuration keeps S_p by separation alone (no contact-speed
+allowance, `safety.contact_speed: 0`) and the operator's hand rests behind the table edge
+(`ALONE`: inside S_p of the placing pose, where it rests by default, separation alone crawls);
+the report goes to `separation_standard_alone.md`.
+
 Usage: ``python benchmarks/bench_separation_standard.py [--seeds 4] [--workers 2] [--lean]
-[--out PATH]``. The report is written (with ``--lean`` too: the settings are stated in it).
+[--separation-alone] [--out PATH]``. The report is written (with ``--lean`` too: the settings
+are stated in it).
 """
 
 from __future__ import annotations
@@ -50,17 +56,20 @@ MONITORING_ALONE = [
 ]
 PREDICTIVE = [c for c in CONFIGURATIONS if c.startswith("predictive") and "unseen" not in c]
 REPORT = Path(__file__).parent / "reports" / "separation_standard.md"
+REPORT_ALONE = REPORT.with_name("separation_standard_alone.md")
+ALONE = "{safety: {contact_speed: 0.0}, body: {rest_hand: [0.9, 0.10, 0.06]}}"
 
 
 def one_run(job: tuple) -> dict:
-    """One run of (configuration, population, interaction, seed, lean): its figures."""
+    """One run of (configuration, population, interaction, seed, lean, alone): its figures."""
     from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 
-    configuration, population, interaction, seed, lean = job
+    configuration, population, interaction, seed, lean, alone = job
     operator = (
         f"{{operator: {{model: {population}, seed: {seed}}}, interaction: {{mode: {interaction}}}}}"
     )
-    texts = [operator, CONFIGURATIONS[configuration], *([LEAN] if lean else [])]
+    texts = [operator, CONFIGURATIONS[configuration], *([ALONE] if alone else [])]
+    texts += [LEAN] if lean else []
     scenario = load_cell_scenario("shared-desk", texts)
     result = pooled_loop(scenario, scenario.assembly).run()
     check = result.safety_check
@@ -161,10 +170,11 @@ def report(runs: list[dict], args, wall: float) -> str:
         "",
         f"`shared-desk`, populations {', '.join(POPULATIONS)}, interaction "
         f"{' and '.join(INTERACTIONS)}, operator seeds 0–{args.seeds - 1}; one run each, "
-        f"{'lean settings (`--lean`: 0.5 s holds)' if args.lean else 'full settings'}. "
+        f"{'lean settings (`--lean`: 0.5 s holds)' if args.lean else 'full settings'}"
+        f"{f'; separation alone, every run with `{ALONE}`' if args.separation_alone else ''}. "
         f"`python benchmarks/bench_separation_standard.py --seeds {args.seeds}"
-        f"{' --lean' if args.lean else ''}` on {platform.machine()}, {len(runs)} runs, "
-        f"{wall:.0f} s wall.",
+        f"{' --lean' if args.lean else ''}{' --separation-alone' if args.separation_alone else ''}"
+        f"` on {platform.machine()}, {len(runs)} runs, {wall:.0f} s wall.",
         "",
         "Violations and body contacts are the run's own check's (S_h: the person's actual "
         "travel): samples where the robot moved under its own command closer than S_p. Of "
@@ -196,18 +206,20 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", type=int, default=4)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--lean", action="store_true")
-    parser.add_argument("--out", type=Path, default=REPORT)
+    parser.add_argument("--separation-alone", action="store_true")
+    parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args(argv)
+    out = args.out or (REPORT_ALONE if args.separation_alone else REPORT)
     jobs = [
-        (c, p, i, s, args.lean)
+        (c, p, i, s, args.lean, args.separation_alone)
         for c in CONFIGURATIONS
         for p in POPULATIONS
         for i in INTERACTIONS
         for s in range(args.seeds)
     ]
     runs, wall = run_pool(one_run, jobs, args.workers)
-    atomic_write_text(args.out, report(runs, args, wall))
-    print(f"wrote {args.out}")
+    atomic_write_text(out, report(runs, args, wall))
+    print(f"wrote {out}")
     return 0
 
 
