@@ -17,7 +17,8 @@ allowance, `safety.contact_speed: 0`) and the operator's hand rests behind the t
 the report goes to `separation_standard_alone.md`.
 
 Usage: ``python benchmarks/bench_separation_standard.py [--seeds 4] [--workers 2] [--lean]
-[--separation-alone] [--out PATH]``. The report is written (with ``--lean`` too: the settings
+[--separation-alone] [--only NAME ...] [--out PATH]``; ``--only`` runs the configurations
+named (keys of `CONFIGURATIONS`). The report is written (with ``--lean`` too: the settings
 are stated in it).
 """
 
@@ -101,6 +102,11 @@ def _of(runs: list[dict], configuration: str, population=None, interaction=None)
     ]
 
 
+def _run(runs: list[dict], configurations) -> list[str]:
+    """Those of `configurations` that `runs` ran (`--only`)."""
+    return [c for c in configurations if _of(runs, c)]
+
+
 def configuration_rows(runs: list[dict]) -> list[str]:
     """Per configuration: the check's counts, the function's stops, the times."""
     lines = [
@@ -109,7 +115,7 @@ def configuration_rows(runs: list[dict]) -> list[str]:
         "[s] |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
-    for configuration in CONFIGURATIONS:
+    for configuration in _run(runs, CONFIGURATIONS):
         rows = _of(runs, configuration)
         violating = sum(1 for r in rows if r["violations"])
         margin = min(r["least_margin"] for r in rows)
@@ -126,7 +132,8 @@ def configuration_rows(runs: list[dict]) -> list[str]:
 
 def ratio_lines(runs: list[dict]) -> list[str]:
     """Predictive against the fastest compliant monitoring alone and against constant speed."""
-    compliant = [c for c in MONITORING_ALONE if not any(r["violations"] for r in _of(runs, c))]
+    alone, predictive = _run(runs, MONITORING_ALONE), _run(runs, PREDICTIVE)
+    compliant = [c for c in alone if not any(r["violations"] for r in _of(runs, c))]
     lines = []
     if compliant:
         fastest = min(compliant, key=lambda c: _mean(_of(runs, c)))
@@ -134,13 +141,13 @@ def ratio_lines(runs: list[dict]) -> list[str]:
             f"The fastest monitoring-alone configuration with 0 violations: **{fastest}**, "
             f"{_mean(_of(runs, fastest)):.2f} s."
         )
-        for c in PREDICTIVE:
+        for c in predictive:
             ratio = _mean(_of(runs, c)) / _mean(_of(runs, fastest))
             lines.append(f"- {c} ÷ {fastest}: **{ratio:.3f}** (goal ≤ 0.80)")
     else:
         lines.append("No monitoring-alone configuration had 0 violations.")
     constant = "monitoring alone, constant"
-    for c in PREDICTIVE:
+    for c in predictive if _of(runs, constant) else ():
         ratio = _mean(_of(runs, c)) / _mean(_of(runs, constant))
         lines.append(f"- {c} ÷ {constant}: **{ratio:.3f}** (do no harm: ≤ 1.00)")
     return lines
@@ -149,7 +156,9 @@ def ratio_lines(runs: list[dict]) -> list[str]:
 def price_rows(runs: list[dict]) -> list[str]:
     """The price of safety, per population and interaction mode: each predictive configuration
     (and monitoring alone) over monitoring off."""
-    shown = ["monitoring alone, tracked", *PREDICTIVE]
+    shown = _run(runs, ["monitoring alone, tracked", *PREDICTIVE])
+    if not _of(runs, OFF):
+        return ["(monitoring off was not run)"]
     lines = [
         "| population | mode | " + " | ".join(shown) + " |",
         "|---|---|" + "---|" * len(shown),
@@ -165,6 +174,7 @@ def price_rows(runs: list[dict]) -> list[str]:
 def report(runs: list[dict], args, wall: float) -> str:
     """The markdown report."""
     failed = [r for r in runs if not r["terminal"]]
+    only = " --only" + "".join(f" {c!r}" for c in args.only) if args.only else ""
     lines = [
         "# Separation the standard accepts, and predictive motion",
         "",
@@ -174,6 +184,7 @@ def report(runs: list[dict], args, wall: float) -> str:
         f"{f'; separation alone, every run with `{ALONE}`' if args.separation_alone else ''}. "
         f"`python benchmarks/bench_separation_standard.py --seeds {args.seeds}"
         f"{' --lean' if args.lean else ''}{' --separation-alone' if args.separation_alone else ''}"
+        f"{only}"
         f"` on {platform.machine()}, {len(runs)} runs, {wall:.0f} s wall.",
         "",
         "Violations and body contacts are the run's own check's (S_h: the person's actual "
@@ -207,12 +218,13 @@ def main(argv=None) -> int:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--lean", action="store_true")
     parser.add_argument("--separation-alone", action="store_true")
+    parser.add_argument("--only", nargs="+", choices=list(CONFIGURATIONS), metavar="NAME")
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args(argv)
     out = args.out or (REPORT_ALONE if args.separation_alone else REPORT)
     jobs = [
         (c, p, i, s, args.lean, args.separation_alone)
-        for c in CONFIGURATIONS
+        for c in args.only or CONFIGURATIONS
         for p in POPULATIONS
         for i in INTERACTIONS
         for s in range(args.seeds)
