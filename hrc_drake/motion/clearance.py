@@ -174,9 +174,9 @@ def time_around(
                 if not slowing_ok or wait < best_cost - _EPS:
                     best_wait = float(wait)
                 break
-            cost = wait + STOP_PENALTY * lost
             if clear_only and wait > 0.0:
                 continue  # only a wait that clears the motion is taken, against going now
+            cost = wait + STOP_PENALTY * lost
             if cost < best_cost - _EPS:
                 best_wait, best_cost = float(wait), cost
         if best_wait > 0.0:

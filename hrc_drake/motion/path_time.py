@@ -403,17 +403,27 @@ def path_time_around(
         wait = 0.0 if under_way else profile.wait
         if wait > 0.0:
             holds.append(Hold(motion.start, begin + wait))
-        first = round(wait / STEP)
-        # Where the timing goes as fast as the monitor allows, the monitor alone sets the
-        # speed: a cap there only adds the lattice's 1/LEVELS quantisation and its step's lag
-        # to the monitor's own limit (on lean shared-desk runs with separation alone, capped
-        # everywhere, the assembly took x1.29 of monitoring alone's time).
-        speeds = np.where(profile.at_limit, 1.0, profile.speeds)[first:]
-        if len(speeds) and speeds.min() < 1.0 - _EPS:
-            taus = tuple(float(x) for x in profile.taus[first:])
-            caps.append(SpeedCap(start, stop, begin + wait, tuple(map(float, speeds)), taus))
+        cap = _chosen_cap(profile, start, stop, begin, wait)
+        caps += [cap] if cap is not None else []
         t = profile.arrival
     return PathTiming(tuple(holds), tuple(caps))
+
+
+def _chosen_cap(
+    profile: Profile, tau0: float, tau1: float, begin: float, wait: float
+) -> SpeedCap | None:
+    """The cap of a motion over plan times [tau0, tau1) timed by `profile` from `begin`, after
+    its `wait` there: its speed where it goes slower by choice; None if it never does. Where the
+    timing goes as fast as the monitor allows, the monitor alone sets the speed: a cap there
+    only adds the lattice's 1/LEVELS quantisation and its step's lag to the monitor's own limit
+    (on lean shared-desk runs with separation alone, capped everywhere, the assembly took
+    x1.29 of monitoring alone's time)."""
+    first = round(wait / STEP)
+    speeds = np.where(profile.at_limit, 1.0, profile.speeds)[first:]
+    if not len(speeds) or speeds.min() >= 1.0 - _EPS:
+        return None
+    taus = tuple(float(x) for x in profile.taus[first:])
+    return SpeedCap(tau0, tau1, begin + wait, tuple(map(float, speeds)), taus)
 
 
 __all__ = [
