@@ -36,6 +36,8 @@ from cell_pool import CAMERA_TEXT
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.run.run import run_scenario, scenario_policy
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+from hrc_drake.cell.station.camera_rest import SEAT_FRAMES
+from hrc_drake.cell.station.camera_verdicts import CONFIRM_FRAMES
 from hrc_drake.resources import scenarios_dir
 from hrc_drake.scenario.sensors import CAMERA
 from hrc_drake.tasks.decide import run_decisions
@@ -117,7 +119,9 @@ def report(rows: list[dict], argv: list[str], full: bool = False) -> str:
         f"Every run {SETTINGS[full]}, with `{CAMERA_TEXT}`: the camera at {CAMERA.rate:g} Hz, "
         f"{CAMERA.latency:g} s latency, {CAMERA.noise * 1000:g} mm and "
         f"{CAMERA.angle_noise:g} rad of noise per axis, {CAMERA.dropout:.0%} of frames lost; "
-        "a verdict within the pocket's tolerance plus 3 sigma, changed after 3 frames agree "
+        "a verdict within the pocket's tolerance plus 3 sigma, taken on a still part's mean "
+        f"and seated only once {SEAT_FRAMES} frames' mean rests on the seat's floor, changed "
+        f"after {CONFIRM_FRAMES} frames agree "
         '(docs/station.md, "The camera"). Expected = the decision loop\'s states with the '
         "scenario's policy and operator. False and missed detections are the camera's `seated` "
         "and `misplaced` verdicts against the contact sensor's (the simulator's ground truth); "

@@ -14,6 +14,7 @@ from hrc_drake.cell.run.result import RunResult
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 from hrc_drake.cell.station import make_cell_station
 from hrc_drake.cell.station.camera import noisy_pose
+from hrc_drake.cell.station.camera_rest import SEAT_FRAMES, SHIFT_FRAMES, rest_bound, see
 from hrc_drake.cell.station.camera_score import CameraHistory, score
 from hrc_drake.cell.station.camera_verdicts import (
     CONFIRM_FRAMES,
@@ -110,6 +111,102 @@ def test_noise_alone_does_not_flip_a_verdict(cell):
             assert reported == expected, name
 
 
+def _seen_over_frames(cell, truth, rng, frames, views=None):
+    """The camera's views after `frames` seeded frames of its noise on the true `truth` poses
+    (`camera_rest.see`), and the part verdicts it reported after each."""
+    geometry, X_W_plate, _ = cell
+    noise = (CAMERA.noise, CAMERA.angle_noise)
+    reported = []
+    for _ in range(frames):
+        draws = rng.standard_normal((len(truth), 6))
+        poses = {
+            p: noisy_pose(X, CAMERA, d) for (p, X), d in zip(truth.items(), draws, strict=True)
+        }
+        views = see(geometry, TOL, noise, views, poses, X_W_plate, None)
+        reported.append({p: v for p, v in views.verdicts.items()})
+    return views, reported
+
+
+# The square flange on 3 mm of debris under one boss, as the simulation leaves it (S23 proposed,
+# `faults: [!NoSeat {task: 2, obstacle: true}]`, measured): 1.16 mm high, tilted 0.023 rad.
+ON_DEBRIS = RigidTransform(RollPitchYaw(0.0, 0.023, 0.0), [0.0, 0.0, 0.00116])
+
+
+def test_a_part_held_up_by_debris_is_never_read_seated(cell):
+    """Before: one frame reads it seated (within the pocket's 1 mm and 0.03 rad plus the
+    noise), and so did the camera. Now it is read misplaced once its frames' mean tells, and
+    never seated, over 40 placements of 30 frames each (seeded)."""
+    station = cell[2]
+    X = station.placement_poses({"square_flange": "S23"})["square_flange"] @ ON_DEBRIS
+    truth = _poses(station, square_flange=X)
+    rng = np.random.default_rng(11)
+    single = [
+        _seen(
+            cell,
+            {**truth, "square_flange": noisy_pose(X, CAMERA, rng.standard_normal(6))},
+            "square_flange",
+        ).status
+        for _ in range(200)
+    ]
+    assert single.count(PartStatus.SEATED) > 150  # what one frame sees
+    assert rest_bound(CAMERA.noise, SEAT_FRAMES) < 0.00116 - 2 * CAMERA.noise / SEAT_FRAMES**0.5
+    for _ in range(40):
+        home = _seen_over_frames(cell, _poses(station), rng, 1)[0]  # in the tray, then placed
+        reported = _seen_over_frames(cell, truth, rng, 30, home)[1]
+        statuses = [r["square_flange"].reported.status for r in reported]
+        assert PartStatus.SEATED not in statuses
+        assert statuses[-1] == PartStatus.MISPLACED
+
+
+def test_a_part_set_down_a_millimetre_lower_is_read_again(cell):
+    """The operator takes the debris out and sets the part down in its seat, 1.16 mm lower: too
+    small a move for one frame to show, it shows in the newest frames' mean (SHIFT_FRAMES), the
+    older frames are dropped, and the part is read seated. Until then at most SHIFT_FRAMES - 1
+    frames stand by the old verdict (a reading that says misplaced after the part was set
+    down); none once the new frames are tentative (40 seeded placements)."""
+    station = cell[2]
+    seat = station.placement_poses({"square_flange": "S23"})["square_flange"]
+    rng = np.random.default_rng(3)
+    for _ in range(40):
+        home = _seen_over_frames(cell, _poses(station), rng, 1)[0]
+        on_debris = _poses(station, square_flange=seat @ ON_DEBRIS)
+        views = _seen_over_frames(cell, on_debris, rng, 20, home)[0]
+        assert views.verdicts["square_flange"].reported.status == PartStatus.MISPLACED
+        reported = _seen_over_frames(cell, _poses(station, square_flange=seat), rng, 15, views)[1]
+        verdicts = [r["square_flange"] for r in reported]
+        seated = next(k for k, v in enumerate(verdicts) if v.reported.status == PartStatus.SEATED)
+        assert seated <= SHIFT_FRAMES + SEAT_FRAMES + CONFIRM_FRAMES
+        stale = [k for k, v in enumerate(verdicts[:seated]) if v.steady]
+        assert stale == list(range(len(stale))) and len(stale) <= SHIFT_FRAMES
+
+
+def test_a_seated_part_is_read_seated_once_its_frames_tell_and_stays_so(cell):
+    """A part seated in its pocket's corner: tentative (the reading not steady) until
+    SEAT_FRAMES still frames, then reported after CONFIRM_FRAMES agree; 2000 frames of noise
+    flip nothing after, on the plate or on a host (seeded)."""
+    station = cell[2]
+    layout = station.placement_poses(
+        {"oval_flange_1": "F1", "square_flange": "S23", "oval_flange_2": "F02"}
+    )
+    corner = layout["oval_flange_1"] @ RigidTransform([0.0015, 0.0015, 0.0])
+    rng = np.random.default_rng(5)
+    home = _seen_over_frames(cell, _poses(station), rng, 1)[0]
+    truth = _poses(station, **{**layout, "oval_flange_1": corner})
+    reported = _seen_over_frames(cell, truth, rng, 2000, home)[1]
+    first = next(
+        k for k, r in enumerate(reported) if r["oval_flange_1"].reported.status == PartStatus.SEATED
+    )
+    assert first == SEAT_FRAMES + CONFIRM_FRAMES - 2  # the frames from 1, the first frame moved
+    assert not any(r["oval_flange_1"].steady for r in reported[: SEAT_FRAMES - 1])
+    for part, token in (
+        ("oval_flange_1", "F1"),
+        ("square_flange", "S23"),
+        ("oval_flange_2", "F02"),
+    ):
+        after = {(r[part].reported.status, r[part].reported.token) for r in reported[first + 5 :]}
+        assert after == {(PartStatus.SEATED, token)}, part
+
+
 def test_the_pockets_bound_the_camera_noise():
     position, angle = max_noise()
     assert CAMERA.noise <= position < 0.0004 and CAMERA.angle_noise <= angle
@@ -157,3 +254,26 @@ def test_the_camera_reads_the_operators_other_slot_as_contact_does():
     camera = result.to_json()["configuration"]["camera"]
     assert camera["detections"] == 3 and camera["wrong_slot"] == 0
     assert (camera["false_detections"], camera["missed_detections"]) == (0, 0), camera["events"]
+
+
+@pytest.mark.slow
+def test_the_camera_finds_a_part_held_up_by_debris_and_the_task_is_handed_over():
+    """Lean row 1, the camera alone reading the cell, debris under the square flange's boss
+    (S23, task 2): before, the camera read it seated (1.16 mm high) and the run went on with
+    the part off its floor. Now the Supervisor finds it off its seat, places it again once, and
+    hands the task over; the operator clears the pocket and the row ends in its states, with
+    no wrong slot against the contact sensor."""
+    from hrc_drake.cell.run.run import run_scenario
+
+    text = (
+        "{sensors: {configuration: camera}, run: {recover_tries: 1}, "
+        "faults: [!NoSeat {task: 2, obstacle: true}]}"
+    )
+    result = run_scenario(load_cell_scenario("row1-optimal", [LEAN, text]))
+    assert result.error is None and result.done and result.collisions == []
+    assert [t.observed for t in result.tasks] == ["F1", "S23", "F03"]
+    assert "square_flange is" in result.tasks[1].handed_over, result.events
+    (record,) = result.faults
+    assert record.detected_at > record.injected_at and record.recovery == "operator"
+    camera = result.to_json()["configuration"]["camera"]
+    assert camera["wrong_slot"] == 0 and camera["missed_detections"] == 0, camera["events"]

@@ -266,3 +266,21 @@ def test_policy_hints_never_advise_overwriting_a_file_that_is_not_a_policy(capsy
 def test_a_negative_seed_is_refused_by_argparse(capsys):
     argv = ["evaluate", "--decider", "exact", "--operator-model", "follows", "--seed", "-1"]
     assert_one_line(*refused(capsys, *argv), "argument --seed", ">= 0")
+
+
+def test_scenario_text_given_twice_merges_both_in_order(capsys):
+    """Before: a second `--scenario-text` silently replaced the first (a camera asked for
+    and a fault given in another text ran without the camera). Now each merges in turn, the
+    later over the earlier, and the station's options repeat them all."""
+    from hrc_drake.cli.app import build_parser
+    from hrc_drake.cli.scenario_args import scenario_from_args, scenario_options
+
+    texts = ["{motion: {hold_time: 1.5}, operator: {seed: 3}}", "{operator: {seed: 7}}"]
+    argv = ["simulate", "--scenario-text", texts[0], "--scenario-text", texts[1]]
+    args = build_parser().parse_args(argv)
+    scenario = scenario_from_args(args)
+    assert scenario.motion.hold_time == 1.5 and scenario.operator.seed == 7
+    assert scenario_options(args) == ["--scenario-text", texts[0], "--scenario-text", texts[1]]
+    # A mistake in either text is still one line naming the flag and the key.
+    bad = [*argv, "--scenario-text", "{run: {max_steps: 0}}", "--lean"]
+    assert_one_line(*refused(capsys, *bad), "--scenario-text", "run.max_steps")

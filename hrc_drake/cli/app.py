@@ -269,8 +269,10 @@ def _add_scenario_flags(p, simulate: bool) -> None:
     )
     p.add_argument(
         "--scenario-text",
+        action="append",
         default=None,
-        help='YAML merged over the scenario, e.g. "{motion: {hold_time: 1.0}}"'
+        help='YAML merged over the scenario, e.g. "{motion: {hold_time: 1.0}}"; repeat it to '
+        "merge several, in order"
         if simulate
         else "as for simulate",
     )
@@ -370,8 +372,10 @@ def _add_drivers(p) -> None:
     )
     p.add_argument(
         "--scenario-text",
+        action="append",
         default=None,
-        help='YAML merged over the scenario, e.g. "{drivers: {rg2: !Rg2Modbus {host: 10.0.0.9}}}"',
+        help='YAML merged over the scenario, e.g. "{drivers: {rg2: !Rg2Modbus {host: 10.0.0.9}}}"; '
+        "repeat it to merge several, in order",
     )
     p.add_argument(
         "--lcm",

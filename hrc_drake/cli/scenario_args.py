@@ -18,7 +18,7 @@ def scenario_from_args(args) -> Scenario:
     `DEFAULT_SCENARIO`, or with `--assembly` an operator who follows the robot), `--lean`,
     `--scenario-text`, `--assembly`, `--operator`, `--policy`, and what `simulate` alone has
     (`--interaction`, `--interface`, `--separation`)."""
-    overrides = [t for t in (LEAN if args.lean else None, args.scenario_text) if t]
+    overrides = [t for t in (LEAN if args.lean else None, *(args.scenario_text or ())) if t]
     scenario = load_cell_scenario(_scenario_name(args), overrides)
     if args.assembly is not None:
         # A missing file is refused by `load_spec`, before anything is built.
@@ -65,8 +65,8 @@ def scenario_options(args) -> list[str]:
         options += ["--assembly", str(args.assembly)]
     if args.lean:
         options.append("--lean")
-    if args.scenario_text:
-        options += ["--scenario-text", args.scenario_text]
+    for text in args.scenario_text or ():
+        options += ["--scenario-text", text]
     if args.operator is not None:
         options += ["--operator", args.operator]
     interface = getattr(args, "interface", None)

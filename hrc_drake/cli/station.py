@@ -39,7 +39,7 @@ def drivers_argv(args) -> list[str]:
     """The scenario options of `args` that `hrc-drake drivers` takes (`--scenario`,
     `--scenario-text`): the drivers read only the scenario's `drivers:` section."""
     argv = ["--scenario", args.scenario] if args.scenario else []
-    return argv + (["--scenario-text", args.scenario_text] if args.scenario_text else [])
+    return argv + [arg for text in args.scenario_text or () for arg in ("--scenario-text", text)]
 
 
 def station_command(args) -> int:

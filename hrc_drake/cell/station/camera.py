@@ -6,7 +6,9 @@ then a frame lost, and no contact at all.
 (`hrc_drake.scenario.sensors.CAMERA`: 5 Hz, 0.15 s latency, 0.3 mm and 1 degree of noise per
 axis, 2 % of frames lost), adds the noise, and decides every part's verdict from the estimated
 poses alone (`hrc_drake.cell.station.camera_verdicts`: the pocket's tolerances plus three noise
-standard deviations, a change reported once three frames in a row agree). It reads the plate's
+standard deviations, a change reported once three frames in a row agree), a still part's from
+the mean of its frames, seated only when that mean rests on the seat's floor
+(`hrc_drake.cell.station.camera_rest`). It reads the plate's
 pose (welded: the cell's calibration) and the gripper's tcp (the arm's kinematics) exactly; the
 temporary obstacle's pose rides with the frame, late but without noise (a 100 mm box is seen
 far better than a part's seat, and the controller plans again only when it moves 5 mm).
@@ -28,21 +30,14 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from pydrake.common.eigen_geometry import AngleAxis
 from pydrake.common.value import AbstractValue
-from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.math import RigidTransform
 from pydrake.systems.framework import DiagramBuilder
 
 from hrc_drake.cell.ports import CellConfiguration, placement_transform, pose_tuple
+from hrc_drake.cell.station.camera_rest import CameraViews, rotation_from_vector, see
 from hrc_drake.cell.station.camera_score import CameraHistory, CameraScore, Label, score
-from hrc_drake.cell.station.camera_verdicts import (
-    CONFIRM_FRAMES,
-    CameraTolerances,
-    Verdict,
-    follow,
-    frame_placements,
-    label,
-)
+from hrc_drake.cell.station.camera_verdicts import CONFIRM_FRAMES, CameraTolerances, label
 from hrc_drake.cell.station.sensors import SampledSensor
 from hrc_drake.cell.station.slot_monitor import SeatGeometry, SlotMonitor
 from hrc_drake.scenario.sensors import SensorModel, camera_model
@@ -63,29 +58,21 @@ class CameraFrame:
 @dataclass(frozen=True)
 class CameraReading:
     """What the camera keeps from frame to frame: the reading it delivers, each part's
-    verdict, and its history beside the truth."""
+    verdict and still estimates, and its history beside the truth."""
 
     configuration: CellConfiguration
-    verdicts: dict[str, Verdict]
+    views: CameraViews
     history: CameraHistory
 
     def __deepcopy__(self, memo) -> CameraReading:
         return self  # immutable once made (Drake copies abstract values often)
 
 
-def _rotation(vector: np.ndarray) -> RotationMatrix:
-    """The rotation by the rotation vector `vector` [rad]."""
-    angle = float(np.linalg.norm(vector))
-    if angle == 0.0:
-        return RotationMatrix()
-    return RotationMatrix(AngleAxis(angle, vector / angle))
-
-
 def noisy_pose(X: RigidTransform, model: SensorModel, draw: np.ndarray) -> RigidTransform:
     """The camera's estimate of the pose `X` for six standard normal draws: `model.noise`
     times the first three added to the position, the orientation turned by the rotation vector
     `model.angle_noise` times the last three (world axes)."""
-    R = _rotation(model.angle_noise * np.asarray(draw[3:])) @ X.rotation()
+    R = rotation_from_vector(model.angle_noise * np.asarray(draw[3:])) @ X.rotation()
     return RigidTransform(R, X.translation() + model.noise * np.asarray(draw[:3]))
 
 
@@ -141,11 +128,17 @@ class CameraSensor(SampledSensor):
         )
 
     def _follow(self, previous: CameraReading | None, frame: CameraFrame, now: float):
-        seen = frame_placements(
-            self._geometry, self._tolerances, frame.poses, frame.X_W_plate, frame.X_W_tcp
+        noise = (self.model.noise, self.model.angle_noise)
+        views = see(
+            self._geometry,
+            self._tolerances,
+            noise,
+            previous.views if previous is not None else None,
+            frame.poses,
+            frame.X_W_plate,
+            frame.X_W_tcp,
         )
-        before = previous.verdicts if previous is not None else {}
-        verdicts = {p: follow(before.get(p), seen[p]) for p in self._parts}
+        verdicts = views.verdicts
         steady = all(v.steady for v in verdicts.values())
         stamp = now if steady or previous is None else previous.configuration.stamp
         placements = tuple(
@@ -153,9 +146,7 @@ class CameraSensor(SampledSensor):
         )
         history = previous.history if previous is not None else CameraHistory()
         history = history.add(now, frame.truth, {p: label(v.reported) for p, v in verdicts.items()})
-        return CameraReading(
-            CellConfiguration(placements, frame.obstacle, stamp), verdicts, history
-        )
+        return CameraReading(CellConfiguration(placements, frame.obstacle, stamp), views, history)
 
     def _calc_reading(self, context, output) -> None:
         sample = self._current(context)

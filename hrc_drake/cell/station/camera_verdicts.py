@@ -23,9 +23,13 @@ A part's reported verdict changes only when CONFIRM_FRAMES frames in a row agree
 What the noise is allowed to be (`max_noise`): a part whose boss stands on a pocket's rim is
 POCKET_DEPTH (4 mm) high, a seated one at most `SlotTolerances.seat_z` (1 mm); one frame tells
 them apart with K_SIGMA on both sides while 2·K_SIGMA·sqrt(2)·noise (a row of a host: two
-estimates) fits between: noise <= 0.35 mm. A noisier camera would have to average frames (n of
-them divide the noise by sqrt(n)), which this one does not: it is refused when the station is
+estimates) fits between: noise <= 0.35 mm. A noisier camera is refused when the station is
 built. The orientation's noise must keep the yaw tolerance under a quarter of a half turn.
+
+What one frame cannot tell, a part seated from one held a millimetre up by debris, the camera
+tells from the mean of a still part's frames (`hrc_drake.cell.station.camera_rest`): the frame
+verdicts here are taken on those means, and a seated one is kept only where the mean rests on
+the seat's floor.
 """
 
 from __future__ import annotations
@@ -252,21 +256,23 @@ def frame_placements(
     poses: Mapping[str, RigidTransform],
     X_W_plate: RigidTransform,
     X_W_tcp: RigidTransform | None,
+    lifted: frozenset[str] = frozenset(),
 ) -> dict[str, PartPlacement]:
     """One frame's verdict on every part (no poses in the placements), from the parts'
     estimated world `poses`, the plate's pose and the tcp's (None: no robot); the module
-    docstring says how."""
+    docstring says how. The parts `lifted` are read in no seat (they do not rest on its floor:
+    `hrc_drake.cell.station.camera_rest`)."""
     seats = {k: X_W_plate @ X_PS for k, X_PS in g.slots}
     placed: dict[str, PartPlacement] = {}
     for part in sorted(poses):
-        found = _base_seat(g, t, part, poses[part], seats)
+        found = None if part in lifted else _base_seat(g, t, part, poses[part], seats)
         if found is not None:
             placed[part] = found
     base = dict(placed)
     for part in sorted(poses):
         if part in placed:
             continue
-        found = _host_seat(g, t, part, poses, seats, base)
+        found = None if part in lifted else _host_seat(g, t, part, poses, seats, base)
         if found is not None:
             placed[part] = found
         elif _held(g, t, part, poses[part], X_W_tcp):
@@ -297,16 +303,26 @@ class Verdict:
 
     @property
     def steady(self) -> bool:
-        """Whether the latest frame agrees with the verdict reported."""
-        return label(self.candidate) == label(self.reported)
+        """Whether the latest frame agrees with the verdict reported (a tentative one, `run`
+        0, tells nothing yet: a part that moved is read again before the reading holds)."""
+        return self.run > 0 and label(self.candidate) == label(self.reported)
 
 
-def follow(previous: Verdict | None, seen: PartPlacement, frames: int = CONFIRM_FRAMES) -> Verdict:
+def follow(
+    previous: Verdict | None,
+    seen: PartPlacement,
+    frames: int = CONFIRM_FRAMES,
+    tentative: bool = False,
+) -> Verdict:
     """The verdict after a frame that sees `seen`: it changes once `frames` frames in a row
-    agree on a new one. The first frame is taken as confirmed (the camera ran before)."""
+    agree on a new one. The first frame is taken as confirmed (the camera ran before). A
+    `tentative` frame (a seat the still part's frames cannot yet confirm) counts toward no
+    change and is not steady."""
     seen = replace(seen, pose=())
     if previous is None:
         return Verdict(seen, seen, frames)
+    if tentative:
+        return Verdict(previous.reported, seen, 0)
     run = previous.run + 1 if label(seen) == label(previous.candidate) else 1
     reported = seen if run >= frames else previous.reported
     return Verdict(reported, seen, run)
