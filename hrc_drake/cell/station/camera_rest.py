@@ -39,7 +39,7 @@ from hrc_drake.cell.station.camera_verdicts import (
     frame_placements,
     radial_quantile,
 )
-from hrc_drake.cell.station.slot_monitor import SeatGeometry
+from hrc_drake.cell.station.slot_monitor import SeatGeometry, rotation_angle
 from hrc_drake.motion.poses import seat_pose
 
 # m: how far above its seat's plane a part resting on the floor may be read: the hydroelastic
@@ -49,8 +49,9 @@ REST_HEIGHT = 0.0005
 # Frames averaged before the camera reads a part seated, and at most.
 SEAT_FRAMES = 6
 WINDOW = 12
-# A new estimate farther than this many standard deviations (3-D: the Maxwell bound of the same
-# tail) from the still part's mean says the part moved: 6e-7 of the draws of one that did not.
+# A new estimate farther than this many standard deviations (of the 3-D difference, in position
+# or in orientation) from the still part's mean says the part moved: 1.5e-5 of the draws of one
+# that did not (the Maxwell tail at 5).
 K_MOVED = 5.0
 # A move too small for one estimate to show (the operator's hand setting a part a millimetre
 # lower) shows in the mean of the newest SHIFT_FRAMES against the older ones' mean: past this
@@ -59,7 +60,7 @@ K_MOVED = 5.0
 # more (bound 0.84 mm): at most 3 frames after the move still read the part as before.
 SHIFT_FRAMES = 3
 K_SHIFT = 3.5
-_MOVED_RADIUS, _SHIFT_RADIUS = radial_quantile(K_MOVED, 3), radial_quantile(K_SHIFT, 3)
+_SHIFT_RADIUS = radial_quantile(K_SHIFT, 3)
 
 
 def _rotation_vector(R: RotationMatrix) -> np.ndarray:
@@ -117,11 +118,10 @@ def _apart(
     X_a: RigidTransform, X_b: RigidTransform, radius: float, variance: float, noise, angle_noise
 ) -> bool:
     """Whether two estimates whose difference has `variance` times a frame's noise variance
-    lie farther apart than `radius` standard deviations of it (a Maxwell bound), in position
-    or in orientation."""
+    lie farther apart than `radius` standard deviations of it, in position or in
+    orientation."""
     spread = radius * math.sqrt(variance)
-    distance = np.linalg.norm(X_b.translation() - X_a.translation())
-    angle = (X_a.rotation().inverse() @ X_b.rotation()).ToAngleAxis().angle()
+    distance, angle = rotation_angle(X_a, X_b)
     return distance > spread * noise or angle > spread * angle_noise
 
 
@@ -155,18 +155,19 @@ def rests(
     placement: PartPlacement,
     part: str,
     stills: Mapping[str, Still],
+    means: Mapping[str, RigidTransform],
     X_W_plate: RigidTransform,
     noise: float,
     need: int = SEAT_FRAMES,
 ) -> bool | None:
     """Whether the part a frame reads seated (`placement`) rests on that seat's floor, by the
-    mean of its still estimates (module docstring); None: fewer than `need` of them yet."""
+    mean of its still estimates (`means`: each part's `stills` mean; module docstring); None:
+    fewer than `need` of them yet."""
     host = placement.host
     frames = stills[part].frames
     host_frames = stills[host].frames if host else None
     if frames < need or (host_frames is not None and host_frames < need):
         return None
-    means = {p: s.mean for p, s in stills.items()}
     height = seat_height(g, placement, means[part], means, X_W_plate)
     return height <= rest_bound(noise, frames, host_frames)
 
@@ -200,7 +201,7 @@ def see(
     seen = frame_placements(g, t, means, X_W_plate, X_W_tcp)
     need = 1 if previous is None else SEAT_FRAMES
     rest = {
-        p: rests(g, seen[p], p, stills, X_W_plate, noise[0], need)
+        p: rests(g, seen[p], p, stills, means, X_W_plate, noise[0], need)
         for p in seen
         if seen[p].status == PartStatus.SEATED
     }
