@@ -65,14 +65,18 @@ def scenario_options(args) -> list[str]:
         options += ["--assembly", str(args.assembly)]
     if args.lean:
         options.append("--lean")
-    for text in args.scenario_text or ():
-        options += ["--scenario-text", text]
+    options += scenario_text_options(args)
     if args.operator is not None:
         options += ["--operator", args.operator]
     interface = getattr(args, "interface", None)
     if interface is not None:
         options += ["--interface", interface]
     return options
+
+
+def scenario_text_options(args) -> list[str]:
+    """`--scenario-text TEXT` for each text of `args`, in the order given."""
+    return [arg for text in args.scenario_text or () for arg in ("--scenario-text", text)]
 
 
 def scenario_argv(args) -> list[str]:
@@ -91,4 +95,4 @@ def _scenario_name(args) -> str | None:
     return args.scenario
 
 
-__all__ = ["scenario_argv", "scenario_from_args", "scenario_options"]
+__all__ = ["scenario_argv", "scenario_from_args", "scenario_options", "scenario_text_options"]

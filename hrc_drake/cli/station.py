@@ -16,7 +16,12 @@ from hrc_drake.cell.link.lockstep import (
 from hrc_drake.cell.link.remote import check_lcm_url, serve_scenario
 from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
 from hrc_drake.cli.drivers import refuse_real_devices
-from hrc_drake.cli.scenario_args import scenario_argv, scenario_from_args, scenario_options
+from hrc_drake.cli.scenario_args import (
+    scenario_argv,
+    scenario_from_args,
+    scenario_options,
+    scenario_text_options,
+)
 from hrc_drake.paths import UsageError
 
 EXIT_MISMATCH = 2
@@ -39,7 +44,7 @@ def drivers_argv(args) -> list[str]:
     """The scenario options of `args` that `hrc-drake drivers` takes (`--scenario`,
     `--scenario-text`): the drivers read only the scenario's `drivers:` section."""
     argv = ["--scenario", args.scenario] if args.scenario else []
-    return argv + [arg for text in args.scenario_text or () for arg in ("--scenario-text", text)]
+    return argv + scenario_text_options(args)
 
 
 def station_command(args) -> int:
