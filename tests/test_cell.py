@@ -222,6 +222,8 @@ def test_settled_configuration_is_read_from_physics(workcell, configuration):
     simulate_station(workcell, context, SETTLE)
     reading = workcell.configuration(context)
     assert reading.tokens() == configuration
+    station_context = workcell.diagram.GetMyContextFromRoot(context)
+    assert workcell.diagram.GetOutputPort("sim.held_part").Eval(station_context) == ""
     for part in PARTS:
         expected = PartStatus.SEATED if part in placements else PartStatus.TRAY
         assert reading.status(part) is expected, part
@@ -341,14 +343,14 @@ def _arm_posture_with_tcp_at(X_W_tcp: RigidTransform) -> np.ndarray:
     return result.GetSolution(ik.q())[:6]
 
 
-def _hold_above_slot_2(cell, part: str, force: float | None = None):
-    """The gripper closed on `part` 1.5 mm above slot 2 (boss inside the pocket), commanded
-    2 mm past the part's width with `force` (default: the scenario's), simulated SETTLE s;
-    (root context, the part's pose at the start)."""
+def _hold_above_slot_2(cell, part: str, force: float | None = None, lift: float = 0.0015):
+    """The gripper closed on `part` `lift` above slot 2 (1.5 mm: boss inside the pocket, clear
+    of its floor), commanded 2 mm past the part's width with `force` (default: the
+    scenario's), simulated SETTLE s; (root context, the part's pose at the start)."""
     plant = cell.plant
     default = plant.CreateDefaultContext()
     X_W_slot2 = plant.GetFrameByName("slot_2").CalcPoseInWorld(default)
-    X_W_part = X_W_slot2 @ RigidTransform([0, 0, 0.0015])
+    X_W_part = X_W_slot2 @ RigidTransform([0, 0, lift])
     q = _arm_posture_with_tcp_at(tcp_pose(cell.frames, part, X_W_part))
     context = cell.create_default_context()
     plant_context = plant.GetMyContextFromRoot(context)
@@ -372,6 +374,8 @@ def test_held_flange_above_the_plate_is_held_not_seated(cell):
     reading = cell.configuration(context)
     assert reading.status(part) is PartStatus.HELD
     assert reading.tokens() == frozenset()
+    # The safety check's cheaper truth reads the same part in the gripper.
+    assert cell.diagram.GetOutputPort("sim.held_part").Eval(station_context) == part
     plant_context = cell.plant.GetMyContextFromRoot(context)
     drift = X_W_part.InvertAndCompose(
         cell.plant.EvalBodyPoseInWorld(plant_context, cell.part_body(part))
@@ -383,6 +387,20 @@ def test_held_flange_above_the_plate_is_held_not_seated(cell):
     weight = cell.part_body(part).default_mass() * 9.81
     assert load[2] == pytest.approx(-weight, rel=0.02)
     assert np.abs(load[:2]).max() < 0.02 * weight and np.abs(load[3:]).max() < 0.01
+
+
+@pytest.mark.slow
+def test_a_part_seated_in_the_fingers_is_seated_not_held(cell):
+    # The robot holds a part on its seat while the operator bolts it: seated, and the safety
+    # check's `sim.held_part` reads no part in the gripper, as the configuration does.
+    part = "oval_flange_1"
+    context, _ = _hold_above_slot_2(cell, part, lift=0.0)
+    station_context = cell.diagram.GetMyContextFromRoot(context)
+    assert cell.diagram.GetOutputPort("rg2.grip_detected").Eval(station_context)[0] == 1.0
+    reading = cell.configuration(context)
+    assert reading.status(part) is PartStatus.SEATED
+    assert reading.held() is None
+    assert cell.diagram.GetOutputPort("sim.held_part").Eval(station_context) == ""
 
 
 @pytest.mark.slow

@@ -29,7 +29,7 @@ from hrc_drake.cell.station.operator_body import ReachInto
 from hrc_drake.motion.plan import Stage
 from hrc_drake.motion.poses import part_pose
 from hrc_drake.robot_models import set_rg2_opening
-from hrc_drake.scenario.safety import SafetyConfig
+from hrc_drake.scenario.safety import HumanSpeed, SafetyConfig
 from hrc_drake.scenario.schema import BodyConfig, Scenario, ScenarioError
 
 
@@ -335,17 +335,19 @@ def test_allowed_scale_vectorised_matches_each_entrys_root():
     assert allowed_scale([0.1], [0.1], [0.0], [0.2]) == 0.0
 
 
-def test_planned_scales_are_each_pairs_largest_scale_that_keeps_s_p():
+@pytest.mark.parametrize("human_speed", list(HumanSpeed))
+@pytest.mark.parametrize("t_s1", [0.4, 0.03, 0.0])
+def test_planned_scales_are_each_pairs_largest_scale_that_keeps_s_p(human_speed, t_s1):
     """Per pair: 1 where full speed keeps S_p within the room, 0 where standing still does
-    not, and between them the bisected scale, within its tolerance of the root (the pairs are
-    bisected apart from the others, so each must be checked against its own S_p)."""
+    not, and between them the root, to 1e-7 (the closed form against `planned_distance`,
+    over hands coming and going, near and far, with and without a stopping time)."""
     rng = np.random.default_rng(11)
-    config = SafetyConfig()
-    shape = (4, 30)
-    v_h = rng.uniform(-0.5, 1.6, shape)
+    config = dataclasses.replace(SafetyConfig(), human_speed=human_speed)
+    shape = (6, 60)
+    v_h = rng.uniform(-3.0, 2.5, shape)
     gap = rng.uniform(0.0, 1.5, shape)
-    v_r1 = rng.uniform(0.0, 1.0, shape)
-    t_rp, t_s1 = 0.12, 0.4
+    v_r1 = rng.uniform(0.0, 1.5, shape)
+    t_rp = 0.12
     room = gap - config.slow_band
     scales = planned_scales(v_h, gap, v_r1, t_rp, t_s1, config, room)
 
@@ -357,7 +359,7 @@ def test_planned_scales_are_each_pairs_largest_scale_that_keeps_s_p():
     assert np.all(scales[full] == 1.0) and np.all(scales[blocked] == 0.0)
     between = ~full & ~blocked
     assert np.all(s_p(scales)[between] <= room[between])
-    assert np.all(s_p(scales + 2e-4)[between] > room[between])
+    assert np.all(s_p(scales + 1e-7)[between] > room[between])
 
 
 def test_the_monitor_system_reads_only_measured_ports_and_logs_each_period(cell):

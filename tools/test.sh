@@ -10,7 +10,8 @@ python3 -m venv .venv
 .venv/bin/ruff format --check .
 set +e
 # Two workers: the closed-loop physics runs are most of the time and the machine has two cores.
-.venv/bin/python -m pytest -n 2 --dist worksteal "$@"
+# The slowest tests are listed at the end: the suite has a 20-minute budget on two cores.
+.venv/bin/python -m pytest -n 2 --dist worksteal --durations=25 "$@"
 rc=$?
 set -e
 if [ "$rc" -eq 5 ]; then

@@ -150,6 +150,7 @@ class RobotEnvelope:
         }
         self._sets: dict[tuple[str | None, bool], Primitives] = {}
         self._axes, self._points = self._chain()
+        self._opening: float | None = None  # the gripper's opening `pose` last set (None: unset)
 
     def _link_of(self, body) -> int:
         """Row in `links` of the arm link whose motion `body` shares; len(links): fixed."""
@@ -247,7 +248,11 @@ class RobotEnvelope:
         opening = (
             RG2_MAX_OPENING / 2 if opening is None else min(max(opening, 0.0), RG2_MAX_OPENING)
         )
-        set_rg2_opening(plant, context, opening, self._gripper)
+        if opening != self._opening:
+            # The measured opening changes in 0.1 mm steps, seldom between two calls; each
+            # set looks up the linkage's six joints by name.
+            set_rg2_opening(plant, context, opening, self._gripper)
+            self._opening = opening
         X = np.array([plant.EvalBodyPoseInWorld(context, b).GetAsMatrix34() for b in self.bodies])
         return X[:, :, :3], X[:, :, 3]
 

@@ -49,8 +49,10 @@ from hrc_drake.cell.person import touchable
 from hrc_drake.cell.ports import NOBODY, BodySpheres
 from hrc_drake.cell.robot_envelope import RobotEnvelope, speeds_toward
 from hrc_drake.cell.ssm import (
+    FAR_SPEED,
     IMPOSED_SPEED,
     NEAR_DISTANCE,
+    NEAR_SPEED,
     beyond_contact_speed,
     body_gaps,
     entry_scales,
@@ -61,7 +63,7 @@ from hrc_drake.cell.ssm import (
 )
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.robot_names import UR3_JOINTS
-from hrc_drake.scenario.safety import SafetyConfig
+from hrc_drake.scenario.safety import HumanSpeed, SafetyConfig
 
 # The plan moves toward a person closer than S_p at this share of `safety.contact_speed` at
 # most: the servo lags its command and a point's speed is not linear in the joints' (our
@@ -71,7 +73,9 @@ CONTACT_SHARE = 0.8
 # S_h steps up there, and the arm needs time to slow (our choice).
 NEAR_AHEAD = 0.1  # m
 _SLOWEST = 1e-9  # m/s: a point this slow toward the person never limits the plan
-_BISECTIONS = 14  # halvings of the speed scale: within 1e-4 of the largest that keeps S_p
+# A planned scale stands this far under its root, so that rounding never puts S_p past the room.
+_ROOT_SLACK = 1e-9
+_TINY = 1e-300
 
 
 @dataclass(frozen=True)
@@ -146,33 +150,66 @@ def planned_distance(s, v_h, gap, v_r1, t_rp: float, t_s1: float, config: Safety
 
 
 def planned_scales(v_h, gap, v_r1, t_rp: float, t_s1: float, config: SafetyConfig, room):
-    """Per pair, the largest speed scale s ∈ [0, 1] of the plan at which S_p(s) ≤ `room`, by
-    bisection (S_p grows with s): the person's travel over T_r + sampling + T_s(s), T_s(s) =
-    s `t_s1`, from their tracked speed toward the robot `v_h`, the robot's speed toward them
-    s `v_r1` over T_r + sampling (`t_rp`) and its stopping distance (`planned_distance`). The
-    plan takes ISO 13855's near speed `NEAR_AHEAD` sooner than 0.5 m, so that it slows before
-    the safety function's S_h steps up there."""
+    """Per pair, the largest speed scale s ∈ [0, 1] of the plan at which S_p(s) ≤ `room`
+    (`planned_distance`: the person's travel over T_r + sampling + T_s(s), T_s(s) = s `t_s1`,
+    from their tracked speed toward the robot `v_h`, the robot's speed toward them s `v_r1`
+    over T_r + sampling (`t_rp`) and its stopping distance), 0 where none is. The plan takes
+    ISO 13855's near speed `NEAR_AHEAD` sooner than 0.5 m, so that it slows before the safety
+    function's S_h steps up there.
+
+    In closed form: S_p(s) = max(S_h(w), 0) + X(s) with the window w = t_rp + t_s1 s and the
+    robot's part X(s) = C + v_r1 t_rp s + v_r1 t_s1 s² / 2. S_h(w) (`bounded_travel`) is
+    v0 w + a w² / 2 until the hand reaches its cap c at w = R = (c - v0) / a, then linear at c;
+    convex, and so is S_h(w(s)) + X(s). S_p(s) ≤ room holds where both S_h + X ≤ room and
+    X ≤ room: from s = 0 up to the smaller of their largest roots (S_p grows with s)."""
     shape = np.broadcast_shapes(*(np.shape(x) for x in (v_h, gap, v_r1, room)))
-    v_h, gap, v_r1, room = (
+    v0, gap, v_r1, room = (
         np.broadcast_to(np.asarray(x, dtype=float), shape) for x in (v_h, gap, v_r1, room)
     )
+    const = separation_constant(config)
+    r1, r2 = v_r1 * t_rp, v_r1 * t_s1 / 2.0
+    cap = np.where(gap < NEAR_DISTANCE + NEAR_AHEAD, NEAR_SPEED, FAR_SPEED)
+    if config.human_speed == HumanSpeed.CONSTANT:
+        reach = np.zeros(shape)  # at the cap from the start: S_h = c w
+        accel = 0.0
+    else:
+        accel = config.hand_acceleration
+        cap = np.maximum(cap, v0)  # a hand already faster keeps its speed
+        reach = (cap - v0) / accel
+    # S_h + X on each piece of the window as c0 + c1 s + c2 s²: rising (w ≤ R), then at the cap.
+    rising = (
+        v0 * t_rp + accel * t_rp * t_rp / 2.0 + const,
+        (v0 + accel * t_rp) * t_s1 + r1,
+        accel * t_s1 * t_s1 / 2.0 + r2,
+    )
+    at_cap = (
+        v0 * reach + accel * reach * reach / 2.0 + cap * (t_rp - reach) + const,
+        cap * t_s1 + r1,
+        r2,
+    )
+    # The rising piece holds the root where the cap comes only past it (or past s = 1).
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s_cap = np.where(t_s1 > 0.0, (reach - t_rp) / t_s1, np.where(reach > t_rp, np.inf, -np.inf))
+    at = np.clip(s_cap, 0.0, 1.0)
+    in_rising = (s_cap > 0.0) & (
+        (s_cap >= 1.0) | (rising[0] + rising[1] * at + rising[2] * at * at > room)
+    )
+    c0, c1, c2 = (np.where(in_rising, a, b) for a, b in zip(rising, at_cap, strict=True))
+    scales = np.minimum(_larger_root(c0, c1, c2, room), entry_scales(room, const, r1, r2))
+    scales = np.clip(scales - _ROOT_SLACK, 0.0, 1.0)
+    full = planned_distance(1.0, v0, gap, v_r1, t_rp, t_s1, config) <= room
+    blocked = planned_distance(0.0, v0, gap, v_r1, t_rp, t_s1, config) > room
+    return np.where(full, 1.0, np.where(blocked, 0.0, scales))
 
-    def s_p(s, v_h, gap, v_r1):
-        return planned_distance(s, v_h, gap, v_r1, t_rp, t_s1, config)
 
-    full = s_p(1.0, v_h, gap, v_r1) <= room
-    scales = np.where(full, 1.0, 0.0)
-    # Bisect only the pairs between the two ends: most pairs are far enough for full speed.
-    open_ = ~full & (s_p(0.0, v_h, gap, v_r1) <= room)
-    if open_.any():
-        v_h, gap, v_r1, room = v_h[open_], gap[open_], v_r1[open_], room[open_]
-        lo, hi = np.zeros(len(gap)), np.ones(len(gap))
-        for _ in range(_BISECTIONS):
-            mid = (lo + hi) / 2
-            fits = s_p(mid, v_h, gap, v_r1) <= room
-            lo, hi = np.where(fits, mid, lo), np.where(fits, hi, mid)
-        scales[open_] = lo
-    return scales
+def _larger_root(c0, c1, c2, level):
+    """Per entry, the larger root s of c0 + c1 s + c2 s² = `level` (c2 ≥ 0, and c2 > 0 where
+    c1 < 0), each in its form free of cancellation."""
+    d = np.sqrt(np.maximum(c1 * c1 + 4.0 * c2 * (level - c0), 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        up = 2.0 * (level - c0) / np.maximum(c1 + d, _TINY)
+        down = (d - c1) / np.maximum(2.0 * c2, _TINY)
+    return np.where(c1 >= 0.0, up, down)
 
 
 def assess(

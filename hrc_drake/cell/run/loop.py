@@ -436,7 +436,7 @@ class _SafetySampler:
                 v=np.array(arm[n:]),
                 commanded=np.array(commanded),
                 opening=float(self._truth("rg2.state_measured").Eval(cell)[0]),
-                carrying=self._truth("configuration").Eval(cell).held(),
+                carrying=self._cell.GetOutputPort("sim.held_part").Eval(cell) or None,
                 body=self._truth("operator.body").Eval(cell),
             )
         )

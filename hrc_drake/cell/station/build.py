@@ -12,7 +12,8 @@ operator with its body, and a camera. Its ports (`docs/station.md`):
 - outputs, what a real cell measures: `ur3.state_estimated`, `ur3.tcp_force`,
   `rg2.state_measured`, `rg2.grip_detected`, `configuration`, `operator.body`, `hri.indication`;
 - outputs for the simulation only (runner, recordings, tests): `sim.welds`, `sim.plant_state`,
-  `sim.contact_results`, `sim.body_poses`, `sim.query_object`, `sim.camera.rgb_image`.
+  `sim.contact_results`, `sim.body_poses`, `sim.query_object`, `sim.camera.rgb_image`,
+  `sim.held_part` (the part the contact sensor reads as held; "": none).
 
 The gripper holds a part by its pads' contact and friction, squeezing with the commanded force
 (`hrc_drake.cell.station.gripper`): a part can slip, fall or fail to seat. What only a simulator can
@@ -411,6 +412,7 @@ def _add_part_sensors(builder, plant, scene_graph, frames, parts, person, scenar
     builder.Connect(plant.get_body_poses_output_port(), sensor.GetInputPort("body_poses"))
     builder.Connect(scene_graph.get_query_output_port(), sensor.GetInputPort("query_object"))
     export_configuration(builder, sensor, plant, scenario)
+    builder.ExportOutput(sensor.GetOutputPort("held_part"), "sim.held_part")
     # The simulated operator bolts where the part truly sits: the contact sensor's reading.
     builder.Connect(
         sensor.GetOutputPort("slot_configuration"), person.GetInputPort("configuration")
@@ -515,7 +517,8 @@ def _connect_safety_function(builder: DiagramBuilder) -> None:
     function = builder.GetSubsystemByName("safety_function")
     for source, port, target in (
         ("rg2_measure", 0, "rg2.state"),
-        ("configuration_sensor", "slot_configuration", "configuration"),
+        # Only the part in the gripper: the whole reading costs a millisecond a period.
+        ("configuration_sensor", "held_part", "held_part"),
     ):
         system = builder.GetSubsystemByName(source)
         out = system.get_output_port(port) if isinstance(port, int) else system.GetOutputPort(port)

@@ -45,7 +45,7 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from hrc_drake.cell.ports import NOBODY, BodySpheres, CellConfiguration, SafetyMode
+from hrc_drake.cell.ports import NOBODY, BodySpheres, SafetyMode
 from hrc_drake.cell.robot_envelope import RobotEnvelope, speeds_toward
 from hrc_drake.cell.ssm import (
     beyond_contact_speed,
@@ -349,9 +349,10 @@ class SafetyFunction(LeafSystem):
     """The station's safety function (see the module docstring).
 
     Input ports: `ur3.position`, `ur3.velocity` (the controller's command, 6 each),
-    `ur3.state` (measured, 12), `rg2.state` (measured opening and rate, 2), `configuration`
-    (CellConfiguration), `operator.body` (BodySpheres), `external_stop` (1: the robot's
-    protective-stop input), `safety.unlock` (1: unlock a protective stop; connected, a person
+    `ur3.state` (measured, 12), `rg2.state` (measured opening and rate, 2), `held_part`
+    (str: the part the configuration sensor reads in the gripper, "" for none),
+    `operator.body` (BodySpheres), `external_stop` (1: the robot's protective-stop input),
+    `safety.unlock` (1: unlock a protective stop; connected, a person
     unlocks there and only there; unconnected, the simulated operator does), `command_stale`
     (1 while the arm's commands have stopped coming; unconnected, never).
     Output ports: `desired_state` (12, for the arm's servo), `safety.stop` (1), `safety.mode`
@@ -371,9 +372,7 @@ class SafetyFunction(LeafSystem):
         self._velocity = self.DeclareVectorInputPort("ur3.velocity", _N)
         self._arm = self.DeclareVectorInputPort("ur3.state", 2 * _N)
         self._gripper = self.DeclareVectorInputPort("rg2.state", 2)
-        self._configuration = self.DeclareAbstractInputPort(
-            "configuration", AbstractValue.Make(CellConfiguration())
-        )
+        self._held_part = self.DeclareAbstractInputPort("held_part", AbstractValue.Make(""))
         self._body = self.DeclareAbstractInputPort("operator.body", AbstractValue.Make(NOBODY))
         self._external = self.DeclareVectorInputPort("external_stop", 1)
         self._unlock = self.DeclareVectorInputPort("safety.unlock", 1)
@@ -423,7 +422,7 @@ class SafetyFunction(LeafSystem):
             q,
             v,
             float(self._gripper.Eval(context)[0]),
-            self._configuration.Eval(context).held(),
+            self._held_part.Eval(context) or None,
             self._body.Eval(context),
             self._config,
             self._acc,

@@ -154,8 +154,9 @@ class SlotMonitor(LeafSystem):
     Input ports: `contact_results` (ContactResults), `body_poses` (list of RigidTransform, by
     BodyIndex), both from the MultibodyPlant; `query_object` (the SceneGraph's, optional: with
     it, a part's boss and a seat floor whose contact is filtered out touch when they are within
-    `touch` of each other). Output port: `slot_configuration` (CellConfiguration: every part's
-    status and its body's world pose, read from `body_poses`).
+    `touch` of each other). Output ports: `slot_configuration` (CellConfiguration: every part's
+    status and its body's world pose, read from `body_poses`); `held_part` (str: the part
+    `slot_configuration` reads as held, "" for none, found without reading every seat).
 
     Args:
         plant: the finalized cell plant.
@@ -197,6 +198,9 @@ class SlotMonitor(LeafSystem):
             "slot_configuration",
             lambda: AbstractValue.Make(CellConfiguration()),
             self._calc_configuration,
+        )
+        self.DeclareAbstractOutputPort(
+            "held_part", lambda: AbstractValue.Make(""), self._calc_held_part
         )
 
     def _read_plate(self, plant: MultibodyPlant, inspector) -> None:
@@ -283,14 +287,17 @@ class SlotMonitor(LeafSystem):
                 touching[self._owner[b]].add(a)
         return touching
 
-    def _touch_skipped(self, query: QueryObject, touching: dict[str, set[GeometryId]]) -> None:
+    def _touch_skipped(
+        self, query: QueryObject, touching: dict[str, set[GeometryId]], parts=None
+    ) -> None:
         """Add to `touching` the seat floors a part's boss touches where their contact is
-        filtered out: within `touch` of each other (a signed-distance query ignores filters)."""
+        filtered out: within `touch` of each other (a signed-distance query ignores filters);
+        for the `parts` named (default: all)."""
         inspector = query.inspector()
         floors = [(None, s.floor) for s in self._slots.values()]
         floors += [(host, s.floor) for host, seats in self._host_seats.items() for s in seats]
-        for part, bosses in self._bosses.items():
-            for boss in bosses:
+        for part in self._bosses if parts is None else parts:
+            for boss in self._bosses[part]:
                 for host, floor in floors:
                     if host == part or floor in touching[part]:
                         continue
@@ -389,13 +396,42 @@ class SlotMonitor(LeafSystem):
                 return True
         return False
 
-    def _calc_configuration(self, context, output) -> None:
-        contacts = self.get_input_port(0).Eval(context)
-        poses = self.get_input_port(1).Eval(context)
-        touching = self._touches(contacts)
+    def _touching(self, context, parts=None) -> dict[str, set[GeometryId]]:
+        """What each part touches: its contacts, and the seat floors its bosses stand on
+        where that contact is filtered out (`_touch_skipped`, for the `parts` named)."""
+        touching = self._touches(self.get_input_port(0).Eval(context))
         if self._query.HasValue(context):
-            self._touch_skipped(self._query.Eval(context), touching)
-        X_W_plate = poses[int(next(iter(self._slots.values())).body_index)]
+            self._touch_skipped(self._query.Eval(context), touching, parts)
+        return touching
+
+    def _plate_pose(self, poses) -> RigidTransform:
+        return poses[int(next(iter(self._slots.values())).body_index)]
+
+    def _calc_held_part(self, context, output) -> None:
+        # The status `_calc_configuration` gives, for the one part it could read as held:
+        # in the gripper by `_held` (the fingers' contacts are never filtered out, so the
+        # plain contacts tell) and seated neither on the plate nor on a host. A run's safety
+        # check samples this at every monitor step, where the whole reading cost a
+        # millisecond.
+        poses = self.get_input_port(1).Eval(context)
+        contacts = self._touches(self.get_input_port(0).Eval(context))
+        for part, body in self._parts.items():
+            X_WP = poses[int(body.index())]
+            if not self._held(part, X_WP, poses, contacts[part]):
+                continue
+            touching = self._touching(context, (part,))[part]
+            X_W_plate = self._plate_pose(poses)
+            if self._base_placement(part, X_WP, X_W_plate, touching) is None and (
+                self._host_placement(part, X_WP, poses, X_W_plate, touching, {}) is None
+            ):
+                output.set_value(part)
+                return
+        output.set_value("")
+
+    def _calc_configuration(self, context, output) -> None:
+        poses = self.get_input_port(1).Eval(context)
+        touching = self._touching(context)
+        X_W_plate = self._plate_pose(poses)
         placements: dict[str, PartPlacement] = {}
         for part, body in self._parts.items():
             found = self._base_placement(part, poses[int(body.index())], X_W_plate, touching[part])
