@@ -419,6 +419,11 @@ class _SafetySampler:
     def __init__(self, loop: ClosedLoop, period: float):
         self.trace = SafetyTrace(period)
         self._cell, self._controller = loop.cell.diagram, loop.controller.diagram
+        self._held = (
+            self._cell.GetOutputPort("sim.held_part")
+            if self._cell.HasOutputPort("sim.held_part")
+            else None
+        )
 
     def sample(self, root, now: float) -> None:
         """Take a sample if one is due at `now`."""
@@ -436,10 +441,18 @@ class _SafetySampler:
                 v=np.array(arm[n:]),
                 commanded=np.array(commanded),
                 opening=float(self._truth("rg2.state_measured").Eval(cell)[0]),
-                carrying=self._cell.GetOutputPort("sim.held_part").Eval(cell) or None,
+                carrying=self._carrying(cell),
                 body=self._truth("operator.body").Eval(cell),
             )
         )
+
+    def _carrying(self, cell) -> str | None:
+        """The part in the gripper: the contact sensor's `sim.held_part` (cheaper than its
+        whole reading), or, from a station that does not export it (over LCM), the held part
+        of its configuration."""
+        if self._held is not None:
+            return self._held.Eval(cell) or None
+        return self._truth("configuration").Eval(cell).held()
 
     def _truth(self, name: str):
         """The cell's port `name`, or its exact value `sim.<name>` where a sensor model
