@@ -45,14 +45,21 @@ REDUCED_SPEED = 0.25  # m/s
 def entry_scales(gap, a0, a1, a2) -> np.ndarray:
     """Per entry, the largest s ∈ [0, 1] with a0 + a1 s + a2 s² ≤ gap (0 if none).
 
-    Vectorised over the entries; the root is taken in the form 2 (g − a0) / (a1 + √(a1² +
-    4 a2 (g − a0))), which is exact for a2 = 0 and free of cancellation for small a2."""
+    Vectorised over the entries; the larger root is taken in the form 2 (g − a0) / (a1 + √D),
+    D = a1² + 4 a2 (g − a0), which is exact for a2 = 0 and free of cancellation for small a2.
+    A negative a1 (a quadratic that dips first, a2 > 0; `planned_scales`) is allowed where
+    a0 ≤ gap: there the root is (√D − a1) / (2 a2), the form free of cancellation for it."""
     gap, a0, a1, a2 = np.broadcast_arrays(
         *(np.atleast_1d(np.asarray(x, dtype=float)) for x in (gap, a0, a1, a2))
     )
     room = gap - a0
-    root = a1 + np.sqrt(np.maximum(a1 * a1 + 4.0 * a2 * np.maximum(room, 0.0), 0.0))
-    scales = np.clip(2.0 * room / np.maximum(root, _TINY), 0.0, 1.0)
+    disc = np.sqrt(np.maximum(a1 * a1 + 4.0 * a2 * np.maximum(room, 0.0), 0.0))
+    root = np.where(
+        a1 >= 0.0,
+        2.0 * room / np.maximum(a1 + disc, _TINY),
+        (disc - a1) / np.maximum(2.0 * a2, _TINY),
+    )
+    scales = np.clip(root, 0.0, 1.0)
     return np.where(a0 + a1 + a2 <= gap, 1.0, np.where(room < 0.0, 0.0, scales))
 
 

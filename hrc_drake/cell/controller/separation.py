@@ -75,7 +75,6 @@ NEAR_AHEAD = 0.1  # m
 _SLOWEST = 1e-9  # m/s: a point this slow toward the person never limits the plan
 # A planned scale stands this far under its root, so that rounding never puts S_p past the room.
 _ROOT_SLACK = 1e-9
-_TINY = 1e-300
 
 
 @dataclass(frozen=True)
@@ -195,21 +194,13 @@ def planned_scales(v_h, gap, v_r1, t_rp: float, t_s1: float, config: SafetyConfi
         (s_cap >= 1.0) | (rising[0] + rising[1] * at + rising[2] * at * at > room)
     )
     c0, c1, c2 = (np.where(in_rising, a, b) for a, b in zip(rising, at_cap, strict=True))
-    scales = np.minimum(_larger_root(c0, c1, c2, room), entry_scales(room, const, r1, r2))
+    # Between full and blocked, c0 ≤ room on the piece chosen (the at-cap line is a tangent
+    # under the convex rising piece), so each piece's larger root is the one sought.
+    scales = np.minimum(entry_scales(room, c0, c1, c2), entry_scales(room, const, r1, r2))
     scales = np.clip(scales - _ROOT_SLACK, 0.0, 1.0)
     full = planned_distance(1.0, v0, gap, v_r1, t_rp, t_s1, config) <= room
     blocked = planned_distance(0.0, v0, gap, v_r1, t_rp, t_s1, config) > room
     return np.where(full, 1.0, np.where(blocked, 0.0, scales))
-
-
-def _larger_root(c0, c1, c2, level):
-    """Per entry, the larger root s of c0 + c1 s + c2 s² = `level` (c2 ≥ 0, and c2 > 0 where
-    c1 < 0), each in its form free of cancellation."""
-    d = np.sqrt(np.maximum(c1 * c1 + 4.0 * c2 * (level - c0), 0.0))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        up = 2.0 * (level - c0) / np.maximum(c1 + d, _TINY)
-        down = (d - c1) / np.maximum(2.0 * c2, _TINY)
-    return np.where(c1 >= 0.0, up, down)
 
 
 def assess(

@@ -396,13 +396,17 @@ class SlotMonitor(LeafSystem):
                 return True
         return False
 
-    def _touching(self, context, parts=None) -> dict[str, set[GeometryId]]:
+    def _touching(self, context) -> dict[str, set[GeometryId]]:
         """What each part touches: its contacts, and the seat floors its bosses stand on
-        where that contact is filtered out (`_touch_skipped`, for the `parts` named)."""
+        where that contact is filtered out (`_add_skipped`)."""
         touching = self._touches(self.get_input_port(0).Eval(context))
+        self._add_skipped(context, touching)
+        return touching
+
+    def _add_skipped(self, context, touching, parts=None) -> None:
+        """`_touch_skipped` for the `parts` named (default: all), where the query is wired."""
         if self._query.HasValue(context):
             self._touch_skipped(self._query.Eval(context), touching, parts)
-        return touching
 
     def _plate_pose(self, poses) -> RigidTransform:
         return poses[int(next(iter(self._slots.values())).body_index)]
@@ -414,15 +418,16 @@ class SlotMonitor(LeafSystem):
         # check samples this at every monitor step, where the whole reading cost a
         # millisecond.
         poses = self.get_input_port(1).Eval(context)
-        contacts = self._touches(self.get_input_port(0).Eval(context))
+        touching = self._touches(self.get_input_port(0).Eval(context))
         for part, body in self._parts.items():
             X_WP = poses[int(body.index())]
-            if not self._held(part, X_WP, poses, contacts[part]):
+            if not self._held(part, X_WP, poses, touching[part]):
                 continue
-            touching = self._touching(context, (part,))[part]
+            self._add_skipped(context, touching, (part,))
             X_W_plate = self._plate_pose(poses)
-            if self._base_placement(part, X_WP, X_W_plate, touching) is None and (
-                self._host_placement(part, X_WP, poses, X_W_plate, touching, {}) is None
+            mine = touching[part]
+            if self._base_placement(part, X_WP, X_W_plate, mine) is None and (
+                self._host_placement(part, X_WP, poses, X_W_plate, mine, {}) is None
             ):
                 output.set_value(part)
                 return
