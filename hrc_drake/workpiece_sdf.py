@@ -15,6 +15,18 @@ Geometry (metres):
   the seat floor, its underside `SEAT_GAP` above the surrounding surface. So the part's weight is
   carried by the seat floor alone, and a seat frame sits where the part's underside (its body
   origin) is when seated: `X_W_part = X_W_seat` holds at rest.
+- A boss's collision box reaches `BOSS_ROOT` up into its part (the same body: no contact
+  between them); what shows is the boss under the part. A compliant box's pressure field rises
+  from its faces to half its least dimension in, and past that its gradient turns and pulls a
+  body further in. A part that falls out of the gripper (a lost grip) strikes at up to 1 m/s,
+  10 mm in one 10 ms step. With the boss's box only its 4.5 mm height, an oval flange dropped
+  turned across a pocket sank its boss between the pocket's rims and stayed wedged there, held
+  by balanced contact forces of 0.7-1.3 kN that no grasp lifts: 9 of 24 drops at 5e6 Pa, 12 of
+  24 at 1e7 Pa (benchmarks/bench_contact.py, section 5), and every lost grip the 4-slot cell
+  did not recover at 1e7 Pa. Reaching up 8 mm, its field is 6.25 mm deep, its modulus scaled
+  so that it presses as before (`BOSS_MODULUS_SCALE`), and the same drops wedge none. (Rims
+  and floors reaching down through the plate did as much for the drops, but changed how a
+  flange let go above a host's row settles: not taken.)
 - Every collision geometry is compliant hydroelastic (its material is the scenario's
   `physics.contact`, applied by the station), the plate and the tray too, although they never
   move: rigid ones would be cheaper, but a part let go a few mm above a rigid seat moves more
@@ -44,6 +56,22 @@ POCKET_CLEARANCE = 0.0015
 POCKET = (BOSS[0] + 2 * POCKET_CLEARANCE, BOSS[1] + 2 * POCKET_CLEARANCE)
 FLOOR_SLACK = 0.001  # the slab under a pocket floor stays this far below it: only the floor touches
 SEAT_THICKNESS = 0.003
+# How far a boss's collision box reaches up into its part: below the least part thickness (the
+# oval flange's and the bar's 10 mm) and below a host's pocket floors (12 mm).
+BOSS_ROOT = 0.008
+# A compliant box's pressure rises to its modulus half its least dimension in, so the deeper
+# box alone would press 2.8 times softer per millimetre than the boss did, and a flange let
+# go above a host's row then caught on the rim (F01 on S12 read misplaced, 3.1 mm off). Its
+# modulus is the scenario's times this ratio of the depths: it presses as the 4.5 mm boss did,
+# only its field turns deeper (the station applies it: hrc_drake.cell.station.build).
+BOSS_MODULUS_SCALE = (BOSS[2] + BOSS_ROOT) / BOSS[2]
+BOSS_NAME = "boss"  # a boss's collision name: "boss", or "boss_<i>" on a part with several
+
+
+def is_boss(geometry_name: str) -> bool:
+    """Whether a collision geometry (its SceneGraph name, `<model>::<name>`) is a part's boss."""
+    return geometry_name.rsplit("::", 1)[-1].split("_")[0] == BOSS_NAME
+
 
 PLATE_WIDTH, PLATE_THICKNESS = 0.120, 0.015
 PLATE_END = 0.070  # plate beyond the first and last slot centres (0.300 m long for 3 slots)
@@ -62,6 +90,7 @@ ALUMINIUM_DENSITY = 2700.0
 # 12.5 mm either side of the tcp (models/rg2/rg2.sdf), so this keeps their lower edge 1.5 mm above
 # the underside, 2 mm above the surface a seated part sits on.
 GRASP_HEIGHT = 0.014
+BOSS_RGBA = "0.45 0.45 0.5 1"
 
 
 @dataclass(frozen=True)
@@ -242,11 +271,11 @@ def _bosses(bosses: list[float]) -> list[str]:
     parts = []
     bh = BOSS[2]
     for i, x in enumerate(bosses, start=1):
-        boss = Box(
-            f"boss_{i}" if len(bosses) > 1 else "boss", (BOSS[0], BOSS[1], bh), (x, 0, -bh / 2)
-        )
-        parts.append(_collision_box(boss, compliant=True))
-        parts.append(_visual_box(boss, "0.45 0.45 0.5 1"))
+        name = f"{BOSS_NAME}_{i}" if len(bosses) > 1 else BOSS_NAME
+        # The collision box reaches up into the part (the module docstring).
+        root = Box(name, (BOSS[0], BOSS[1], bh + BOSS_ROOT), (x, 0, (BOSS_ROOT - bh) / 2))
+        parts.append(_collision_box(root, compliant=True))
+        parts.append(_visual_box(Box(name, (BOSS[0], BOSS[1], bh), (x, 0, -bh / 2)), BOSS_RGBA))
     return parts
 
 

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.inverse_kinematics import InverseKinematics
+from pydrake.multibody.math import SpatialVelocity
 from pydrake.multibody.parsing import PackageMap
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.solvers import Solve
@@ -91,6 +92,16 @@ def _set_parts(station, context, poses: dict[str, RigidTransform]) -> None:
     plant_context = station.plant.GetMyContextFromRoot(context)
     for part, X_WP in poses.items():
         station.plant.SetFreeBodyPose(plant_context, station.part_body(part), X_WP)
+
+
+def _bodies_of(plant, station, info) -> set:
+    """The indices of the two bodies of a hydroelastic contact."""
+    inspector = station.scene_graph.model_inspector()
+    surface = info.contact_surface()
+    return {
+        plant.GetBodyFromFrameId(inspector.GetFrameId(g)).index()
+        for g in (surface.id_M(), surface.id_N())
+    }
 
 
 def test_every_model_parses_offline():
@@ -248,6 +259,43 @@ def test_straddling_flange_is_misplaced(workcell):
     reading = workcell.configuration(context)
     assert reading.status("oval_flange_1") is PartStatus.MISPLACED
     assert reading.tokens() == frozenset()
+
+
+@pytest.mark.parametrize("modulus", [5e6, 1e7])
+def test_a_flange_dropped_across_a_pocket_rests_on_its_rims_at_either_modulus(modulus):
+    """A part that falls out of the gripper turned across a pocket lands on the rims, whatever
+    the modulus; with a boss's collision box only its 4.5 mm height (hrc_drake.workpiece_sdf)
+    its boss sank between the rims and stayed wedged there by kilonewtons of balanced contact
+    force, which no grasp lifts (the first and the sixth of these drops, at 1e7 Pa; the first
+    at 5e6 Pa)."""
+    text = f"{{physics: {{contact: {{hydroelastic_modulus: {modulus:g}}}}}}}"
+    station = make_cell_station(station_scenario(load_cell_scenario(None, [text]), robot=False))
+    plant, body = station.plant, station.part_body("oval_flange_1")
+    X_W_slot = plant.GetFrameByName("slot_1").CalcPoseInWorld(plant.CreateDefaultContext())
+    weight = body.default_mass() * 9.81
+    rng = np.random.default_rng(0)
+    for drop in range(6):
+        yaw, speed = rng.uniform(0.6, math.pi / 2), rng.uniform(0.5, 1.2)
+        (dx, dy), tilt = rng.uniform(-0.01, 0.01, 2), rng.uniform(-0.1, 0.1)
+        context = station.create_default_context()
+        plant_context = plant.GetMyContextFromRoot(context)
+        X_drop = X_W_slot @ RigidTransform(RollPitchYaw(tilt, 0, yaw), [dx, dy, 0.006])
+        plant.SetFreeBodyPose(plant_context, body, X_drop)
+        plant.SetFreeBodySpatialVelocity(
+            plant_context, body, SpatialVelocity([0, 0, 0], [0, 0, -speed])
+        )
+        simulate_station(station, context, 1.0)
+        rest = X_W_slot.InvertAndCompose(plant.EvalBodyPoseInWorld(plant_context, body))
+        contacts = plant.get_contact_results_output_port().Eval(plant_context)
+        on_part = [
+            contacts.hydroelastic_contact_info(i)
+            for i in range(contacts.num_hydroelastic_contacts())
+            if body.index() in _bodies_of(plant, station, contacts.hydroelastic_contact_info(i))
+        ]
+        largest = max(np.linalg.norm(c.F_Ac_W().translational()) for c in on_part)
+        # On the rims: the boss (4.5 mm) stands on the plate's top, 4 mm above the seat floor.
+        assert rest.translation()[2] > 0.002, (drop, rest.translation())
+        assert largest < 5 * weight, (drop, largest)
 
 
 @pytest.mark.slow

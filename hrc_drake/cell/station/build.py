@@ -93,6 +93,7 @@ from hrc_drake.tasks.assembly import SpecError
 from hrc_drake.tasks.decide import Operator
 from hrc_drake.tasks.graph import StateSpace, generate_states
 from hrc_drake.tasks.spec import load_spec
+from hrc_drake.workpiece_sdf import BOSS_MODULUS_SCALE, is_boss
 
 _SAP_FAMILY = ("sap", "similar", "lagged")
 
@@ -146,12 +147,15 @@ def _set_servo_gains(plant: MultibodyPlant, instances, scenario: Scenario) -> No
     plant.set_gravity_enabled(instances[GRIPPER], False)
 
 
-def _apply_friction(plant: MultibodyPlant, scene_graph, scenario: Scenario) -> None:
+def _apply_material(plant: MultibodyPlant, scene_graph, scenario: Scenario) -> None:
     """Give every collision geometry the scenario's friction but the gripper's fingers, whose
     rubber pads state their own (models/rg2/rg2.sdf). Drake's parsers write a friction of 1.0
-    on every geometry whose model states none, so SceneGraph's defaults would never apply."""
+    on every geometry whose model states none, so SceneGraph's defaults would never apply.
+    A part's boss, whose box reaches up into the part, takes the scenario's modulus scaled by
+    `BOSS_MODULUS_SCALE` (hrc_drake.workpiece_sdf)."""
     contact = scenario.physics.contact
     friction = CoulombFriction(contact.static_friction, contact.dynamic_friction)
+    boss_modulus = contact.hydroelastic_modulus * BOSS_MODULUS_SCALE
     inspector = scene_graph.model_inspector()
     for index in range(plant.num_bodies()):
         body = plant.get_body(BodyIndex(index))
@@ -162,6 +166,8 @@ def _apply_friction(plant: MultibodyPlant, scene_graph, scenario: Scenario) -> N
         for gid in plant.GetCollisionGeometriesForBody(body):
             props = ProximityProperties(inspector.GetProximityProperties(gid))
             props.UpdateProperty("material", "coulomb_friction", friction)
+            if is_boss(inspector.GetName(gid)):
+                props.UpdateProperty("hydroelastic", "hydroelastic_modulus", boss_modulus)
             scene_graph.AssignRole(plant.get_source_id(), gid, props, RoleAssign.kReplace)
 
 
@@ -179,7 +185,7 @@ def _add_plant(
     )
     robot = scenario.station.robot
     instances = add_cell_models(plant, design, include_robot=robot)
-    _apply_friction(plant, scene_graph, scenario)
+    _apply_material(plant, scene_graph, scenario)
     if robot:
         _set_servo_gains(plant, instances, scenario)
     obstacles = mounted_obstacles(scenario.faults) if robot else ()

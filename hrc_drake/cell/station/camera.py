@@ -18,6 +18,12 @@ frame's estimate, and its `stamp` the newest frame whose every part's view agree
 verdict reported: the controller, which waits for a reading of the cell after a part came to
 rest, waits for a stamp past that instant (`CellConfiguration.current_at`).
 
+A part the operator places by hand, which the simulated station puts in its place at once, is
+told to the camera (`CameraSensor.part_handled`): it starts that part's still mean again, as a
+camera that saw the part lifted and set down would. Without it, a part set down by hand 1.2 mm
+lower than where it had rested (on debris, cleared) was read misplaced from the old mean, its
+stamp current.
+
 The contact sensor stays the ground truth (`sim.configuration`): the camera notes its verdict
 beside it at every frame (`hrc_drake.cell.station.camera_score.CameraHistory`) and the run
 scores it (`CameraSensor.score`: false and missed detections, the detection latency).
@@ -151,6 +157,22 @@ class CameraSensor(SampledSensor):
     def _calc_reading(self, context, output) -> None:
         sample = self._current(context)
         output.set_value(CellConfiguration() if sample is None else sample.value.configuration)
+
+    def part_handled(self, context, part: str) -> None:
+        """The operator took `part` in hand (simulator only: the station puts a part placed
+        by hand in its place at once, where a camera would see it lifted and set down): in
+        this system's mutable `context`, its still estimates go, so that its next frames
+        start a new mean, and a seated look at it is tentative until they tell, as after
+        any move (`hrc_drake.cell.station.camera_rest`)."""
+        state = self.state(context)
+        if not state.samples:
+            return
+        last = state.samples[-1]
+        reading: CameraReading = last.value
+        stills = {p: still for p, still in reading.views.stills.items() if p != part}
+        handled = replace(reading, views=replace(reading.views, stills=stills))
+        samples = (*state.samples[:-1], replace(last, value=handled))
+        context.get_mutable_abstract_state(self._state).set_value(replace(state, samples=samples))
 
     def history(self, context) -> CameraHistory:
         """The camera's verdicts beside the truth's, up to its newest frame, in its `context`."""

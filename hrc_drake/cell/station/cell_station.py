@@ -149,6 +149,7 @@ class CellStation:
                 X = self.frames.homes[part] if task == UNDO else self._seat_by_hand(config, task)
                 self.plant.SetFreeBodyPose(plant_context, body, X)
                 self.plant.SetFreeBodySpatialVelocity(plant_context, body, SpatialVelocity.Zero())
+                self._handled_by_hand(context, part)
             for other, placement in config.placements:
                 if other != part and placement.status in (
                     PartStatus.TRANSIT,
@@ -159,7 +160,14 @@ class CellStation:
                     self.plant.SetFreeBodySpatialVelocity(
                         plant_context, body, SpatialVelocity.Zero()
                     )
+                    self._handled_by_hand(context, other)
             self.operator.placed(operator_context, part)
+
+    def _handled_by_hand(self, context: Context, part: str) -> None:
+        """Tell the camera, if the station has one, that the operator moved `part` by hand."""
+        if self.diagram.HasSubsystemNamed(CAMERA_SYSTEM):
+            camera = self.diagram.GetSubsystemByName(CAMERA_SYSTEM)
+            camera.part_handled(camera.GetMyMutableContextFromRoot(context), part)
 
     def _clear_debris(self, context: Context, plant_context) -> None:
         """The operator, doing a task by hand, takes any debris out of the pocket first (its
