@@ -25,8 +25,8 @@ Geometry (metres):
   24 at 1e7 Pa (benchmarks/bench_contact.py, section 5), and every lost grip the 4-slot cell
   did not recover at 1e7 Pa. Reaching up 8 mm, its field is 6.25 mm deep, its modulus scaled
   so that it presses as before (`BOSS_MODULUS_SCALE`), and the same drops wedge none. (Rims
-  and floors reaching down through the plate did as much for the drops, but changed how a
-  flange let go above a host's row settles: not taken.)
+  and floors reaching down through the plate also kept them from wedging, but would make the
+  plate press softer: not kept.)
 - Every collision geometry is compliant hydroelastic (its material is the scenario's
   `physics.contact`, applied by the station), the plate and the tray too, although they never
   move: rigid ones would be cheaper, but a part let go a few mm above a rigid seat moves more

@@ -36,6 +36,7 @@ from hrc_drake.robot_models import (
     set_rg2_opening,
 )
 from hrc_drake.robot_names import UR3_JOINTS, UR3_VELOCITY_LIMITS
+from hrc_drake.workpiece_sdf import BOSS_MODULUS_SCALE, is_boss
 
 sys.path.insert(0, str(Path(__file__).parent))
 from rg2_sim_device import SimulatedRg2
@@ -318,7 +319,8 @@ CONTACT = (
 def test_every_collision_geometry_has_the_scenarios_friction_but_the_fingers() -> None:
     """The models state only what differs from the scenario's contact material: the RG2's
     fingers and rubber pads (1.0). The station gives every other geometry the scenario's
-    friction, and SceneGraph its other contact values as defaults (seen in a context)."""
+    friction, and SceneGraph its other contact values as defaults (seen in a context); the
+    parts' bosses the scenario's modulus times BOSS_MODULUS_SCALE."""
     scenario = load_cell_scenario(None, CONTACT)
     station = make_cell_station(scenario)
     context = station.diagram.CreateDefaultContext()
@@ -328,7 +330,7 @@ def test_every_collision_geometry_has_the_scenarios_friction_but_the_fingers() -
     ids = inspector.GetAllGeometryIds(Role.kProximity)
     assert len(ids) >= 14
     contact = scenario.physics.contact
-    fingers, others = [], []
+    fingers, others, bosses = [], [], 0
     for geometry in ids:
         props = inspector.GetProximityProperties(geometry)
         name = inspector.GetName(geometry)
@@ -338,7 +340,12 @@ def test_every_collision_geometry_has_the_scenarios_friction_but_the_fingers() -
         (fingers if on_finger else others).append((name, mu))
         if props.HasProperty("hydroelastic", "hydroelastic_modulus"):
             modulus = props.GetProperty("hydroelastic", "hydroelastic_modulus")
-            assert modulus == contact.hydroelastic_modulus, name
+            scale = BOSS_MODULUS_SCALE if is_boss(name) else 1.0
+            assert modulus == pytest.approx(contact.hydroelastic_modulus * scale), name
+            bosses += is_boss(name)
+    # Every boss (one under each oval flange, two under the square) presses as its 4.5 mm did:
+    # the scenario's modulus scaled by its box's depth (hrc_drake.workpiece_sdf).
+    assert bosses == 4
     assert len(fingers) == 4 and {mu for _, mu in fingers} == {(1.0, 1.0)}
     scenario_friction = (contact.static_friction, contact.dynamic_friction)
     wrong = sorted({(name, mu) for name, mu in others if mu != scenario_friction})
