@@ -69,10 +69,15 @@ window.cancelAnimationFrame = (id) => clearTimeout(id);
 # Our buttons sit in the panel's top level; Drake's own (save_scene, …) are in folders.
 BUTTONS = ".dg.main > ul > li.cr.function"
 STEP_TIMEOUT = 180.0  # s; a task at the wall clock's pace is ~8 s, planning on a busy CI more
+# The live runs go at three times the wall clock's pace (`--live 3`): what the page shows and
+# what a click does are the same at any pace, and each run takes a third of the time (a
+# loaded machine that cannot keep up runs as fast as it can).
+LIVE_PACE = "3"
 # A question left unanswered for `run.indication_timeout` (10 s) is sent to the browser afresh,
 # its buttons deleted and added again (tests/test_live.py tests that): a page slowed by a loaded
-# machine must not take that for a button out of view, so these runs ask again only after 60 s.
-SLOW_PAGE = "{run: {indication_timeout: 60.0}}"
+# machine must not take that for a button out of view, so these runs ask again only after 60 s
+# of the wall clock (180 simulated seconds at the live pace).
+SLOW_PAGE = "{run: {indication_timeout: 180.0}}"
 # Drake's MeshcatAnimation records at 64 frames per second (MeshcatVisualizerParams default).
 RECORDING_FRAME = 1.0 / 64
 
@@ -322,7 +327,7 @@ def _drive_live_run(chromium, tmp_path, frames, scenario, clicks, script, screen
     record = tmp_path / "live.html"
     # Port 0: the OS picks a free port as Meshcat binds it. A port probed free beforehand can be
     # taken by another test's socket before the run starts (CI met it).
-    args = ["--live", "--lean", "--scenario", scenario, "--port", "0"]
+    args = ["--live", LIVE_PACE, "--lean", "--scenario", scenario, "--port", "0"]
     run = SimulateProcess(*args, "--scenario-text", SLOW_PAGE, "--record", str(record), "--json")
     try:
         url = run.wait_for_line(r"live: open (http://\S+) in a web browser", STEP_TIMEOUT)[1]
@@ -520,10 +525,10 @@ def test_a_person_does_a_task_handed_over_and_unlocks_a_protective_stop(chromium
     from hrc_drake.hri.pendant import UNLOCK_LABEL
 
     text = (
-        "{interaction: {mode: wait}, run: {recover_tries: 0, indication_timeout: 60.0}, "
+        "{interaction: {mode: wait}, run: {recover_tries: 0, indication_timeout: 180.0}, "
         "faults: [!GripLost {task: 1}, !ProtectiveStop {task: 2, after: 1.0, duration: 0.5}]}"
     )
-    args = ["--live", "--lean", "--scenario", "row1-optimal", "--port", "0"]
+    args = ["--live", LIVE_PACE, "--lean", "--scenario", "row1-optimal", "--port", "0"]
     run = SimulateProcess(*args, "--scenario-text", text, "--json")
     try:
         url = run.wait_for_line(r"live: open (http://\S+) in a web browser", STEP_TIMEOUT)[1]

@@ -41,6 +41,11 @@ def test_table2_row_in_the_cell(row, space):
     assert result.final_tokens in _terminal_configurations(space)
     assert result.final_tokens == frozenset(result.states[-1])
     assert result.collisions == []
+    # The operator's body shares the desk (a lean row's default): separation kept by the
+    # controller's monitor and by the run's own check, and never a touch.
+    assert result.safety.violations == 0 and result.safety.body_contacts == 0
+    assert result.safety_check.beyond_contact_speed == 0 and result.safety_check.body_contacts == 0
+    assert result.safety.min_separation > 0
     # Carried by friction alone, no part was dropped or let go off its seat on the way.
     assert not any("not in the gripper" in e or "does not sit" in e for e in result.events)
     # The operator's deviations are the scenario's; the cell shows what was really done.

@@ -19,6 +19,9 @@ from hrc_drake.tasks.tokens import UNDO
 umsgpack = pytest.importorskip("umsgpack")
 
 CATALOGUE = sorted((models_dir() / "assemblies").glob("*.yaml"))
+# The in-process live runs, at ten times the wall clock's pace: their clicks are injected at
+# simulated times, so the pace changes nothing they check (the browser tests run at 3).
+FAST_PACE = 10.0
 
 
 @pytest.mark.parametrize(
@@ -140,7 +143,10 @@ def test_a_live_run_follows_the_clicks_to_a_terminal_state(tmp_path, monkeypatch
     poll_now = LiveOperator.poll
     monkeypatch.setattr(LiveOperator, "poll", poll)
 
-    result = run_scenario(row, live=True, on_prompt=click, record=tmp_path / "live.html")
+    # The clicks come at simulated times, so the run need not wait for the wall clock.
+    result = run_scenario(
+        row, live=True, on_prompt=click, record=tmp_path / "live.html", pace=FAST_PACE
+    )
     assert result.error is None and result.done and not result.interrupted
     assert result.names == list(row.minimum_effort)
     assert [t.indicated for t in result.tasks] == ["F3", "S12", "F01"]
@@ -299,7 +305,7 @@ def test_a_live_run_goes_on_once_the_person_says_they_did_the_task_handed_over(m
 
     poll_now = LiveOperator.poll
     monkeypatch.setattr(LiveOperator, "poll", poll)
-    result = run_scenario(row, live=True, on_prompt=click)
+    result = run_scenario(row, live=True, on_prompt=click, pace=FAST_PACE)
     assert result.done and result.error is None, result.error
     assert [bool(t.handed_over) for t in result.tasks] == [True, False, False]
     assert "slipped out of the gripper 1 time;" in result.tasks[0].handed_over

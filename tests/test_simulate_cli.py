@@ -77,6 +77,20 @@ def test_bad_input_is_one_line_before_any_work(capsys, tmp_path, args, message):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize(
+    ("pace", "message"),
+    [("0", "0 is not a pace; give a real-time rate > 0"), ("fast", "'fast' is not a number")],
+)
+def test_a_live_pace_that_is_no_pace_is_one_line(capsys, pace, message):
+    """`--live PACE` takes a real-time rate > 0; anything else is refused by the parser, in
+    one line naming the flag, before any work."""
+    with pytest.raises(SystemExit) as exit_:
+        main(["simulate", "--live", pace, "--lean"])
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2
+    assert f"argument --live: {message}" in err and err.count("\n") == 1
+
+
 @pytest.mark.slow
 def test_still_past_the_end_of_the_run_is_an_error(capsys, tmp_path):
     still = tmp_path / "late.png"

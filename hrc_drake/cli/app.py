@@ -78,7 +78,8 @@ def probability(text: str) -> float:
 
 
 def pace(text: str) -> float:
-    """`--realtime PACE`: a real-time rate > 0 (NaN and infinity refused), as `discount`."""
+    """`--realtime PACE`, `--live PACE`: a real-time rate > 0 (NaN and infinity refused), as
+    `discount`."""
     value = _number(text)
     if not 0.0 < value < float("inf"):  # False for NaN too
         raise argparse.ArgumentTypeError(
@@ -303,10 +304,15 @@ def _add_simulate(p) -> None:
     )
     p.add_argument(
         "--live",
-        action="store_true",
+        nargs="?",
+        const=1.0,
+        default=None,
+        type=pace,
+        metavar="PACE",
         help="you are the operator: serve Meshcat (open the printed URL) and run at the wall "
-        "clock's pace; at every task boundary your click is the indication (anticipating, the "
-        "robot starts on its proposal meanwhile; with --interaction wait it waits for it)",
+        "clock's pace, or PACE times it (2: twice as fast, for a quick look); at every task "
+        "boundary your click is the indication (anticipating, the robot starts on its proposal "
+        "meanwhile; with --interaction wait it waits for it)",
     )
     p.add_argument(
         "--port",

@@ -127,7 +127,7 @@ def _run(args, checked: CheckedRun, record, still, live: bool, port):
     if url is None:
         return run_scenario(
             scenario, policy, record=record, progress=not live, still=still, live=live,
-            port=port, on_task=on_task, space=space,
+            port=port, on_task=on_task, space=space, pace=args.live if live else None,
         )  # fmt: skip
     if record is not None or still is not None or live:
         raise UsageError(
@@ -272,7 +272,7 @@ def _simulate(args) -> int:
             "(and start the station with --realtime), or use --live for a paced run here"
         )
     record, still = _outputs(args)
-    live = getattr(args, "live", False)
+    live = getattr(args, "live", None) is not None
     if getattr(args, "port", None) is not None and not (live or record is not None):
         raise UsageError(
             f"--port {args.port}: Meshcat serves only with --live or --record; add one of "

@@ -424,15 +424,25 @@ class _SafetySampler:
             if self._cell.HasOutputPort("sim.held_part")
             else None
         )
+        self._arm, self._opening, self._body, self._configuration = (
+            self._truth(name)
+            for name in (
+                "ur3.state_estimated",
+                "rg2.state_measured",
+                "operator.body",
+                "configuration",
+            )
+        )
+        self._commanded = self._controller.GetOutputPort("ur3.velocity")
 
     def sample(self, root, now: float) -> None:
         """Take a sample if one is due at `now`."""
         if not self.trace.due(now):
             return
         cell = self._cell.GetMyContextFromRoot(root)
-        arm = self._truth("ur3.state_estimated").Eval(cell)
+        arm = self._arm.Eval(cell)
         controller = self._controller.GetMyContextFromRoot(root)
-        commanded = self._controller.GetOutputPort("ur3.velocity").Eval(controller)
+        commanded = self._commanded.Eval(controller)
         n = len(commanded)
         self.trace.add(
             SafetySample(
@@ -440,9 +450,9 @@ class _SafetySampler:
                 q=np.array(arm[:n]),
                 v=np.array(arm[n:]),
                 commanded=np.array(commanded),
-                opening=float(self._truth("rg2.state_measured").Eval(cell)[0]),
+                opening=float(self._opening.Eval(cell)[0]),
                 carrying=self._carrying(cell),
-                body=self._truth("operator.body").Eval(cell),
+                body=self._body.Eval(cell),
             )
         )
 
@@ -452,7 +462,7 @@ class _SafetySampler:
         of its configuration."""
         if self._held is not None:
             return self._held.Eval(cell) or None
-        return self._truth("configuration").Eval(cell).held()
+        return self._configuration.Eval(cell).held()
 
     def _truth(self, name: str):
         """The cell's port `name`, or its exact value `sim.<name>` where a sensor model
@@ -468,10 +478,16 @@ def _monitor(loop: ClosedLoop):
     status_port = loop.controller.diagram.GetOutputPort("status")
     controller_context = loop.controller.diagram.GetMyContextFromRoot(root)
     period = setup.scenario.run.period
+    plant_step = setup.scenario.physics.time_step
     waits = setup.wait_for_planner
 
     def monitor(context) -> EventStatus:
         now = context.get_time()
+        if not (_on_the_period(now, period) or _on_the_period(now, plant_step)):
+            # A step that ends between the plant's steps and the controller's updates (a
+            # sensor's sample at its own rate, `sensors:`): neither the plant nor the
+            # controller has changed since, so there is nothing new to watch.
+            return EventStatus.DidNothing()
         status: SupervisorStatus = status_port.Eval(controller_context)
         if now >= watch.next_check:
             watch.next_check = now + period
@@ -501,6 +517,12 @@ def _monitor(loop: ClosedLoop):
         return EventStatus.DidNothing()
 
     return monitor
+
+
+def _on_the_period(now: float, period: float) -> bool:
+    """Whether `now` is one of the run's update times, a whole number of `period`s (event
+    times are sums of floats: within a microsecond)."""
+    return abs(now - round(now / period) * period) < 1e-6
 
 
 def _announce_live(meshcat: Meshcat) -> None:

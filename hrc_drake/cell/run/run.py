@@ -180,6 +180,7 @@ def run_scenario(
     motion_planner: MotionPlanner | None = None,
     port: int | None = None,
     space: StateSpace | None = None,
+    pace: float | None = None,
 ) -> RunResult:
     """Run one scenario through the station and its controller until a terminal state (or a
     stop, or Ctrl-C).
@@ -193,11 +194,12 @@ def run_scenario(
     the scenario's; `body_script` the operator body's (`hrc_drake.cell.station.operator_body`).
     `live`: a person is the operator, through Meshcat buttons (`hrc_drake.hri.live`), served on
     `port`, and unlocks a protective stop there (`hrc_drake.hri.pendant`); the run paces itself
-    to the wall clock; `on_prompt` is handed to the `LiveOperator`
-    (tests inject clicks from it). `on_task(record)` hears every task as the cell observed it.
-    While the operator bolts, the controller plans the tasks the policy predicts next (its
-    `predicted_tasks(state)` if it has one, else its `next_task(state)`). `space`: the state
-    space of the scenario's spec, when the caller built it already (it is built once).
+    to the wall clock (at `pace` times its speed, if given); `on_prompt` is handed to the
+    `LiveOperator` (tests inject clicks from it). `on_task(record)` hears every task as the
+    cell observed it. While the operator bolts, the controller plans the tasks the policy
+    predicts next (its `predicted_tasks(state)` if it has one, else its `next_task(state)`).
+    `space`: the state space of the scenario's spec, when the caller built it already (it is
+    built once).
     CellModelError (before any simulation) if the spec does not fit the cell."""
     if not isinstance(scenario, Scenario):
         scenario = load_cell_scenario(scenario, scenario_text)
@@ -215,7 +217,7 @@ def run_scenario(
         still=still,
         space=space,
     )
-    return loop.run(record, live, progress)
+    return loop.run(record, live, progress, pace=pace)
 
 
 def _meshcat(wanted: bool, live: bool, port: int | None) -> Meshcat | None:
