@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
 from hrc_drake.cell_models import TABLE, CellDesign
 from hrc_drake.motion import (
@@ -242,12 +242,27 @@ def test_a_part_lying_askew_on_the_tray_is_refused_when_a_finger_would_touch_the
     lying = pose_from_values(
         (0.232473, -0.175711, 0.022043, 0.771955, -0.104027, -0.060447, 0.624188)
     )
-    with pytest.raises(UnreachableError, match=r"fingers going down to it would touch the cell"):
+    with pytest.raises(UnreachableError, match=r"closing on it, would touch the cell"):
         planner.plan_task({"F1"}, "S23", instance="square_flange", source_pose=lying, q_start=None)
     # The same part lying flat on the table beside the tray, on its bosses, is planned.
     home = planner.frames.homes["square_flange"]
     flat = RigidTransform(home.rotation(), [0.46, home.translation()[1] + 0.08, 0.0045])
     assert planner.plan_task({"F1"}, "S23", instance="square_flange", source_pose=flat)
+
+
+def test_fingers_that_would_sweep_into_a_neighbour_as_they_close_are_refused(planner):
+    # Where a square flange came to rest flat in the tray beside oval_flange_2 after a lost
+    # grip (the fault benchmark's flange seed 1, !GripLost {task: 2, after: 0.81}): the left
+    # finger goes down 5 mm clear of the oval flange and ends 2.3 mm clear of it closed on the
+    # square one, but on the way the RG2's pad comes down its arc onto the oval flange's top
+    # (in the cell it tipped the flange over, counted a collision). The planner says so.
+    lying = RigidTransform(RollPitchYaw(0.0, 0.0, 1.671), [0.171, -0.2034, 0.0165])
+    with pytest.raises(UnreachableError, match=r"left_finger vs oval_flange_2"):
+        planner.plan_task({"F1"}, "S23", instance="square_flange", source_pose=lying)
+    # Lying as far from its home the other way, clear of the oval flanges, it is planned.
+    home = planner.frames.homes["square_flange"].translation()
+    away = RigidTransform(RollPitchYaw(0.0, 0.0, 1.671), home + np.array([-0.041, 0.0, 0.0]))
+    assert planner.plan_task({"F1"}, "S23", instance="square_flange", source_pose=away)
 
 
 @pytest.mark.parametrize(("task", "home"), [("F3", False), (UNDO, True)])

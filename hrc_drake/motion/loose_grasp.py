@@ -110,9 +110,9 @@ def reach_loose(
 
 
 def check_fingers_clear(scene: PlanningScene, part: str, down: list, task: str) -> None:
-    """UnreachableError when, going down to a part lying loose, the gripper would touch
-    what the part lies on (allowed near it, not into it: a part lying askew on the tray may
-    leave no room for a finger beside it)."""
+    """UnreachableError when, at the postures `down` going to a part lying loose (at the
+    scene's opening), the gripper would touch what the part lies on or beside (allowed near
+    it, not into it: a part lying askew on the tray may leave no room for a finger beside it)."""
     scene.set_allowed_contacts(((GRIPPER, part),))
     for q in down:
         gap, pair = scene.min_distance(q, max_distance=0.01)
@@ -121,5 +121,6 @@ def check_fingers_clear(scene: PlanningScene, part: str, down: list, task: str) 
                 task,
                 "grasp",
                 "collision",
-                f"{part} lies where the fingers going down to it would touch the cell ({pair})",
+                f"{part} lies where the fingers, going down to it or closing on it, would "
+                f"touch the cell ({pair})",
             )

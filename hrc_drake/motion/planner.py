@@ -62,6 +62,11 @@ from hrc_drake.motion.trajectory import (
 from hrc_drake.tasks.spec import load_spec
 from hrc_drake.tasks.tokens import UNDO
 
+# Openings at which a loose part's closing fingers are checked, evenly from the pick's opening
+# to the part's width: between two checks the pads move at most 3.4 mm down their arc and
+# 1.6 mm in (the square flange, 106 to 90 mm; `hrc_drake.rg2_kinematics.pad_height`).
+_CLOSING_CHECKS = 5
+
 
 @dataclass(frozen=True)
 class _Pick:
@@ -322,18 +327,17 @@ class MotionPlanner:
 
     def _check_loose_fingers(self, scene, move: TaskMove, measured: Measured, down) -> None:
         """UnreachableError when, going down to a part lying loose or closing on it, a finger
-        would touch what the part lies on: the RG2's pads come down as they close, so closed
-        on the part the fingers stand lower than they went down."""
+        would touch what the part lies on or beside: the RG2's pads come down on an arc as they
+        close, so a finger that went down clear beside a neighbour can sweep into its top
+        before it stands at the part (a regrasp tipped a flange in the tray so). The closing
+        is checked at `_CLOSING_CHECKS` openings down to the part's width."""
         part = move.instance
         check_fingers_clear(scene, part, down, move.task)
-        closed = Layout.of(
-            move.before,
-            None,
-            self.frames.widths[part],
-            {part: pose_from_values(measured.source)},
-            measured.obstacle,
-        )
-        check_fingers_clear(self.scene(closed), part, down[-1:], move.task)
+        lying = {part: pose_from_values(measured.source)}
+        start, width = scene.layout.opening, self.frames.widths[part]
+        for opening in np.linspace(start, width, _CLOSING_CHECKS + 1)[1:]:
+            closing = Layout.of(move.before, None, float(opening), lying, measured.obstacle)
+            check_fingers_clear(self.scene(closing), part, down[-1:], move.task)
 
     def _plan(self, configuration: frozenset[str], move: TaskMove, measured: Measured) -> Plan:
         opts, part = self.options, move.instance
