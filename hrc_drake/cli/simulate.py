@@ -127,7 +127,7 @@ def _run(args, checked: CheckedRun, record, still, live: bool, port):
     if url is None:
         return run_scenario(
             scenario, policy, record=record, progress=not live, still=still, live=live,
-            port=port, on_task=on_task, space=space, pace=args.live if live else None,
+            port=port, on_task=on_task, space=space, pace=args.live,
         )  # fmt: skip
     if record is not None or still is not None or live:
         raise UsageError(
