@@ -16,20 +16,26 @@ from hrc_drake.cell.run.safety_check import SafetySample, check_separation
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario, motion_options
 from hrc_drake.cell.station.build import make_cell_station
 from hrc_drake.cell.station.safety_function import (
+    PAYLOAD_TOLERANCE,
     RESTART_DELAY,
     UNLOCK_WAIT,
     Brake,
     SafetyFunctionState,
     SeparationVerdict,
     StopCause,
+    payload,
     step,
 )
+from hrc_drake.cell_models import CellDesign
 from hrc_drake.hri.activity import min_jerk
 from hrc_drake.hri.messages import Prompt, PromptKind
-from hrc_drake.motion.scene import TCP
+from hrc_drake.motion.options import MotionOptions
+from hrc_drake.motion.scene import TCP, load_cell_frames
+from hrc_drake.resources import models_dir
 from hrc_drake.robot_names import GRIPPER, UR3
 from hrc_drake.scenario.safety import SafetyConfig, SafetyFunctionConfig
 from hrc_drake.scenario.schema import ScenarioError
+from hrc_drake.tasks.spec import load_spec
 
 PERIOD = 0.02
 CONFIG = SafetyConfig()
@@ -134,6 +140,22 @@ def test_bad_safety_function_values_are_refused():
 
 
 # --- the station, driven by a controller that ignores its robot's safety mode --------------
+
+
+@pytest.mark.parametrize("assembly", sorted((models_dir() / "assemblies").glob("*.yaml")))
+def test_the_payload_is_read_from_the_grippers_opening_alone(assembly):
+    """Each part's grasp width, as the fingers close 0.6 mm inside it, is a payload of that
+    part (and of any part alike in width); open for a pick (the part's width and the fingers'
+    gap each side) or closed on nothing, the gripper carries none."""
+    spec = load_spec(assembly)
+    widths = load_cell_frames(CellDesign.of(spec)).widths
+    gap = MotionOptions().finger_gap
+    for part, width in widths.items():
+        alike = {p for p, w in widths.items() if abs(w - width) <= PAYLOAD_TOLERANCE - 0.0006}
+        assert part in payload(width - 0.0006, widths)
+        assert set(payload(width - 0.0006, widths)) >= alike
+        assert payload(width + 2.0 * gap, widths) == ()
+    assert payload(0.0, widths) == ()
 
 
 class Commander(LeafSystem):

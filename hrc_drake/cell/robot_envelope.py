@@ -227,16 +227,17 @@ class RobotEnvelope:
             round=np.array([r[4] for r in rows], dtype=float),
         )
 
-    def shapes(self, carrying: str | None, measured_opening: bool) -> Primitives:
+    def shapes(self, carrying: str | tuple[str, ...] | None, measured_opening: bool) -> Primitives:
         """The robot's shapes (fingers as measured, or swept over their travel) and the carried
-        part's. KeyError names the parts if `carrying` is not one."""
+        part's (a tuple: each of those parts', all in the grasp, as a payload that may be any
+        of them). KeyError names the parts if `carrying` is not one."""
         key = (carrying, not measured_opening)
         if key not in self._sets:
             parts = [self._robot[key[1]]]
-            if carrying is not None:
-                if carrying not in self._parts:
-                    raise KeyError(f"no part {carrying!r}; the parts are {sorted(self._parts)}")
-                parts.append(self._parts[carrying])
+            for part in (carrying,) if isinstance(carrying, str) else carrying or ():
+                if part not in self._parts:
+                    raise KeyError(f"no part {part!r}; the parts are {sorted(self._parts)}")
+                parts.append(self._parts[part])
             self._sets[key] = Primitives.join(parts)
         return self._sets[key]
 

@@ -82,11 +82,12 @@ def body_gaps(
     envelope: RobotEnvelope,
     q: np.ndarray,
     opening: float | None,
-    carrying: str | None,
+    carrying: str | tuple[str, ...] | None,
     body: BodySpheres,
 ):
     """(R_WB, p_WB, pairs, gap): the envelope posed at arm positions `q` and the gripper's
-    measured `opening` (None: the fingers over their whole travel) with the part `carrying`,
+    measured `opening` (None: the fingers over their whole travel) with the part (or parts,
+    `RobotEnvelope.shapes`) `carrying`,
     its nearest points to every body sphere, and each pair's gap, the distance less the sphere's
     radius counted `1 + CHAIN_GAP` times (a chain of spheres is thinner than its capsule)."""
     shapes = envelope.shapes(carrying, opening is not None)

@@ -212,7 +212,7 @@ def _add_plant(
 
 
 def _add_arm(
-    builder: DiagramBuilder, plant: MultibodyPlant, ur3, scenario: Scenario, design: CellDesign
+    builder: DiagramBuilder, plant: MultibodyPlant, ur3, scenario: Scenario, frames: CellFrames
 ) -> SafetyFunction:
     """`ur3.position` and `ur3.velocity` into the arm's servo through the safety function
     (returned; its measurements are connected once the station has them,
@@ -222,10 +222,11 @@ def _add_arm(
     function = builder.AddNamedSystem(
         "safety_function",
         SafetyFunction(
-            RobotEnvelope(design),
+            RobotEnvelope(frames.design),
             scenario.safety,
             motion_options(scenario).joint_acceleration_limit,
             scenario.run.period,
+            frames.widths,
         ),
     )
     builder.Connect(
@@ -503,7 +504,7 @@ def _add_robot(builder, plant, instances, scenario: Scenario, frames, space: Sta
     if not scenario.station.robot:
         _export_disturbance(builder, plant)
         return None
-    function = _add_arm(builder, plant, instances[UR3], scenario, frames.design)
+    function = _add_arm(builder, plant, instances[UR3], scenario, frames)
     injector = _add_faults(builder, plant, scenario, SeatPositions(frames, space))
     builder.Connect(injector.GetOutputPort("safety.stop"), function.GetInputPort("external_stop"))
     add_gripper_ports(
@@ -518,17 +519,11 @@ def _add_robot(builder, plant, instances, scenario: Scenario, frames, space: Sta
 
 
 def _connect_safety_function(builder: DiagramBuilder) -> None:
-    """The safety function's measurements: the gripper's opening, the configuration sensor's
-    reading and the tracked body, as the station measures them."""
+    """The safety function's measurements: the gripper's opening and the tracked body, as the
+    station measures them."""
     function = builder.GetSubsystemByName("safety_function")
-    for source, port, target in (
-        ("rg2_measure", 0, "rg2.state"),
-        # Only the part in the gripper: the whole reading costs a millisecond a period.
-        ("configuration_sensor", "held_part", "held_part"),
-    ):
-        system = builder.GetSubsystemByName(source)
-        out = system.get_output_port(port) if isinstance(port, int) else system.GetOutputPort(port)
-        builder.Connect(out, function.GetInputPort(target))
+    gripper = builder.GetSubsystemByName("rg2_measure").get_output_port(0)
+    builder.Connect(gripper, function.GetInputPort("rg2.state"))
     tracker = (
         builder.GetSubsystemByName("operator_body").GetOutputPort("spheres")
         if builder.HasSubsystemNamed("operator_body")

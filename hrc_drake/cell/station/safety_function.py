@@ -2,8 +2,9 @@
 controller do on a real cell, apart from the controller and whatever it believes.
 
 Every `period` it reads what the station measures — the arm's joint state, the gripper's opening,
-the part the configuration sensor reads as held, the tracked body — and judges the separation
-with its own robot model (`RobotEnvelope`) and the protective separation distance of
+the tracked body — and judges the separation
+with its own robot model (`RobotEnvelope`, with the payload the gripper's opening says it holds,
+`payload`) and the protective separation distance of
 `hrc_drake.cell.ssm`, with the person's travel S_h bounded as `safety.human_speed` says (the
 tracked speed toward the robot bounded by a hand's acceleration, or ISO 13855's constant
 speeds). Its own sampling adds one period to the reaction: S_h spans
@@ -39,6 +40,7 @@ function holds the arm, nothing the controller commands moves it.
 from __future__ import annotations
 
 import enum
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -67,7 +69,21 @@ RESUME_SPEED = 0.5  # rad/s: the fastest joint of the blend back to the command 
 # its own command where the arm stands (our choice; safety scanners offer 0.1-60 s).
 RESTART_DELAY = 0.5  # s
 MIN_BLEND = 0.2  # s: the shortest blend back to the command (our choice)
+# The gripper holds a part when its measured opening lies this close to the part's grasp width
+# (our choice). Measured here: the pads close 0.2-0.6 mm inside the width (the oval flange's
+# 45 mm reads 44.36-44.38 mm, the square flange's 90 mm 89.77 mm; the RG2 reports 0.1 mm steps),
+# and a pick opens the fingers 16 mm wider than the part (`finger_gap` each side).
+PAYLOAD_TOLERANCE = 0.002  # m
 _N = len(UR3_JOINTS)
+
+
+def payload(opening: float, widths: Mapping[str, float]) -> tuple[str, ...]:
+    """The parts the gripper may hold at its measured `opening`: those whose grasp width
+    (`widths`, part -> m) lies within `PAYLOAD_TOLERANCE` of it, in name order (none: empty).
+    A safety controller knows its payload from its tool's configuration and the gripper's
+    feedback, not from which part the cell believes it carries; where widths alike leave it
+    unsure which part, the envelope carries every one of them."""
+    return tuple(sorted(p for p, w in widths.items() if abs(opening - w) <= PAYLOAD_TOLERANCE))
 
 
 class StopCause(enum.StrEnum):
@@ -109,7 +125,7 @@ def judge_separation(
     q: np.ndarray,
     v: np.ndarray,
     opening: float,
-    carrying: str | None,
+    carrying: str | tuple[str, ...] | None,
     body: BodySpheres,
     config: SafetyConfig,
     joint_acceleration: float,
@@ -349,12 +365,12 @@ class SafetyFunction(LeafSystem):
     """The station's safety function (see the module docstring).
 
     Input ports: `ur3.position`, `ur3.velocity` (the controller's command, 6 each),
-    `ur3.state` (measured, 12), `rg2.state` (measured opening and rate, 2), `held_part`
-    (str: the part the configuration sensor reads in the gripper, "" for none),
-    `operator.body` (BodySpheres), `external_stop` (1: the robot's protective-stop input),
-    `safety.unlock` (1: unlock a protective stop; connected, a person
-    unlocks there and only there; unconnected, the simulated operator does), `command_stale`
-    (1 while the arm's commands have stopped coming; unconnected, never).
+    `ur3.state` (measured, 12), `rg2.state` (measured opening and rate, 2; the opening also
+    says the payload, `payload` of the parts' grasp `widths`), `operator.body` (BodySpheres),
+    `external_stop` (1: the robot's protective-stop input), `safety.unlock` (1: unlock a
+    protective stop; connected, a person unlocks there and only there; unconnected, the
+    simulated operator does), `command_stale` (1 while the arm's commands have stopped coming;
+    unconnected, never).
     Output ports: `desired_state` (12, for the arm's servo), `safety.stop` (1), `safety.mode`
     (1, the `SafetyMode` code). Updated every `period`."""
 
@@ -364,15 +380,15 @@ class SafetyFunction(LeafSystem):
         config: SafetyConfig,
         joint_acceleration: float,
         period: float,
+        widths: Mapping[str, float],
     ):
         super().__init__()
-        self._envelope, self._config = envelope, config
+        self._envelope, self._config, self._widths = envelope, config, dict(widths)
         self._acc, self._period = joint_acceleration, period
         self._position = self.DeclareVectorInputPort("ur3.position", _N)
         self._velocity = self.DeclareVectorInputPort("ur3.velocity", _N)
         self._arm = self.DeclareVectorInputPort("ur3.state", 2 * _N)
         self._gripper = self.DeclareVectorInputPort("rg2.state", 2)
-        self._held_part = self.DeclareAbstractInputPort("held_part", AbstractValue.Make(""))
         self._body = self.DeclareAbstractInputPort("operator.body", AbstractValue.Make(NOBODY))
         self._external = self.DeclareVectorInputPort("external_stop", 1)
         self._unlock = self.DeclareVectorInputPort("safety.unlock", 1)
@@ -417,12 +433,13 @@ class SafetyFunction(LeafSystem):
     def _update(self, context, state) -> None:
         x = self._arm.Eval(context)
         q, v = x[:_N], x[_N:]
+        opening = float(self._gripper.Eval(context)[0])
         verdict = judge_separation(
             self._envelope,
             q,
             v,
-            float(self._gripper.Eval(context)[0]),
-            self._held_part.Eval(context) or None,
+            opening,
+            payload(opening, self._widths),
             self._body.Eval(context),
             self._config,
             self._acc,
