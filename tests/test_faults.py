@@ -18,6 +18,7 @@ from hrc_drake.hri.faults import (
     check_faults,
     check_faults_within_run,
 )
+from hrc_drake.motion.plan import Stage
 from hrc_drake.robot_names import UR3, UR3_JOINTS
 
 ROW1_STATES = [(), ("F1",), ("F1", "S23"), ("F1", "S23", "F03")]
@@ -96,6 +97,31 @@ def test_faults_the_cell_cannot_fix_stop_the_task_and_hand_it_over(fault, task, 
     assert not result.collisions
     # The state the run reached stays: the tasks before the fault are all there.
     assert result.states == ROW1_STATES[:task]
+
+
+def test_fingers_that_do_not_let_go_of_a_bolted_part_keep_the_arm_where_it_released_it():
+    """The gripper sticks on the square flange it has just released, bolted: the arm waits at
+    the release's end for the fingers to read open, and the task stops there. It never pulls
+    on the bolted part (going on up with the fingers on it sprang a wrist joint ahead of its
+    command in the four-slot cell's fault benchmark)."""
+    fault = "{faults: [!GripperStuck {task: 2, stuck: open}]}"
+    loop = build_closed_loop(load_cell_scenario("row1-optimal", [LEAN, NO_BODY, fault]))
+    plant, ur3 = loop.station.plant, loop.station.instances[UR3]
+    released, t = None, 0.0
+    while loop.advance_to(t) not in (Mode.DONE, Mode.FAILED) and t < 60:
+        t = round(t + 0.02, 6)
+        status, plan = loop.status, loop.status.plan
+        at_release = plan is not None and plan.task == "S23"
+        if (
+            released is None
+            and at_release
+            and status.plan_time(t) >= plan.segment(Stage.RELEASE).end
+        ):
+            released = plant.GetPositions(plant.GetMyContextFromRoot(loop.root_context), ur3)
+    (found,) = loop.status.detections
+    assert found.cause == "release" and released is not None
+    q_stop = plant.GetPositions(plant.GetMyContextFromRoot(loop.root_context), ur3)
+    assert np.abs(q_stop - released).max() < 1e-3
 
 
 def test_a_lost_grip_lets_the_part_fall_and_the_robot_picks_it_up_from_where_it_lies():

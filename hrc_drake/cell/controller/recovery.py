@@ -53,8 +53,9 @@ class FaultRecovery:
 
     def check_grip(self, s: SupervisorStatus, cell: Readings, now: float) -> SupervisorStatus:
         """Between the grasp and the release the fingers must stand at the part's width,
-        stalled on it (closed past it, the gripper holds nothing); after the release they must
-        have left it (standing at it, the gripper does not open)."""
+        stalled on it (closed past it, the gripper holds nothing); from the release's end they
+        must have left it (standing at it, the gripper does not open; the arm waits there
+        meanwhile, `release_wait`)."""
         plan, tau = s.plan, s.plan_time(now)
         opening = cell.opening()
         width = plan.grip_width
@@ -68,8 +69,8 @@ class FaultRecovery:
                     f"{width * 1000:.1f} mm wide: it does not hold the part"
                 ),
             )
-        elif plan.segment(Stage.RELEASE).end + GRIP_SETTLE <= tau < plan.duration:
-            ok = opening > width + 2 * self._limits.grip_tolerance
+        elif plan.segment(Stage.RELEASE).end <= tau < plan.duration:
+            ok = self._let_go(plan, opening)
             cause, what = (
                 Cause.RELEASE,
                 (
@@ -102,6 +103,19 @@ class FaultRecovery:
             "stopped",
             cause=cause,
         )
+
+    def release_wait(self, s: SupervisorStatus, tau: float, opening: float) -> float | None:
+        """The plan time where the arm waits after a release while its fingers, at the measured
+        `opening`, have not yet left the part (None: no wait). It goes on only once they have,
+        as a robot program waits for its gripper's report before it moves off: fingers that
+        stay on a bolted part would drag it (`check_grip` stops the task meanwhile)."""
+        plan = s.plan
+        end = plan.segment(Stage.RELEASE).end
+        return end if end <= tau < plan.duration and not self._let_go(plan, opening) else None
+
+    def _let_go(self, plan, opening: float) -> bool:
+        """Whether fingers at `opening` have left `plan`'s part."""
+        return opening > plan.grip_width + 2 * self._limits.grip_tolerance
 
     def stop_pressing(self, s: SupervisorStatus, trip: GuardTrip, now: float) -> SupervisorStatus:
         """The guarded descent tripped (`trip`): the part met something before its seat. Stop

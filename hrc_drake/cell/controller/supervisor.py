@@ -6,26 +6,24 @@ It is the controller's task level and sees the cell only through what a real cel
 2. asks the policy for the next task and shows it on the operator's interface (a `CHOOSE`
    prompt);
 3. takes the operator's indication (the proposal confirmed, or another task);
-4. asks the planner for the plan — the planner runs beside it (`hrc_drake.motion.service`): the
-   update only asks and polls, holding the arm still meanwhile — and drives the UR3 and the
-   gripper through it: pick, carry, place; holds the part still and prompts `BOLT`; once the
-   operator says it is bolted, releases and retreats (or, for `undo`, takes the part placed
-   last back to the tray);
+4. asks the planner (`hrc_drake.motion.service`, beside it) for the plan and drives the arm and
+   gripper through it: pick, carry, place; holds the part, prompts `BOLT`; once it is bolted,
+   releases and retreats (`undo`: takes the part placed last back to the tray);
 5. after the task, learns what really happened from the configuration sensor — the part may
    sit in another seat than planned — and only then moves the MDP state on.
 
 It checks what it commands against what it measures: a joint farther from its command than
 `station.ur3.tracking_tolerance`, fingers that do not stand at the width of the part they
-should hold (and have not stalled on it), or that have not left it after the release, stop the
-task with the reason, and the run. A protective stop on the `safety.stop` input stops the robot
-on its path until it clears; an operator silent for `run.indication_timeout` is asked again,
-and after `run.indication_give_up` the run stops. A task with no path while the configuration
-sensor sees an obstacle waits for it to move or go, planning again each time it does, for up to
-`run.path_timeout`. A task the robot cannot do while it is itself sound (a part it dropped and
-cannot pick again, a path that stays blocked) is handed over: the arm holds still, the
-interface prompts `HANDOVER`, the operator does the task by hand and says so, and the robot
-reads the cell and goes on. Each is recorded as a `Detection` (what the run reports of the
-scenario's faults, `hrc_drake.cell.run.fault_report`).
+should hold (and have not stalled on it), or that have not left it after the release (the arm
+waits for them there), stop the task with the reason, and the run. A protective stop on the
+`safety.stop` input stops the robot on its path until it clears; an operator silent for
+`run.indication_timeout` is asked again, and after `run.indication_give_up` the run stops. A
+task with no path while the configuration sensor sees an obstacle waits for it to move or go,
+planning again each time it does, for up to `run.path_timeout`. A task the robot cannot do
+while it is itself sound (a part it dropped and cannot pick again, a path that stays blocked)
+is handed over: the arm holds still, the interface prompts `HANDOVER`, the operator does the
+task by hand and says so, and the robot reads the cell and goes on. Each is recorded as a
+`Detection` (what the run reports of the scenario's faults, `hrc_drake.cell.run.fault_report`).
 
 In `anticipate` mode it does not wait at step 3: it starts on the placement its policy commits
 to and turns when the indication names another task. With predictive separation it times its
@@ -39,11 +37,11 @@ The Supervisor is composed of parts, each with its own narrow inputs (the status
 `hrc_drake.cell.controller.supervisor_state`; what the cell shows after a task,
 `hrc_drake.cell.controller.observe`.
 
-The robot follows its plan in plan time `tau`, which advances at the speed scale s ∈ [0, 1] that
-the separation monitor allows on the optional `speed_limit` input: the robot slows down by
-scaling its trajectory's time, stops with s = 0 and resumes as s ramps back, never faster than
-the arm's joint acceleration limit allows. While it holds a part for bolting, `tau` stands at
-the start of the plan's hold; the operator's `bolted` moves it to the release.
+The robot follows its plan in plan time `tau`, advancing at the speed scale s ∈ [0, 1] the
+separation monitor allows (`speed_limit`): it slows by scaling its trajectory's time, stops at
+s = 0 and resumes as s ramps back, within the joint acceleration limit. `tau` stands at the
+plan's hold while it holds a part for bolting (`bolted` moves it to the release), and at the
+release's end until the fingers have let go.
 """
 
 from __future__ import annotations
@@ -239,7 +237,7 @@ class Supervisor(LeafSystem):
         try:
             if not stale:  # a stale reading says nothing of where the arm is now
                 self._check_tracking(status, cell, now)
-            status = self._advance(status, float(np.clip(limit, 0.0, 1.0)), now)
+            status = self._advance(status, float(np.clip(limit, 0.0, 1.0)), now, cell.opening())
             status = self._step(status, cell, now)
             status = self._keep_clear.update(status, cell.body, now)
         except SupervisorError as err:
@@ -308,10 +306,10 @@ class Supervisor(LeafSystem):
                 cause=Cause.TRACKING,
             )
 
-    def _advance(self, s: SupervisorStatus, limit: float, now: float) -> SupervisorStatus:
+    def _advance(self, s: SupervisorStatus, limit: float, now: float, opening: float):
         """Move the plan time to `now`, then ramp the speed scale toward `limit` (no faster
-        than the joint acceleration limit allows at the plan's speed) and set the rate on.
-        While the robot holds a part for bolting the plan time stands still."""
+        than the joint acceleration limit allows at the plan's speed) and set the rate on. It
+        stands still for bolting, and after a release until the fingers (`opening`) let go."""
         clock = s.clock
         if s.mode != Mode.EXECUTE or clock.plan is None:
             return replace(s, clock=replace(clock, speed=limit))
@@ -327,8 +325,10 @@ class Supervisor(LeafSystem):
                 # rest: it stops there to turn. Slowing down along the path took it on down
                 # to the seat, too late to turn (the run stopped; population sweep).
                 return self._clocked(s, tau=above, tau_time=now, speed=0.0, rate=0.0)
-        if s.holding_for_bolts(tau):
-            return self._clocked(s, tau=plan.t_in_place, tau_time=now, speed=limit, rate=0.0)
+        stand = plan.t_in_place if s.holding_for_bolts(tau) else None
+        stand = self._recovery.release_wait(s, tau, opening) if stand is None else stand
+        if stand is not None:
+            return self._clocked(s, tau=stand, tau_time=now, speed=limit, rate=0.0)
         limit = min(limit, speed_cap(clock.caps, now, tau))  # the motion's path timing
         qdot = np.abs(plan.trajectory.EvalDerivative(min(tau, plan.duration), 1)).max()
         step = self._limits.joint_acceleration * self._limits.period / max(qdot, 1e-9)
