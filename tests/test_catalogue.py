@@ -5,13 +5,14 @@ each run terminal (or by the run's own task cap, with its reason) with no collis
 import json
 
 import pytest
+from cell_checks import check_catalogue_run
 
 from hrc_drake.cell.run.run import run_scenario
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 from hrc_drake.cli import main
 from hrc_drake.hri.populations import OPERATOR_MODELS
 from hrc_drake.resources import scenarios_dir
-from hrc_drake.scenario.load import load_scenario, table2_scenarios
+from hrc_drake.scenario.load import table2_scenarios
 from hrc_drake.tasks.decide import run_decisions
 from hrc_drake.tasks.graph import StateKind, generate_states
 from hrc_drake.tasks.solve import exact_policy
@@ -39,7 +40,7 @@ def test_the_catalogue_is_covered():
 
 @pytest.mark.parametrize("name", OTHERS)
 def test_every_other_catalogue_scenario_runs_lean_to_its_terminal_state(name):
-    _check_catalogue_run(name, run_scenario(load_cell_scenario(name, LEAN)))
+    check_catalogue_run(name, run_scenario(load_cell_scenario(name, LEAN)))
 
 
 def test_a_stochastic_operator_misplaces_and_the_cell_follows_the_decision_loop():
@@ -48,7 +49,7 @@ def test_a_stochastic_operator_misplaces_and_the_cell_follows_the_decision_loop(
     space = generate_states(load_spec())
     scenario = load_cell_scenario("stochastic-mistakes", LEAN)
     result = run_scenario(scenario)
-    _check_catalogue_run("stochastic-mistakes", result)
+    check_catalogue_run("stochastic-mistakes", result)
     terminal = {
         space.configuration(s) for s in range(space.n_states) if space.kind[s] == StateKind.TERMINAL
     }
@@ -57,30 +58,6 @@ def test_a_stochastic_operator_misplaces_and_the_cell_follows_the_decision_loop(
     assert any(t.observed in {"F01", "F02", "F03"} for t in deviations), "no misplaced flange"
     predicted, _ = run_decisions(space, exact_policy(space), scenario.operator_for(space))
     assert result.states == predicted
-
-
-def _check_catalogue_run(name: str, result) -> None:
-    """What every catalogue run must show: terminal, no collision, separation kept by the run's
-    own check, and the minimum-effort states where the file states them."""
-    assert result.error is None, result.error
-    assert result.done and result.final_kind == "terminal"
-    assert result.collisions == []
-    if result.safety is not None:
-        assert result.safety.violations == 0 and result.safety.body_contacts == 0
-        # The run's own check, the same for every mode (`hrc_drake.cell.run.safety_check`):
-        # inside S_p only at the contact speed, which power and force limiting permits.
-        assert (
-            result.safety_check.beyond_contact_speed == 0 and result.safety_check.body_contacts == 0
-        )
-        # `simulate --json`'s `safety` is the check's, the monitor's own count apart.
-        data = json.loads(json.dumps(result.to_json()))["safety"]
-        assert data["violations"] == result.safety_check.violations
-        assert data["violations_beyond_contact_speed"] == 0 and data["body_contacts"] == 0
-        assert data["monitor_violations"] == result.safety.violations
-        assert data["checked_steps"] == pytest.approx(result.sim_time / 0.02, abs=2)
-    expected = load_scenario(name).minimum_effort
-    if expected:
-        assert result.names == list(expected)
 
 
 def test_a_run_past_its_task_cap_ends_with_the_reason_and_is_no_failure():

@@ -3,6 +3,7 @@
 import dataclasses
 
 import pytest
+from cell_checks import check_catalogue_run
 
 from hrc_drake.cell.run.run import build_closed_loop, run_scenario, shared_planner
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario, motion_options
@@ -32,20 +33,15 @@ def _terminal_configurations(space):
 def test_table2_row_in_the_cell(row, space):
     loop = build_closed_loop(load_cell_scenario(row.name, LEAN))
     result = loop.run()
-    assert result.error is None
+    # Terminal in the row's states, no collision, separation kept (the operator's body shares
+    # the desk, a lean row's default).
+    check_catalogue_run(row.name, result)
+    assert result.names == list(row.minimum_effort) and result.safety.min_separation > 0
     # Without faults nothing is injected, and the controller detects none from its measurements.
     assert result.faults == () and loop.status.detections == ()
-    assert result.names == list(row.minimum_effort)
-    assert result.done and result.final_kind == "terminal"
     # The final configuration as contact shows it is a terminal one, and the one reached.
     assert result.final_tokens in _terminal_configurations(space)
     assert result.final_tokens == frozenset(result.states[-1])
-    assert result.collisions == []
-    # The operator's body shares the desk (a lean row's default): separation kept by the
-    # controller's monitor and by the run's own check, and never a touch.
-    assert result.safety.violations == 0 and result.safety.body_contacts == 0
-    assert result.safety_check.beyond_contact_speed == 0 and result.safety_check.body_contacts == 0
-    assert result.safety.min_separation > 0
     # Carried by friction alone, no part was dropped or let go off its seat on the way.
     assert not any("not in the gripper" in e or "does not sit" in e for e in result.events)
     # The operator's deviations are the scenario's; the cell shows what was really done.
