@@ -3,14 +3,13 @@
 It is the controller's task level and sees the cell only through what a real cell measures
 (`docs/station.md`). At a task boundary the Supervisor
 1. reads the configuration sensor and, with the history it has seen, the MDP state;
-2. asks the policy for the next task and shows it on the operator's interface (a `CHOOSE`
-   prompt);
+2. asks the policy for the next task and shows it on the interface (a `CHOOSE` prompt);
 3. takes the operator's indication (the proposal confirmed, or another task);
 4. asks the planner (`hrc_drake.motion.service`, beside it) for the plan and drives the arm and
    gripper through it: pick, carry, place; holds the part, prompts `BOLT`; once it is bolted,
    releases and retreats (`undo`: takes the part placed last back to the tray);
-5. after the task, learns what really happened from the configuration sensor — the part may
-   sit in another seat than planned — and only then moves the MDP state on.
+5. after the task, learns from the configuration sensor what really happened (the part may sit
+   in another seat than planned) and only then moves the MDP state on.
 
 It checks what it commands against what it measures: a joint farther from its command than
 `station.ur3.tracking_tolerance`, fingers that do not stand at the width of the part they
@@ -33,9 +32,8 @@ The Supervisor is composed of parts, each with its own narrow inputs (the status
 `Readings`, the time) and its own record in the status: `FaultRecovery`
 (`hrc_drake.cell.controller.recovery`), `Anticipation` (`hrc_drake.cell.controller.anticipation`),
 `KeepClear` (`hrc_drake.cell.controller.keep_clear`), and the `PlanAsker` they share
-(`hrc_drake.cell.controller.planning`). Its values (mode, status records, limits) are
-`hrc_drake.cell.controller.supervisor_state`; what the cell shows after a task,
-`hrc_drake.cell.controller.observe`.
+(`hrc_drake.cell.controller.planning`). Its values (mode, status records, limits) are in
+`supervisor_state`; what the cell shows after a task, in `observe`.
 
 The robot follows its plan in plan time `tau`, advancing at the speed scale s ∈ [0, 1] the
 separation monitor allows (`speed_limit`): it slows by scaling its trajectory's time, stops at
@@ -306,7 +304,9 @@ class Supervisor(LeafSystem):
                 cause=Cause.TRACKING,
             )
 
-    def _advance(self, s: SupervisorStatus, limit: float, now: float, opening: float):
+    def _advance(
+        self, s: SupervisorStatus, limit: float, now: float, opening: float
+    ) -> SupervisorStatus:
         """Move the plan time to `now`, then ramp the speed scale toward `limit` (no faster
         than the joint acceleration limit allows at the plan's speed) and set the rate on. It
         stands still for bolting, and after a release until the fingers (`opening`) let go."""
