@@ -153,14 +153,17 @@ def test_another_part_indicated_as_the_arm_reaches_the_pre_place_pose_stops_it_t
     moving = SupervisorStatus(
         mode=Mode.EXECUTE, clock=PlanClock(plan=f1, tau=above - 0.01, tau_time=10.0), turn=committed
     )
-    turning = supervisor._advance(replace(moving, turn=replace(committed, change=UNDO)), 1.0, 10.02)
+    held = f1.grip_width  # the fingers on the part carried (they let go only after the seat)
+    turning = supervisor._advance(
+        replace(moving, turn=replace(committed, change=UNDO)), 1.0, 10.02, held
+    )
     assert turning.clock.tau == pytest.approx(above) and turning.clock.speed == 0.0
     assert turning.plan_time(10.1) == pytest.approx(above)
     assert turn_at(f1, turning.plan_time(10.02), supervisor._space.spec, UNDO) == Turn.RETURN
     # Still waiting for the indication: it waits there at speed; with none to wait for and no
     # turn, it goes on down to the seat.
     awaiting = replace(moving, turn=replace(committed, awaiting=True))
-    waiting = supervisor._advance(awaiting, 1.0, 10.02)
+    waiting = supervisor._advance(awaiting, 1.0, 10.02, held)
     assert waiting.clock.tau == pytest.approx(above) and waiting.clock.speed == 1.0
-    placing = supervisor._advance(moving, 1.0, 10.02)
+    placing = supervisor._advance(moving, 1.0, 10.02, held)
     assert placing.plan_time(10.02) > above
