@@ -139,9 +139,6 @@ def test_bad_safety_function_values_are_refused():
         load_cell_scenario("row1-optimal", "{safety: {hand_acceleration: 0}}")
 
 
-# --- the station, driven by a controller that ignores its robot's safety mode --------------
-
-
 @pytest.mark.parametrize("assembly", sorted((models_dir() / "assemblies").glob("*.yaml")))
 def test_the_payload_is_read_from_the_grippers_opening_alone(assembly):
     """Each part's grasp width, as the fingers close 0.6 mm inside it, is a payload of that
@@ -156,6 +153,9 @@ def test_the_payload_is_read_from_the_grippers_opening_alone(assembly):
         assert set(payload(width - 0.0006, widths)) >= alike
         assert payload(width + 2.0 * gap, widths) == ()
     assert payload(0.0, widths) == ()
+
+
+# --- the station, driven by a controller that ignores its robot's safety mode --------------
 
 
 class Commander(LeafSystem):

@@ -2,9 +2,8 @@
 controller do on a real cell, apart from the controller and whatever it believes.
 
 Every `period` it reads what the station measures — the arm's joint state, the gripper's opening,
-the tracked body — and judges the separation
-with its own robot model (`RobotEnvelope`, with the payload the gripper's opening says it holds,
-`payload`) and the protective separation distance of
+the tracked body — and judges the separation with its own robot model (`RobotEnvelope`, with the
+payload the gripper's opening says it holds, `payload`) and the protective separation distance of
 `hrc_drake.cell.ssm`, with the person's travel S_h bounded as `safety.human_speed` says (the
 tracked speed toward the robot bounded by a hand's acceleration, or ISO 13855's constant
 speeds). Its own sampling adds one period to the reaction: S_h spans
