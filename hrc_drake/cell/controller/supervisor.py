@@ -325,8 +325,8 @@ class Supervisor(LeafSystem):
                 # rest: it stops there to turn. Slowing down along the path took it on down
                 # to the seat, too late to turn (the run stopped; population sweep).
                 return self._clocked(s, tau=above, tau_time=now, speed=0.0, rate=0.0)
-        stand = plan.t_in_place if s.holding_for_bolts(tau) else None
-        stand = self._recovery.release_wait(s, tau, opening) if stand is None else stand
+        bolting = s.holding_for_bolts(tau)
+        stand = plan.t_in_place if bolting else self._recovery.release_wait(s, tau, opening)
         if stand is not None:
             return self._clocked(s, tau=stand, tau_time=now, speed=limit, rate=0.0)
         limit = min(limit, speed_cap(clock.caps, now, tau))  # the motion's path timing
