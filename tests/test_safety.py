@@ -298,6 +298,31 @@ def test_a_body_far_away_allows_full_speed_and_one_on_the_path_stops_the_robot(c
     assert assess(envelope, q, qdot, _one_sphere(ahead), intent, off, 3.0, 0.05).limit == 1.0
 
 
+def test_the_creep_toward_a_hand_allows_for_the_plans_speed_ahead_and_the_monitors_lag(cell):
+    """Inside S_p the plan creeps toward a hand only as fast as stops short of it. It is
+    judged by the plan's velocities until its limit governs the arm (`MotionIntent.ahead`): a
+    plan that starts slowly and speeds up meanwhile gets the limit of its faster part, where
+    its first velocity alone would let it run at full speed. And the arm may go on for the
+    monitor's lag before the limit slows it: a lag lowers the limit."""
+    _, envelope = cell
+    q, qdot = np.array(POSTURES[0]), np.array([0.6, 0.3, 0.0, 0.0, 0.0, 0.0])
+    p, v = _tcp_motion(envelope, q, qdot)
+    hand = _one_sphere(p + 0.14 * v / np.linalg.norm(v), radius=0.05)
+    config = SafetyConfig()  # the contact speed: the creep inside S_p
+
+    def limit(intent, lag=0.0):
+        return assess(envelope, q, intent.qdot, hand, intent, config, 3.0, None, 0.02, lag).limit
+
+    fast = limit(MotionIntent(qdot=qdot, moving=True))
+    assert 0.0 < fast < 1.0
+    start = MotionIntent(qdot=0.3 * qdot, moving=True)
+    assert limit(start) == 1.0
+    speeding = np.stack([0.3 * qdot, 0.6 * qdot, qdot, qdot])
+    ahead = dataclasses.replace(start, ahead=speeding)
+    assert limit(ahead) == pytest.approx(fast, abs=1e-12)
+    assert 0.0 < limit(MotionIntent(qdot=qdot, moving=True), lag=0.04) < fast - 0.03
+
+
 def test_the_allowed_scale_keeps_the_protective_separation(cell):
     """A hand moving toward the robot's path: at the allowed scale s the plan (scaled by s)
     keeps S_p + slow_band to the body for every pair; 10 % faster it does not; and a robot that

@@ -23,6 +23,7 @@ from hrc_drake.cell.controller.guard import GuardSettings
 from hrc_drake.cell.controller.intent import MotionIntent
 from hrc_drake.cell.controller.keep_clear import KeepClearSettings
 from hrc_drake.cell.controller.separation import (
+    MONITOR_LAG,
     BodyAge,
     ControllerSeparationMonitor,
     SafetyLog,
@@ -111,6 +112,7 @@ def supervisor_limits(scenario: Scenario, options: MotionOptions) -> SupervisorL
             enabled=run.place_guard > 0,
         ),
         gripper_time=options.gripper_time,
+        look_ahead=MONITOR_LAG * run.period,
     )
 
 
@@ -137,6 +139,7 @@ def keep_clear_settings(
         body.person(), desk, delay.median, delay.sigma, safety.forecast_spread
     )
     acceleration, period = options.joint_acceleration_limit, scenario.run.period
+    lag = MONITOR_LAG * period
     reach = REACH_BOUND + max(
         (NEAR_SPEED + TCP_BOUND) * (safety.reaction_time + period + STOP_BOUND), 0.0
     )
@@ -149,7 +152,9 @@ def keep_clear_settings(
             return 1.0
         intent = MotionIntent(qdot=qdot, carrying=carrying, moving=True, rate=1.0)
         spheres = BodySpheres(centres, radii, velocities)
-        reading = assess(envelope, q, qdot, spheres, intent, safety, acceleration, None, period)
+        reading = assess(
+            envelope, q, qdot, spheres, intent, safety, acceleration, None, period, lag
+        )
         return reading.limit
 
     return KeepClearSettings(

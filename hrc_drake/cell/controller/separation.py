@@ -75,6 +75,16 @@ NEAR_AHEAD = 0.1  # m
 _SLOWEST = 1e-9  # m/s: a point this slow toward the person never limits the plan
 # A planned scale stands this far under its root, so that rounding never puts S_p past the room.
 _ROOT_SLACK = 1e-9
+# Controller periods a limit set now takes to govern what the safety function judges: it
+# reaches the arm at the Supervisor's next update, the function judges a period after, and
+# meanwhile the speed scale ramps toward it at the joint acceleration limit. With the creep held
+# to stopping short of the person on T_r + sampling alone, the function stopped the arm 69
+# times in 8 runs of monitoring alone on `shared-desk` (benchmarks/reports/separation_standard.md).
+MONITOR_LAG = 2
+# A plan allowed slower than this share of its speed stops instead: the creep toward a person
+# slows in proportion to the room left, so it would come ever closer and never stand (our
+# choice).
+SLOWEST_SCALE = 0.02
 
 
 @dataclass(frozen=True)
@@ -213,28 +223,33 @@ def assess(
     joint_acceleration: float,
     opening: float | None = None,
     sampling: float = 0.0,
+    lag: float = 0.0,
 ) -> SeparationReading:
     """One step of the monitor (see the module docstring) without a diagram: the arm at
     measured `q`, `v` (UR3_JOINTS order), the gripper at the measured `opening` (None: not
     measured), the operator's `body`, and the controller's `intent`. The plan's speed keeps
     S_p with the reaction time lengthened by `sampling` [s], the station's safety function's
-    period, so that the function, which judges a period late, need not stop it. Poses
-    `envelope`'s own context (its only side effect)."""
+    period, so that the function, which judges a period late, need not stop it. Closer than
+    S_p, where the plan only creeps toward the person as fast as lets it stop short of them,
+    the arm may also go on for `lag` [s] at the speed it has before a limit set now slows it
+    (`MONITOR_LAG`). Poses `envelope`'s own context (its only side effect)."""
     v = np.asarray(v, dtype=float)
     moving = bool(np.abs(v).max(initial=0.0) > config.moving_speed)
     commanded = np.asarray(intent.qdot, dtype=float) * intent.rate
     imposed = bool(np.abs(v - commanded).max(initial=0.0) > IMPOSED_SPEED)
     if len(body.radii) == 0:
         return SeparationReading(moving=moving, imposed=imposed)
-    qdot = np.asarray(intent.qdot, dtype=float)
+    # The plan's velocities until a limit set now governs the arm (`MotionIntent.ahead`): the
+    # fastest of them toward each sphere, and the fastest joint's stopping time.
+    ahead = np.asarray(intent.velocities_ahead(), dtype=float)
     R_WB, p_WB, pairs, gap = body_gaps(envelope, q, opening, intent.carrying, body)
-    speeds = speeds_toward(envelope.link_velocities(R_WB, p_WB, np.stack([v, qdot])), pairs)
+    speeds = speeds_toward(envelope.link_velocities(R_WB, p_WB, np.vstack([v, ahead])), pairs)
     v_h = -np.einsum("nj,mnj->mn", body.velocities, pairs.direction)
-    v_r, v_r1 = np.maximum(0.0, speeds)
+    v_r, v_r1 = np.maximum(0.0, speeds[0]), np.maximum(0.0, speeds[1:].max(axis=0))
     t_r = config.reaction_time
     # Measured: the S_p the standard asks to keep.
     t_s = stopping_time(v, joint_acceleration)
-    t_s1 = stopping_time(qdot, joint_acceleration)
+    t_s1 = stopping_time(np.abs(ahead).max(axis=0), joint_acceleration)
     s_p = protective_distance(person_travel(v_h, gap, t_r + t_s, config), v_r, t_s, config)
     # Planned: the plan at scale s keeps S_p(s) + slow_band, or moves no faster than the
     # contact speed toward the person.
@@ -243,10 +258,11 @@ def assess(
     slow = CONTACT_SHARE * config.contact_speed / np.maximum(v_r1, _SLOWEST)
     # ... and only as fast as lets it stop short of the person where they are now: power and
     # force limiting permits a person coming into the robot, not the robot driving into them.
-    t_rp = t_r + sampling
-    short_of = entry_scales(gap, separation_constant(config), v_r1 * t_rp, v_r1 * t_s1 / 2)
+    reaction = t_r + sampling + lag
+    short_of = entry_scales(gap, separation_constant(config), v_r1 * reaction, v_r1 * t_s1 / 2)
     slow = np.where(touchable(body)[None, :], np.minimum(slow, short_of), 0.0)  # head: none
     limit = float(np.maximum(separated, np.minimum(slow, 1.0)).min()) if config.enabled else 1.0
+    limit = 0.0 if limit < SLOWEST_SCALE else limit
     return SeparationReading(
         separation=float(gap.min()),
         margin=float((gap - s_p).min()),
@@ -387,6 +403,7 @@ class ControllerSeparationMonitor(LeafSystem):
             self._acc,
             opening,
             self._period + reading_age(body, context.get_time()),
+            MONITOR_LAG * self._period,
         )
         if stale_reading(body, context.get_time(), self._age):
             # No body seen: the person may be anywhere, so the plan stops (docs/hardware.md,
@@ -405,6 +422,7 @@ class ControllerSeparationMonitor(LeafSystem):
 
 
 __all__ = [
+    "MONITOR_LAG",
     "BodyAge",
     "ControllerSeparationMonitor",
     "SafetyLog",

@@ -60,7 +60,7 @@ from hrc_drake.cell.controller.anticipation import (
     wait_point,
 )
 from hrc_drake.cell.controller.guard import DescentGuard
-from hrc_drake.cell.controller.intent import MotionIntent
+from hrc_drake.cell.controller.intent import MotionIntent, plan_velocities
 from hrc_drake.cell.controller.keep_clear import KeepClear, KeepClearSettings
 from hrc_drake.cell.controller.observe import cell_shows, task_record
 from hrc_drake.cell.controller.planning import PlanAsker
@@ -212,14 +212,11 @@ class Supervisor(LeafSystem):
             output.set_value(MotionIntent(carrying=carrying, moving=False, rate=rate))
             return
         moving = tau < plan.duration and not s.holding_for_bolts(tau) and rate > 0
-        qdot = plan.trajectory.EvalDerivative(min(tau, plan.duration), 1).ravel()
+        ahead = plan_velocities(plan.trajectory, tau, plan.duration, self._limits.look_ahead)
+        if tau >= plan.duration:
+            ahead = np.zeros_like(ahead)
         output.set_value(
-            MotionIntent(
-                qdot=qdot if tau < plan.duration else np.zeros_like(qdot),
-                carrying=carrying,
-                moving=moving,
-                rate=rate,
-            )
+            MotionIntent(qdot=ahead[0], carrying=carrying, moving=moving, rate=rate, ahead=ahead)
         )
 
     # --- the state machine ---------------------------------------------------------------

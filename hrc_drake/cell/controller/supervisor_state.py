@@ -395,6 +395,10 @@ class SupervisorLimits:
     guard: GuardSettings = field(default_factory=GuardSettings)
     # Seconds the fingers take to open or close (`MotionOptions.gripper_time`).
     gripper_time: float = 0.5
+    # Plan time over which the intent tells the separation monitor the plan's velocities
+    # (`MotionIntent.ahead`): until a limit the monitor sets now governs what the station's
+    # safety function judges (`hrc_drake.cell.controller.separation.MONITOR_LAG` periods).
+    look_ahead: float = 0.04
 
 
 __all__ = [
