@@ -423,6 +423,7 @@ class ControllerSeparationMonitor(LeafSystem):
 
 __all__ = [
     "MONITOR_LAG",
+    "SLOWEST_SCALE",
     "BodyAge",
     "ControllerSeparationMonitor",
     "SafetyLog",
