@@ -468,13 +468,14 @@ def test_an_operator_who_never_answers_is_given_up_on_with_the_json_written(tmp_
 
 
 def test_simulate_json_says_the_operator_recovered_a_part_the_robot_could_not_pick():
-    # The done-when check of the handover: the square flange, lost in its carry, falls against
-    # the tray where no finger can go down beside it; the operator seats it (and puts back the
-    # oval flange it knocked out of its tray home), and the run ends terminal.
+    # The done-when check of the handover: the square flange, lost 1.2 s into its carry, falls
+    # against the tray where no finger can go down beside it; the operator seats it, and the
+    # run ends terminal. (Where a dropped part lands turns on milliseconds of the carry's
+    # timing: lost at the default 1.0 s it now lands where the robot picks it again.)
     import subprocess
     import sys
 
-    text = "{faults: [!GripLost {task: 2}]}"
+    text = "{faults: [!GripLost {task: 2, after: 1.2}]}"
     cmd = [sys.executable, "-m", "hrc_drake.cli", "simulate", "--scenario", "row1-optimal"]
     done = subprocess.run(
         [*cmd, "--lean", "--json", "--scenario-text", text],
