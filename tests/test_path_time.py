@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 from pydrake.trajectories import PiecewisePolynomial
 
-from hrc_drake.motion.clearance import Occupancy, time_around
+from hrc_drake.motion.clearance import Occupancy, motion_path, time_around
 from hrc_drake.motion.path_time import (
     LEVELS,
+    POSE_STEP,
     STEP,
     SpeedCap,
-    motion_path,
     path_time_around,
     reactive_profile,
     slip,
@@ -22,13 +22,13 @@ ACCELERATION = 5.0  # rad/s²
 DURATION = 3.0  # s: the one motion's time at full speed
 
 
-def _plan(duration: float = DURATION, reach: float = 1.0) -> Plan:
+def _plan(duration: float = DURATION, reach: float = 1.0, opening: float = 0.0) -> Plan:
     """One motion from rest to rest: joint 0 goes 0 → `reach` over [0, duration] (read as the
-    robot's x by the scale functions below)."""
+    robot's x by the scale functions below), the gripper held at `opening` [m]."""
     knots = np.zeros((6, 2))
     knots[0, 1] = reach
     trajectory = PiecewisePolynomial.CubicHermite([0.0, duration], knots, np.zeros((6, 2)))
-    gripper = PiecewisePolynomial.ZeroOrderHold([0.0, duration], np.zeros((1, 2)))
+    gripper = PiecewisePolynomial.ZeroOrderHold([0.0, duration], np.full((1, 2), opening))
     segments = (
         Segment(Stage.APPROACH, 0.0, 0.0),
         Segment(Stage.GRASP, 0.0, 0.0),
@@ -41,7 +41,7 @@ def _plan(duration: float = DURATION, reach: float = 1.0) -> Plan:
     )  # fmt: skip
 
 
-def _graded(q, qdot, carrying, centres, radii, velocities) -> float:
+def _graded(q, qdot, opening, carrying, centres, radii, velocities) -> float:
     """Monitoring's stand-in: a stop within 0.15 m of a body sphere, full speed past 0.45 m,
     in between in proportion."""
     robot = np.array([q[0], 0.0, 0.0])
@@ -49,9 +49,9 @@ def _graded(q, qdot, carrying, centres, radii, velocities) -> float:
     return float(np.clip((gap - 0.15) / 0.3, 0.0, 1.0))
 
 
-def _stops_near(q, qdot, carrying, centres, radii, velocities) -> float:
+def _stops_near(q, qdot, opening, carrying, centres, radii, velocities) -> float:
     """A monitor that only stops: within 0.3 m of a body sphere, else full speed."""
-    return 0.0 if _graded(q, qdot, carrying, centres, radii, velocities) < 0.5 else 1.0
+    return 0.0 if _graded(q, qdot, opening, carrying, centres, radii, velocities) < 0.5 else 1.0
 
 
 def _sits(at: float, until: float, start: float = 0.0, end: float = 12.0) -> Occupancy:
@@ -70,13 +70,13 @@ def _arrival_after_wait(plan: Plan, occupancy: Occupancy) -> float:
     the monitor underneath (monitoring alone after the wait)."""
     holds = time_around(plan, 0.0, 0.0, occupancy, _graded, max_wait=6.0)
     wait = holds[0].until if holds else 0.0
-    path = motion_path(plan, 0.0, plan.duration)
+    path = motion_path(plan, 0.0, plan.duration, POSE_STEP)
     return reactive_profile(path, 0.0, occupancy, _graded, ACCELERATION, wait=wait).arrival
 
 
 def test_a_hand_that_sits_on_the_path_for_2_s_is_passed_sooner_than_by_waiting_or_reacting():
     plan = _plan()
-    path = motion_path(plan, 0.0, plan.duration)
+    path = motion_path(plan, 0.0, plan.duration, POSE_STEP)
     sits = _sits(at=0.6, until=2.0)
     profile = time_path(path, 0.0, sits, _graded, ACCELERATION, longest=6.0)
     assert profile is not None
@@ -96,13 +96,13 @@ def test_a_hand_that_sits_on_the_path_for_2_s_is_passed_sooner_than_by_waiting_o
         i = sits.at(t)
         q = plan.trajectory.value(tau).ravel()
         qdot = plan.trajectory.EvalDerivative(tau, 1).ravel()
-        allowed = _graded(q, qdot, None, sits.centres[i], sits.radii, sits.velocities[i])
+        allowed = _graded(q, qdot, 0.0, None, sits.centres[i], sits.radii, sits.velocities[i])
         assert s <= allowed + 0.1  # the pose is the nearest sampled one (0.1 s of plan time)
 
 
 def test_between_two_hands_it_stops_mid_path_and_goes_on_when_the_one_ahead_leaves():
     plan = _plan()
-    path = motion_path(plan, 0.0, plan.duration)
+    path = motion_path(plan, 0.0, plan.duration, POSE_STEP)
     # One hand sits near the path's end until 3 s, another comes to its start at 1.5 s: the
     # arm must leave at once and stand between them until the one ahead has left.
     ahead, behind = _sits(at=1.0, until=3.0), _sits(at=0.0, until=12.0, start=1.5)
@@ -135,7 +135,7 @@ def test_never_later_than_monitoring_alone_after_any_wait_against_an_exact_forec
     considers: its arrival is never later (with the monitor's own limit, and with the limit
     held over the reaction and stopping window)."""
     plan = _plan()
-    path = motion_path(plan, 0.0, plan.duration)
+    path = motion_path(plan, 0.0, plan.duration, POSE_STEP)
     sits = _sits(at, until)
     profile = time_path(path, 0.0, sits, _graded, ACCELERATION, longest=6.0, reaction=reaction)
     for wait in np.arange(0.0, 6.0 + 1e-9, 0.5):
@@ -151,6 +151,25 @@ def _blocks_then_stands_beside(until: float = 4.0) -> Occupancy:
     times = np.arange(0.0, 12.0, STEP)
     centres = np.array([[[0.6, 0.0, 0.0] if t < until else [0.5, 0.4, 0.0]] for t in times])
     return Occupancy(times, centres, np.array([0.05]), np.zeros_like(centres))
+
+
+def test_the_monitor_is_asked_about_the_gripper_at_the_plans_opening():
+    """Both timings ask the forecast monitor about each pose with the gripper's opening there:
+    a monitor that stops the arm only when its fingers are open wide (they reach a hand on the
+    path) makes the open plan wait for the hand and lets the closed one go at once."""
+
+    def stops_wide_fingers(q, qdot, opening, carrying, centres, radii, velocities) -> float:
+        near = _graded(q, qdot, opening, carrying, centres, radii, velocities) < 1.0
+        return 0.0 if opening > 0.05 and near else 1.0
+
+    sits = _sits(at=0.6, until=2.0)
+    closed, wide = _plan(opening=0.02), _plan(opening=0.1)
+    assert np.all(motion_path(closed, 0.0, DURATION, POSE_STEP).opening == 0.02)
+    assert time_around(closed, 0.0, 0.0, sits, stops_wide_fingers, 6.0) == ()
+    assert len(time_around(wide, 0.0, 0.0, sits, stops_wide_fingers, 6.0)) == 1
+    for plan, slowed in ((closed, False), (wide, True)):
+        timing = path_time_around(plan, 0.0, 0.0, 0.0, sits, stops_wide_fingers, 6.0, ACCELERATION)
+        assert bool(timing.holds or timing.caps) == slowed
 
 
 def test_clear_only_waits_only_where_a_wait_clears_the_motion():
@@ -172,7 +191,7 @@ def test_with_a_reaction_time_it_keeps_below_the_limit_while_it_could_still_be_s
     """A hand far off that comes onto the path at 2 s: with T_r the arm keeps below the limit
     the monitor will set over the next T_r + T_s, not only the one it sets now."""
     plan = _plan()
-    path = motion_path(plan, 0.0, plan.duration)
+    path = motion_path(plan, 0.0, plan.duration, POSE_STEP)
     times = np.arange(0.0, 12.0, STEP)
     centres = np.array([[[0.6 if 2.0 <= t < 4.0 else 5.0, 0.0, 0.0]] for t in times])
     comes = Occupancy(times, centres, np.array([0.05]), np.zeros_like(centres))
@@ -184,7 +203,7 @@ def test_with_a_reaction_time_it_keeps_below_the_limit_while_it_could_still_be_s
         window = reaction + np.abs(qdot).max() / ACCELERATION
         ahead = [comes.at(t + d) for d in np.arange(0.0, window + STEP, STEP)]
         allowed = min(
-            _graded(q, qdot, None, comes.centres[i], comes.radii, comes.velocities[i])
+            _graded(q, qdot, 0.0, None, comes.centres[i], comes.radii, comes.velocities[i])
             for i in ahead
             if i is not None
         )
@@ -197,7 +216,7 @@ def test_with_a_reaction_time_it_keeps_below_the_limit_while_it_could_still_be_s
 
 def test_with_nothing_forecast_it_runs_the_plan_at_full_speed():
     plan = _plan()
-    path = motion_path(plan, 0.0, plan.duration)
+    path = motion_path(plan, 0.0, plan.duration, POSE_STEP)
     profile = time_path(path, 2.0, _empty(), _graded, ACCELERATION)
     assert np.all(profile.speeds == 1.0)
     assert profile.arrival == pytest.approx(2.0 + DURATION, abs=STEP / LEVELS)
@@ -208,7 +227,7 @@ def test_the_speed_changes_within_the_joint_acceleration_limit():
     # A slow arm limit, so that the ramp binds: Δs ≤ a STEP / max |q̇| per step.
     acceleration = 0.5
     plan = _plan(reach=1.5)
-    path = motion_path(plan, 0.0, plan.duration)
+    path = motion_path(plan, 0.0, plan.duration, POSE_STEP)
     sits = _sits(at=0.9, until=2.5)
     profile = time_path(path, 0.0, sits, _graded, acceleration, longest=6.0)
     changes = np.abs(np.diff(profile.speeds))
@@ -252,7 +271,7 @@ def test_the_cap_leaves_the_steps_at_the_monitors_limit_to_the_monitor():
     its speed."""
     plan = _plan()
     sits = _sits(0.6, 2.0)
-    path = motion_path(plan, 0.0, plan.duration)
+    path = motion_path(plan, 0.0, plan.duration, POSE_STEP)
     profile = time_path(path, 0.0, sits, _graded, ACCELERATION, longest=6.0)
     # at_limit: the level the monitor allows at the step's pose (the nearest sampled one) is
     # no higher than the one taken.
@@ -261,7 +280,7 @@ def test_the_cap_leaves_the_steps_at_the_monitors_limit_to_the_monitor():
     ):
         p = int(np.argmin(np.abs(path.taus - tau)))
         i = sits.at(t)
-        allowed = _graded(path.q[p], path.qdot[p], None, sits.centres[i], sits.radii, None)
+        allowed = _graded(path.q[p], path.qdot[p], 0.0, None, sits.centres[i], sits.radii, None)
         assert at_limit == (int(np.floor(allowed * LEVELS + 1e-6)) <= round(s * LEVELS))
     assert profile.at_limit.any() and not profile.at_limit.all()
     timing = path_time_around(plan, 0.0, 0.0, 0.0, sits, _graded, 6.0, ACCELERATION)

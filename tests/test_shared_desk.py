@@ -78,7 +78,7 @@ def _plan_along_x(duration: float = 4.0) -> Plan:
     )
 
 
-def _slows_near(q, qdot, carrying, centres, radii, velocities) -> float:
+def _slows_near(q, qdot, opening, carrying, centres, radii, velocities) -> float:
     """Monitoring's stand-in: stop within 0.3 m of a body sphere, else full speed."""
     robot = np.array([q[0], 0.0, 0.0])
     return 0.0 if (np.linalg.norm(centres - robot, axis=1) - radii).min() < 0.3 else 1.0
@@ -122,8 +122,10 @@ def test_beside_a_hand_that_only_goes_away_the_plan_may_be_slowed_rather_than_wa
     times = np.arange(0.0, 12.0, 0.1)
     reach = _reach(times, at=1.0, start=0.0, end=5.0)
 
-    def halves_near(q, qdot, carrying, centres, radii, velocities) -> float:
-        return 0.5 if _slows_near(q, qdot, carrying, centres, radii, velocities) < 1 else 1.0
+    def halves_near(q, qdot, opening, carrying, centres, radii, velocities) -> float:
+        return (
+            0.5 if _slows_near(q, qdot, opening, carrying, centres, radii, velocities) < 1 else 1.0
+        )
 
     (hold,) = time_around(plan, 0.0, 0.0, reach, halves_near, max_wait=6.0)
     assert hold.tau == pytest.approx(2.0) and hold.until >= 4.0  # waits out the reach

@@ -26,9 +26,12 @@ import numpy as np
 
 from hrc_drake.motion.plan import Plan
 
-# (q, q̇ at full speed, the part carried or None, body centres k×3, radii k, velocities k×3)
-#   -> the speed scale in [0, 1] that separation monitoring allows
-ScaleFn = Callable[[np.ndarray, np.ndarray, str | None, np.ndarray, np.ndarray, np.ndarray], float]
+# (q, q̇ at full speed, the gripper's commanded opening [m], the part carried or None, body
+# centres k×3, radii k, velocities k×3) -> the speed scale in [0, 1] that separation monitoring
+# allows
+ScaleFn = Callable[
+    [np.ndarray, np.ndarray, float, str | None, np.ndarray, np.ndarray, np.ndarray], float
+]
 # A forecast slowing costs this many times its lost seconds: the monitor brakes and restarts
 # the arm within the joint acceleration limit, which the forecast leaves out, and the person may
 # come closer than forecast (our weighting).
@@ -78,29 +81,37 @@ class Hold:
 
 
 @dataclass(frozen=True)
-class _Poses:
-    """A motion's checked poses: plan times from the motion's start, q, q̇, carried part."""
+class MotionPath:
+    """Poses along a plan: plan times `taus` (evenly spaced), with q and q̇ at full speed, the
+    gripper's commanded opening and the part carried at each. The opening is the plan's, so that
+    the monitor is asked about the gripper as it will be: with the opening unknown it takes the
+    fingers over their whole travel (`hrc_drake.cell.ssm.body_gaps`), which put a carry beside
+    the operator's hand at the nut bin at a stop that the monitor, reading the measured opening,
+    never made (lean `shared-desk`, follows, seed 0, exact forecast)."""
 
-    offsets: np.ndarray
+    taus: np.ndarray
     q: np.ndarray
     qdot: np.ndarray
+    opening: np.ndarray
     carrying: tuple[str | None, ...]
 
 
-def _poses(plan: Plan, start: float, duration: float) -> _Poses:
-    count = max(2, int(np.ceil(duration / SAMPLE)) + 1)
-    taus = np.linspace(start, start + duration, count)
+def motion_path(plan: Plan, start: float, end: float, step: float) -> MotionPath:
+    """The poses of `plan` over plan times [start, end], `step` apart or closer."""
+    count = max(2, int(np.ceil((end - start) / step)) + 1)
+    taus = np.linspace(start, end, count)
     q = np.array([plan.trajectory.value(t).ravel() for t in taus])
     qdot = np.array([plan.trajectory.EvalDerivative(t, 1).ravel() for t in taus])
-    return _Poses(taus - start, q, qdot, tuple(plan.carrying(t) for t in taus))
+    opening = np.array([plan.gripper_opening(t) for t in taus])
+    return MotionPath(taus, q, qdot, opening, tuple(plan.carrying(t) for t in taus))
 
 
-def forecast_delay(poses: _Poses, begin: float, occupancy: Occupancy, scale: ScaleFn) -> float:
+def forecast_delay(poses: MotionPath, begin: float, occupancy: Occupancy, scale: ScaleFn) -> float:
     """Seconds the monitor is forecast to add to the motion if it starts at `begin` (absolute):
     the motion played forward in steps of its pose spacing, its plan time advancing at the
     scale the monitor would allow against the forecast body at each moment (a stopped arm
     stays where it stopped until the body leaves). Capped at the forecast's end."""
-    offsets = poses.offsets
+    offsets = poses.taus - poses.taus[0]
     duration = float(offsets[-1])
     dt = duration / max(len(offsets) - 1, 1)
     if dt <= 0:
@@ -116,6 +127,7 @@ def forecast_delay(poses: _Poses, begin: float, occupancy: Occupancy, scale: Sca
             s = scale(
                 poses.q[k],
                 poses.qdot[k],
+                poses.opening[k],
                 poses.carrying[k],
                 occupancy.centres[i],
                 occupancy.radii,
@@ -160,7 +172,7 @@ def time_around(
         begin = now + (motion.start - tau) + shift
         if not occupancy.overlaps(begin, begin + motion.duration + max_wait):
             continue
-        poses = _poses(plan, motion.start, motion.duration)
+        poses = motion_path(plan, motion.start, motion.start + motion.duration, SAMPLE)
         longest = max_wait
         if spent is not None and abs(spent[0] - motion.start) < _EPS:
             longest = max(0.0, max_wait - spent[1])
@@ -185,4 +197,12 @@ def time_around(
     return tuple(holds)
 
 
-__all__ = ["Hold", "Occupancy", "ScaleFn", "forecast_delay", "time_around"]
+__all__ = [
+    "Hold",
+    "MotionPath",
+    "Occupancy",
+    "ScaleFn",
+    "forecast_delay",
+    "motion_path",
+    "time_around",
+]

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hrc_drake.motion.clearance import Hold, Occupancy, ScaleFn
+from hrc_drake.motion.clearance import Hold, MotionPath, Occupancy, ScaleFn, motion_path
 from hrc_drake.motion.plan import Plan
 
 STEP = 0.1  # s per step of the search: the forecast's own sampling (OperatorForecast.SAMPLE)
@@ -40,26 +40,6 @@ LEVELS = 20  # speed levels above 0: s ∈ {0, 1/20, ..., 1}
 POSE_STEP = 0.1  # s of plan time between the poses the monitor is asked about
 _EPS = 1e-6
 _REST = 1e-6  # rad/s: a path this slow is at rest (the speed may jump there)
-
-
-@dataclass(frozen=True)
-class MotionPath:
-    """The part of a motion still to go: plan times `taus` (evenly spaced, from where the arm
-    is to the motion's end), with q and q̇ at full speed and the part carried at each."""
-
-    taus: np.ndarray
-    q: np.ndarray
-    qdot: np.ndarray
-    carrying: tuple[str | None, ...]
-
-
-def motion_path(plan: Plan, start: float, end: float) -> MotionPath:
-    """The path of `plan` over plan times [start, end], sampled every POSE_STEP or finer."""
-    count = max(2, int(np.ceil((end - start) / POSE_STEP)) + 1)
-    taus = np.linspace(start, end, count)
-    q = np.array([plan.trajectory.value(t).ravel() for t in taus])
-    qdot = np.array([plan.trajectory.EvalDerivative(t, 1).ravel() for t in taus])
-    return MotionPath(taus, q, qdot, tuple(plan.carrying(t) for t in taus))
 
 
 @dataclass(frozen=True)
@@ -138,6 +118,7 @@ class _Lattice:
             s = self.scale(
                 path.q[p],
                 path.qdot[p],
+                path.opening[p],
                 path.carrying[p],
                 occupancy.centres[i],
                 occupancy.radii,
@@ -387,7 +368,7 @@ def path_time_around(
         longest = max_wait
         if spent is not None and abs(spent[0] - motion.start) < _EPS:
             longest = max(0.0, max_wait - spent[1])
-        path = motion_path(plan, start, stop)
+        path = motion_path(plan, start, stop, POSE_STEP)
         profile = time_path(
             path,
             begin,
@@ -428,12 +409,11 @@ def _chosen_cap(
 
 __all__ = [
     "LEVELS",
+    "POSE_STEP",
     "STEP",
-    "MotionPath",
     "PathTiming",
     "Profile",
     "SpeedCap",
-    "motion_path",
     "path_time_around",
     "reactive_profile",
     "slip",

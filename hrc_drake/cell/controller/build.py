@@ -144,7 +144,7 @@ def keep_clear_settings(
         (NEAR_SPEED + TCP_BOUND) * (safety.reaction_time + period + STOP_BOUND), 0.0
     )
 
-    def scale(q, qdot, carrying, centres, radii, velocities) -> float:
+    def scale(q, qdot, opening, carrying, centres, radii, velocities) -> float:
         # Far from every sphere the monitor cannot limit: skip its full assessment.
         wrist = envelope.pose(q, None)[1]
         near = np.linalg.norm(centres[None, :, :] - wrist[:, None, :], axis=2) - radii[None]
@@ -153,7 +153,7 @@ def keep_clear_settings(
         intent = MotionIntent(qdot=qdot, carrying=carrying, moving=True, rate=1.0)
         spheres = BodySpheres(centres, radii, velocities)
         reading = assess(
-            envelope, q, qdot, spheres, intent, safety, acceleration, None, period, lag
+            envelope, q, qdot, spheres, intent, safety, acceleration, opening, period, lag
         )
         return reading.limit
 
