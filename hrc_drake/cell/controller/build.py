@@ -112,7 +112,6 @@ def supervisor_limits(scenario: Scenario, options: MotionOptions) -> SupervisorL
             enabled=run.place_guard > 0,
         ),
         gripper_time=options.gripper_time,
-        look_ahead=MONITOR_LAG * run.period,
     )
 
 

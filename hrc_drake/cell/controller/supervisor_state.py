@@ -10,6 +10,7 @@ import numpy as np
 
 from hrc_drake.cell.controller.forecast import Anchor
 from hrc_drake.cell.controller.guard import GuardSettings, GuardState, Retreat
+from hrc_drake.cell.controller.separation import MONITOR_LAG
 from hrc_drake.hri.messages import Prompt
 from hrc_drake.motion.clearance import Hold
 from hrc_drake.motion.path_time import SpeedCap
@@ -395,10 +396,13 @@ class SupervisorLimits:
     guard: GuardSettings = field(default_factory=GuardSettings)
     # Seconds the fingers take to open or close (`MotionOptions.gripper_time`).
     gripper_time: float = 0.5
-    # Plan time over which the intent tells the separation monitor the plan's velocities
-    # (`MotionIntent.ahead`): until a limit the monitor sets now governs what the station's
-    # safety function judges (`hrc_drake.cell.controller.separation.MONITOR_LAG` periods).
-    look_ahead: float = 0.04
+
+    @property
+    def look_ahead(self) -> float:
+        """Plan time [s] over which the intent tells the separation monitor the plan's
+        velocities (`MotionIntent.ahead`): until a limit the monitor sets now governs what the
+        station's safety function judges, `MONITOR_LAG` periods."""
+        return MONITOR_LAG * self.period
 
 
 __all__ = [
