@@ -107,14 +107,16 @@ def _row(r: dict) -> str:
     )
 
 
-def report(rows: list[dict], argv: list[str], full: bool = False) -> str:
-    """The report's Markdown."""
+def report(rows: list[dict], argv: list[str], full: bool = False, load: float = 0.0) -> str:
+    """The report's Markdown; `load`: the machine's 1-minute load average as the runs began
+    (the real-time factor asks a quiet machine)."""
     command = " ".join(["python benchmarks/bench_camera.py", *argv])
     lines = [
         "# Camera configuration sensor over the catalogue",
         "",
         f"`{command}` — drake {importlib.metadata.version('drake')}, {platform.machine()}, "
-        f"{os.cpu_count()} cores (shared), Python {platform.python_version()}.",
+        f"{os.cpu_count()} cores, load average {load:.2f} as the runs began, "
+        f"Python {platform.python_version()}.",
         "",
         f"Every run {SETTINGS[full]}, with `{CAMERA_TEXT}`: the camera at {CAMERA.rate:g} Hz, "
         f"{CAMERA.latency:g} s latency, {CAMERA.noise * 1000:g} mm and "
@@ -154,12 +156,13 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     out = args.out or (FULL_REPORT if args.full else REPORT)
     names = args.only or sorted(p.stem for p in scenarios_dir().glob("*.yaml"))
+    load = os.getloadavg()[0]
     rows = []
     for name in names:
         print(f"{name} ...", flush=True)
         rows.append(run(name, args.full))
         print(_row(rows[-1]), flush=True)
-    atomic_write_text(out, report(rows, sys.argv[1:] if argv is None else argv, args.full))
+    atomic_write_text(out, report(rows, sys.argv[1:] if argv is None else argv, args.full, load))
     print(f"wrote {out}")
     return 0
 

@@ -90,7 +90,10 @@ class MotionPath:
     the monitor is asked about the gripper as it will be: with the opening unknown it takes the
     fingers over their whole travel (`hrc_drake.cell.ssm.body_gaps`), which put a carry beside
     the operator's hand at the nut bin at a stop that the monitor, reading the measured opening,
-    never made (lean `shared-desk`, follows, seed 0, exact forecast)."""
+    never made (lean `shared-desk`, follows, seed 0, exact forecast). Holding a part, the
+    command is `MotionOptions.grip_squeeze` (2 mm) under its width, so the forecast's fingers
+    sit 1 mm inside where they stall on it: a planning figure; the monitor reads the measured
+    opening."""
 
     taus: np.ndarray
     q: np.ndarray
