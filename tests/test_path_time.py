@@ -4,7 +4,13 @@ import numpy as np
 import pytest
 from pydrake.trajectories import PiecewisePolynomial
 
-from hrc_drake.motion.clearance import Occupancy, motion_path, time_around
+from hrc_drake.motion.clearance import (
+    SAMPLE,
+    Occupancy,
+    forecast_delay,
+    motion_path,
+    time_around,
+)
 from hrc_drake.motion.path_time import (
     LEVELS,
     POSE_STEP,
@@ -170,6 +176,26 @@ def test_the_monitor_is_asked_about_the_gripper_at_the_plans_opening():
     for plan, slowed in ((closed, False), (wide, True)):
         timing = path_time_around(plan, 0.0, 0.0, 0.0, sits, stops_wide_fingers, 6.0, ACCELERATION)
         assert bool(timing.holds or timing.caps) == slowed
+
+
+def test_the_forecast_delay_asks_the_monitor_once_per_pose_and_sample_over_every_wait():
+    """The waits a motion tries meet the same (pose, forecast sample) pairs again: with a
+    shared memo each is asked once, and every delay is the one asked afresh."""
+    plan, sits = _plan(), _sits(at=0.6, until=2.0)
+    path = motion_path(plan, 0.0, DURATION, SAMPLE)
+    asked = []
+
+    def counted(*args) -> float:
+        asked.append(1)
+        return _graded(*args)
+
+    memo: dict = {}
+    begins = np.arange(0.0, 3.0, 0.2)
+    shared = [forecast_delay(path, b, sits, counted, memo) for b in begins]
+    once = len(asked)
+    fresh = [forecast_delay(path, b, sits, counted) for b in begins]
+    assert shared == fresh and shared[0] > 0.5
+    assert once == len(memo) < len(asked) - once
 
 
 def test_clear_only_waits_only_where_a_wait_clears_the_motion():

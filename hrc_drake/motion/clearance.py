@@ -112,11 +112,20 @@ def motion_path(plan: Plan, start: float, end: float, step: float) -> MotionPath
     return MotionPath(taus, q, qdot, opening, tuple(plan.carrying(t) for t in taus))
 
 
-def forecast_delay(poses: MotionPath, begin: float, occupancy: Occupancy, scale: ScaleFn) -> float:
+def forecast_delay(
+    poses: MotionPath,
+    begin: float,
+    occupancy: Occupancy,
+    scale: ScaleFn,
+    memo: dict[tuple[int, int], float] | None = None,
+) -> float:
     """Seconds the monitor is forecast to add to the motion if it starts at `begin` (absolute):
     the motion played forward in steps of its pose spacing, its plan time advancing at the
     scale the monitor would allow against the forecast body at each moment (a stopped arm
-    stays where it stopped until the body leaves). Capped at the forecast's end."""
+    stays where it stopped until the body leaves). Capped at the forecast's end. `memo` keeps
+    the scales already asked, by (pose, forecast sample), for further calls on the same
+    `poses` and `occupancy`: the waits a motion tries meet the same pairs again, and each
+    costs the monitor's whole assessment."""
     offsets = poses.taus - poses.taus[0]
     duration = float(offsets[-1])
     dt = duration / max(len(offsets) - 1, 1)
@@ -130,15 +139,19 @@ def forecast_delay(poses: MotionPath, begin: float, occupancy: Occupancy, scale:
             break  # past the forecast: nothing slows it any more
         s = 1.0
         if i is not None and np.abs(poses.qdot[k]).max() > _EPS:
-            s = scale(
-                poses.q[k],
-                poses.qdot[k],
-                poses.opening[k],
-                poses.carrying[k],
-                occupancy.centres[i],
-                occupancy.radii,
-                occupancy.velocities[i],
-            )
+            s = memo.get((k, i)) if memo is not None else None
+            if s is None:
+                s = scale(
+                    poses.q[k],
+                    poses.qdot[k],
+                    poses.opening[k],
+                    poses.carrying[k],
+                    occupancy.centres[i],
+                    occupancy.radii,
+                    occupancy.velocities[i],
+                )
+                if memo is not None:
+                    memo[(k, i)] = s
         tau += s * dt
         t += dt
     return max(0.0, (t - begin) - tau) if tau < duration - _EPS else (t - begin) - duration
@@ -183,9 +196,10 @@ def time_around(
         if spent is not None and abs(spent[0] - motion.start) < _EPS:
             longest = max(0.0, max_wait - spent[1])
         best_wait, best_cost = 0.0, np.inf
+        memo: dict[tuple[int, int], float] = {}
         for wait in np.arange(0.0, longest + _EPS, WAIT_STEP):
             lost = max(
-                forecast_delay(poses, begin + wait + late, occupancy, scale)
+                forecast_delay(poses, begin + wait + late, occupancy, scale, memo)
                 for late in RUNNING_LATE
             )
             if lost <= _EPS:  # separation forecast to hold: no later wait costs less
