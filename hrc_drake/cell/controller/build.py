@@ -145,7 +145,7 @@ def keep_clear_settings(
 
     def scale(q, qdot, opening, carrying, centres, radii, velocities) -> float:
         # Far from every sphere the monitor cannot limit: skip its full assessment.
-        wrist = envelope.pose(q, None)[1]
+        wrist = envelope.pose(q, opening)[1]
         near = np.linalg.norm(centres[None, :, :] - wrist[:, None, :], axis=2) - radii[None]
         if near.min() > reach + safety.slow_band + safety.human_uncertainty:
             return 1.0
