@@ -366,3 +366,55 @@ def test_with_separation_alone_predictive_waits_only_where_a_wait_clears_the_mot
         scenario, design, RobotEnvelope(design), motion_options(scenario)
     )
     assert settings.forecast is not None and settings.clear_only is clear_only
+
+
+def test_the_forecast_monitor_asks_about_each_repeated_sphere_once_with_the_same_scale():
+    """A joined forecast repeats the spheres its timelines share (the hand resting in one
+    place): `distinct_spheres` keeps each once, in order, and keeps spheres that differ in their
+    velocity alone; the forecast monitor's scale over a joined forecast's samples equals the
+    monitor's whole assessment of every sphere."""
+    from hrc_drake.cell.controller.build import keep_clear_settings
+    from hrc_drake.cell.controller.forecast import Anchor, distinct_spheres
+    from hrc_drake.cell.controller.intent import MotionIntent
+    from hrc_drake.cell.controller.separation import MONITOR_LAG, assess
+    from hrc_drake.cell.ports import BodySpheres
+    from hrc_drake.cell.robot_envelope import RobotEnvelope
+    from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
+    from hrc_drake.tasks.spec import load_spec
+
+    centres = np.array([[0.4, 0.1, 0.2], [0.4, 0.1, 0.2], [0.5, 0.0, 0.2], [0.4, 0.1, 0.2]])
+    velocities = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
+    kept = distinct_spheres(centres, np.full(4, 0.05), velocities)
+    assert np.array_equal(kept[0], centres[[0, 2, 3]])
+    assert np.array_equal(kept[2], velocities[[0, 2, 3]])
+
+    scenario = load_cell_scenario("shared-desk", None)
+    design = cell_design(scenario, load_spec(scenario.assembly_path))
+    envelope, options = RobotEnvelope(design), motion_options(scenario)
+    settings = keep_clear_settings(scenario, design, envelope, options)
+    forecast = settings.forecast
+    occupancy = forecast.occupancy(Anchor("F1", 0.0), 0.0, 6.0, forecast.offsets(False))
+    # A pose and a speed that the forecast limits on some samples (found by a random search).
+    q = np.array([-2.34, 1.38, -2.21, -0.75, -0.44, -0.07])
+    qdot = np.array([0.31, -0.18, -0.32, -0.14, 1.09, -0.03])
+    safety, period = scenario.safety, scenario.run.period
+    repeated, scales = 0, []
+    for i in range(len(occupancy.times)):
+        c, r, v = occupancy.centres[i], occupancy.radii, occupancy.velocities[i]
+        repeated += len(r) - len(distinct_spheres(c, r, v)[1])
+        whole = assess(
+            envelope,
+            q,
+            qdot,
+            BodySpheres(c, r, v),
+            MotionIntent(qdot=qdot, carrying=None, moving=True, rate=1.0),
+            safety,
+            options.joint_acceleration_limit,
+            0.05,
+            period,
+            MONITOR_LAG * period,
+        ).limit
+        scales.append(settings.scale(q, qdot, 0.05, None, c, r, v))
+        assert scales[-1] == whole
+    assert repeated > 0
+    assert min(scales) < 1.0 == max(scales)

@@ -7,6 +7,7 @@ simulated person by it; the controller's `OperatorForecast` predicts the person 
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -136,15 +137,24 @@ def desk_of(frames: CellFrames, layout: CellLayout) -> Desk:
     return Desk(bins, seats, parts, bolts)
 
 
+@functools.lru_cache(maxsize=4096)
+def _sphere_centres(stance: tuple, hand: tuple, left: bool) -> np.ndarray:
+    """The centres of `BodyPose.spheres` for `body_pose(stance, hand, left)`, kept for the
+    hand places met again: a forecast's timelines hold the hand at rest in the same place on
+    many samples (read-only: shared between the calls)."""
+    centres = body_pose(np.array(stance), np.array(hand), left).spheres()[0]
+    centres.flags.writeable = False
+    return centres
+
+
 def body_samples(person: Person, timeline: HandTimeline, times: np.ndarray) -> Occupancy:
     """The body as spheres at `times` with the hand on `timeline` (velocities by differences,
     as a tracker reports them)."""
-    stance = np.asarray(person.stance, dtype=float)
-    centres, radii = [], None
-    for t in times:
-        c, radii, _ = body_pose(stance, timeline.at(t), person.left_handed).spheres()
-        centres.append(c)
-    centres = np.array(centres)
+    stance = tuple(float(x) for x in person.stance)
+    centres = np.array(
+        [_sphere_centres(stance, tuple(timeline.at(t)), person.left_handed) for t in times]
+    )
+    radii = _RADII
     velocities = np.zeros_like(centres)
     if len(times) > 1:
         velocities = np.gradient(centres, times, axis=0)

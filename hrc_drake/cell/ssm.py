@@ -49,9 +49,8 @@ def entry_scales(gap, a0, a1, a2) -> np.ndarray:
     D = a1² + 4 a2 (g − a0), which is exact for a2 = 0 and free of cancellation for small a2.
     A negative a1 (a quadratic that dips first, a2 > 0; `planned_scales`) is allowed where
     a0 ≤ gap: there the root is (√D − a1) / (2 a2), the form free of cancellation for it."""
-    gap, a0, a1, a2 = np.broadcast_arrays(
-        *(np.atleast_1d(np.asarray(x, dtype=float)) for x in (gap, a0, a1, a2))
-    )
+    # Broadcast by the arithmetic: np.broadcast_arrays took a third of a call's time.
+    gap, a0, a1, a2 = (np.asarray(x, dtype=float) for x in (gap, a0, a1, a2))
     room = gap - a0
     disc = np.sqrt(np.maximum(a1 * a1 + 4.0 * a2 * np.maximum(room, 0.0), 0.0))
     root = np.where(
@@ -59,8 +58,8 @@ def entry_scales(gap, a0, a1, a2) -> np.ndarray:
         2.0 * room / np.maximum(a1 + disc, _TINY),
         (disc - a1) / np.maximum(2.0 * a2, _TINY),
     )
-    scales = np.clip(root, 0.0, 1.0)
-    return np.where(a0 + a1 + a2 <= gap, 1.0, np.where(room < 0.0, 0.0, scales))
+    scales = np.minimum(np.maximum(root, 0.0), 1.0)
+    return np.atleast_1d(np.where(a0 + a1 + a2 <= gap, 1.0, np.where(room < 0.0, 0.0, scales)))
 
 
 def allowed_scale(gap, a0, a1, a2) -> float:

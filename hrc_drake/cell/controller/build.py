@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
-from hrc_drake.cell.controller.forecast import OperatorForecast
+from hrc_drake.cell.controller.forecast import OperatorForecast, distinct_spheres
 from hrc_drake.cell.controller.guard import GuardSettings
 from hrc_drake.cell.controller.intent import MotionIntent
 from hrc_drake.cell.controller.keep_clear import KeepClearSettings
@@ -144,6 +144,7 @@ def keep_clear_settings(
     )
 
     def scale(q, qdot, opening, carrying, centres, radii, velocities) -> float:
+        centres, radii, velocities = distinct_spheres(centres, radii, velocities)
         # Far from every sphere the monitor cannot limit: skip its full assessment.
         wrist = envelope.pose(q, opening)[1]
         near = np.linalg.norm(centres[None, :, :] - wrist[:, None, :], axis=2) - radii[None]

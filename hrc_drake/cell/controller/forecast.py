@@ -132,4 +132,21 @@ class OperatorForecast:
         return replace(anchor, lag=anchor.lag - float(offsets[best])), float(gaps[best])
 
 
-__all__ = ["Anchor", "OperatorForecast"]
+def distinct_spheres(
+    centres: np.ndarray, radii: np.ndarray, velocities: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The spheres of one forecast sample (`Occupancy` at one time) with each repeated one
+    (the same centre, radius and velocity) kept once, in their order. The timelines of a
+    forecast put the hand in the same place wherever it rests on all of them: on full
+    `shared-desk` its samples held 141 spheres on average, 51 of them distinct. The monitor
+    takes the least scale over the (shape, sphere) pairs, one pair at a time, so a repeated
+    sphere cannot change it; it only costs the monitor's time, which grows with the spheres."""
+    rows = np.ascontiguousarray(np.column_stack([centres, radii, velocities]), dtype=float)
+    keys = rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).ravel()
+    first = np.sort(np.unique(keys, return_index=True)[1])
+    if len(first) == len(radii):
+        return centres, radii, velocities
+    return centres[first], radii[first], velocities[first]
+
+
+__all__ = ["Anchor", "OperatorForecast", "distinct_spheres"]
