@@ -151,6 +151,7 @@ class RobotEnvelope:
         self._sets: dict[tuple[str | None, bool], Primitives] = {}
         self._axes, self._points = self._chain()
         self._opening: float | None = None  # the gripper's opening `pose` last set (None: unset)
+        self._posed: tuple = (None, None)  # ((q's bytes, opening), (R_WB, p_WB)) `pose` last gave
 
     def _link_of(self, body) -> int:
         """Row in `links` of the arm link whose motion `body` shares; len(links): fixed."""
@@ -245,17 +246,24 @@ class RobotEnvelope:
         """Forward kinematics at arm positions `q` (UR3_JOINTS order) and the gripper `opening`
         (None: mid-stroke): (R_WB n×3×3, p_WB n×3) of `bodies`."""
         plant, context = self.plant, self.context
-        plant.SetPositions(context, self._arm, q)
         opening = (
             RG2_MAX_OPENING / 2 if opening is None else min(max(opening, 0.0), RG2_MAX_OPENING)
         )
+        key = (np.asarray(q, dtype=float).tobytes(), opening)
+        if key == self._posed[0]:
+            # Asked again at the same pose (the forecast monitor's check far from the body,
+            # then its assessment): the kinematics are the same.
+            return self._posed[1]
+        plant.SetPositions(context, self._arm, q)
         if opening != self._opening:
             # The measured opening changes in 0.1 mm steps, seldom between two calls; each
             # set looks up the linkage's six joints by name.
             set_rg2_opening(plant, context, opening, self._gripper)
             self._opening = opening
         X = np.array([plant.EvalBodyPoseInWorld(context, b).GetAsMatrix34() for b in self.bodies])
-        return X[:, :, :3], X[:, :, 3]
+        X.flags.writeable = False  # shared with the next call at this pose
+        self._posed = (key, (X[:, :, :3], X[:, :, 3]))
+        return self._posed[1]
 
     def _chain(self) -> tuple[np.ndarray, np.ndarray]:
         """Each arm joint's axis and a point on it in its link's frame (UR3_JOINTS order), after
