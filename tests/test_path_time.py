@@ -354,3 +354,34 @@ def test_the_shared_desk_timed_along_its_paths_keeps_separation_and_stands_on_it
     assert result.safety.stopped_time > 1.0
     assert result.safety.body_contacts == 0 and result.safety.violations == 0
     assert result.safety_check.beyond_contact_speed == 0 and result.safety_check.body_contacts == 0
+
+
+def test_a_remembered_scale_answers_a_question_asked_before_without_asking_again():
+    """`remembered` asks the monitor once per distinct question (pose, speed, opening, part,
+    body), gives its answer again for a repeat, tells apart questions that differ in any one
+    of them, and forgets the oldest past its size."""
+    from hrc_drake.motion.clearance import remembered
+
+    asked = []
+
+    def monitor(q, qdot, opening, carrying, centres, radii, velocities) -> float:
+        asked.append(1)
+        return float(q[0] + qdot[0] + opening + centres.sum() + velocities.sum() + len(radii))
+
+    scale = remembered(monitor, size=3)
+    q, qdot, c, r, v = np.zeros(6), np.ones(6), np.zeros((2, 3)), np.ones(2), np.zeros((2, 3))
+    first = scale(q, qdot, 0.05, None, c, r, v)
+    assert scale(q, qdot, 0.05, None, c.copy(), r.copy(), v.copy()) == first
+    assert len(asked) == 1
+    variants = [
+        (q + 0.1, qdot, 0.05, None, c, r, v),
+        (q, qdot, 0.06, None, c, r, v),
+        (q, qdot, 0.05, "oval_flange_1", c, r, v),
+        (q, qdot, 0.05, None, c, r, v + 1.0),
+    ]
+    for variant in variants:
+        assert scale(*variant) == monitor(*variant)
+    assert len(asked) == 1 + 2 * len(variants)
+    # Size 3: the first question was forgotten, so it is asked again.
+    scale(q, qdot, 0.05, None, c, r, v)
+    assert len(asked) == 2 + 2 * len(variants)

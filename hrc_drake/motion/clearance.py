@@ -19,6 +19,8 @@ monitoring stays underneath and acts on the body as measured. The forecast's own
 
 from __future__ import annotations
 
+import hashlib
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -110,6 +112,33 @@ def motion_path(plan: Plan, start: float, end: float, step: float) -> MotionPath
     qdot = np.array([plan.trajectory.EvalDerivative(t, 1).ravel() for t in taus])
     opening = np.array([plan.gripper_opening(t) for t in taus])
     return MotionPath(taus, q, qdot, opening, tuple(plan.carrying(t) for t in taus))
+
+
+def remembered(scale: ScaleFn, size: int = 1 << 16) -> ScaleFn:
+    """`scale` answering each question it was asked before from memory: the same pose, speed,
+    opening, part and forecast sample, known by a digest of their values; the `size` latest
+    are kept. A re-timing asks again about the motions still to come, and while the forecast's
+    anchor stays, its sample at a time is the same body: on full `shared-desk` (realistic
+    sensors, the camera) 2605 of the forecast monitor's 4991 questions were distinct."""
+    answers: OrderedDict[bytes, float] = OrderedDict()
+
+    def answer(q, qdot, opening, carrying, centres, radii, velocities) -> float:
+        digest = hashlib.blake2b(digest_size=16)
+        for values in (q, qdot, centres, radii, velocities):
+            digest.update(np.ascontiguousarray(values, dtype=float).tobytes())
+        opened = None if opening is None else float(opening)
+        digest.update(repr((opened, carrying, len(radii))).encode())
+        key = digest.digest()
+        if key in answers:
+            answers.move_to_end(key)
+            return answers[key]
+        value = scale(q, qdot, opening, carrying, centres, radii, velocities)
+        answers[key] = value
+        if len(answers) > size:
+            answers.popitem(last=False)
+        return value
+
+    return answer
 
 
 def forecast_delay(
@@ -224,5 +253,6 @@ __all__ = [
     "ScaleFn",
     "forecast_delay",
     "motion_path",
+    "remembered",
     "time_around",
 ]

@@ -40,6 +40,7 @@ from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.robot_envelope import RobotEnvelope
 from hrc_drake.cell.ssm import NEAR_SPEED
 from hrc_drake.cell_models import CellDesign
+from hrc_drake.motion.clearance import remembered
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.scene import load_cell_frames
 from hrc_drake.motion.service import PlanService
@@ -159,7 +160,7 @@ def keep_clear_settings(
 
     return KeepClearSettings(
         forecast,
-        scale,
+        remembered(scale),
         safety.max_wait,
         safety.departure,
         safety.timing,
