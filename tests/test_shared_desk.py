@@ -368,19 +368,41 @@ def test_with_separation_alone_predictive_waits_only_where_a_wait_clears_the_mot
     assert settings.forecast is not None and settings.clear_only is clear_only
 
 
+def _forecast_monitor():
+    """(settings, envelope, options, scenario) of `shared-desk`'s predictive separation."""
+    from hrc_drake.cell.controller.build import keep_clear_settings
+    from hrc_drake.cell.robot_envelope import RobotEnvelope
+    from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
+    from hrc_drake.tasks.spec import load_spec
+
+    scenario = load_cell_scenario("shared-desk", None)
+    design = cell_design(scenario, load_spec(scenario.assembly_path))
+    envelope, options = RobotEnvelope(design), motion_options(scenario)
+    return keep_clear_settings(scenario, design, envelope, options), envelope, options, scenario
+
+
+def _monitor_limit(envelope, options, scenario, q, qdot, body) -> float:
+    """The controller's monitor's limit for the arm at `q`, `qdot` (opening 5 cm) by `body`."""
+    from hrc_drake.cell.controller.intent import MotionIntent
+    from hrc_drake.cell.controller.separation import MONITOR_LAG, assess
+
+    period = scenario.run.period
+    intent = MotionIntent(qdot=qdot, carrying=None, moving=True, rate=1.0)
+    acceleration = options.joint_acceleration_limit
+    lag = MONITOR_LAG * period
+    return assess(
+        envelope, q, qdot, body, intent, scenario.safety, acceleration, 0.05, period, lag
+    ).limit
+
+
 def test_the_forecast_monitor_asks_about_each_repeated_sphere_once_with_the_same_scale():
     """A joined forecast repeats the spheres its timelines share (the hand resting in one
     place): `distinct_spheres` keeps each once, in order, and keeps spheres that differ in their
     velocity alone; the forecast monitor's scale over a joined forecast's samples equals the
-    monitor's whole assessment of every sphere."""
-    from hrc_drake.cell.controller.build import keep_clear_settings
+    monitor's whole assessment of every sphere, the body's parts told."""
     from hrc_drake.cell.controller.forecast import Anchor, distinct_spheres
-    from hrc_drake.cell.controller.intent import MotionIntent
-    from hrc_drake.cell.controller.separation import MONITOR_LAG, assess
+    from hrc_drake.cell.person import BODY_GROUPS
     from hrc_drake.cell.ports import BodySpheres
-    from hrc_drake.cell.robot_envelope import RobotEnvelope
-    from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options
-    from hrc_drake.tasks.spec import load_spec
 
     centres = np.array([[0.4, 0.1, 0.2], [0.4, 0.1, 0.2], [0.5, 0.0, 0.2], [0.4, 0.1, 0.2]])
     velocities = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
@@ -388,33 +410,42 @@ def test_the_forecast_monitor_asks_about_each_repeated_sphere_once_with_the_same
     assert np.array_equal(kept[0], centres[[0, 2, 3]])
     assert np.array_equal(kept[2], velocities[[0, 2, 3]])
 
-    scenario = load_cell_scenario("shared-desk", None)
-    design = cell_design(scenario, load_spec(scenario.assembly_path))
-    envelope, options = RobotEnvelope(design), motion_options(scenario)
-    settings = keep_clear_settings(scenario, design, envelope, options)
+    settings, envelope, options, scenario = _forecast_monitor()
     forecast = settings.forecast
     occupancy = forecast.occupancy(Anchor("F1", 0.0), 0.0, 6.0, forecast.offsets(False))
     # A pose and a speed that the forecast limits on some samples (found by a random search).
     q = np.array([-2.34, 1.38, -2.21, -0.75, -0.44, -0.07])
     qdot = np.array([0.31, -0.18, -0.32, -0.14, 1.09, -0.03])
-    safety, period = scenario.safety, scenario.run.period
     repeated, scales = 0, []
     for i in range(len(occupancy.times)):
         c, r, v = occupancy.centres[i], occupancy.radii, occupancy.velocities[i]
         repeated += len(r) - len(distinct_spheres(c, r, v)[1])
-        whole = assess(
-            envelope,
-            q,
-            qdot,
-            BodySpheres(c, r, v),
-            MotionIntent(qdot=qdot, carrying=None, moving=True, rate=1.0),
-            safety,
-            options.joint_acceleration_limit,
-            0.05,
-            period,
-            MONITOR_LAG * period,
-        ).limit
+        whole = BodySpheres(c, r, v, BODY_GROUPS)
         scales.append(settings.scale(q, qdot, 0.05, None, c, r, v))
-        assert scales[-1] == whole
+        assert scales[-1] == _monitor_limit(envelope, options, scenario, q, qdot, whole)
     assert repeated > 0
     assert min(scales) < 1.0 == max(scales)
+
+
+def test_the_forecast_monitor_permits_no_approach_to_the_forecast_head():
+    """The monitor lets the arm creep toward a hand at the contact speed, never toward the
+    head (ISO/TS 15066 Annex A). The forecast monitor reads a forecast body's head as the
+    head: an arm coming down slowly onto it is stopped, where the same spheres without their
+    parts (all touchable) would let it creep."""
+    from hrc_drake.cell.person import BODY_GROUPS, body_pose
+    from hrc_drake.cell.ports import BodySpheres
+
+    settings, envelope, options, scenario = _forecast_monitor()
+    q = np.array([0.0, -1.2, 1.4, -1.8, -1.57, 0.0])
+    qdot = np.array([0.0, 0.05, 0.0, 0.0, 0.0, 0.0])  # the shoulder lifts: the tool comes down
+    tool = envelope.pose(q, 0.05)[1][-1]
+    centres, radii, groups = body_pose(np.zeros(2), np.array([0.3, 0.3, 0.3])).spheres()
+    head = centres[groups[-1][0]]
+    centres = centres + (tool - head) - np.array([0.0, 0.0, 0.2])  # the head under the tool
+    velocities = np.zeros_like(centres)
+    assert groups == BODY_GROUPS
+    limit = settings.scale(q, qdot, 0.05, None, centres, radii, velocities)
+    parts = BodySpheres(centres, radii, velocities, groups)
+    none = BodySpheres(centres, radii, velocities)
+    assert limit == _monitor_limit(envelope, options, scenario, q, qdot, parts) == 0.0
+    assert _monitor_limit(envelope, options, scenario, q, qdot, none) > 0.0

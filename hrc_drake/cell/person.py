@@ -161,6 +161,8 @@ def body_samples(person: Person, timeline: HandTimeline, times: np.ndarray) -> O
     return Occupancy(np.asarray(times, dtype=float), centres, np.asarray(radii), velocities)
 
 
+# Every whole body's spheres (`BodyPose.spheres`): their radii and the parts' index ranges.
+BODY_RADII, BODY_GROUPS = _RADII, _GROUPS
 # The hand, forearm and upper arm: the first three groups of `BodyPose.spheres`.
 ARM_SPHERES = body_pose(np.zeros(2), np.array([0.5, 0.0, 0.1])).spheres()[2][2][1]
 
@@ -178,6 +180,8 @@ def touchable(body: BodySpheres) -> np.ndarray:
 
 __all__ = [
     "ARM_SPHERES",
+    "BODY_GROUPS",
+    "BODY_RADII",
     "CHAIN_GAP",
     "BodyPose",
     "body_pose",

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
-from hrc_drake.cell.controller.forecast import OperatorForecast, distinct_spheres
+from hrc_drake.cell.controller.forecast import OperatorForecast, forecast_body
 from hrc_drake.cell.controller.guard import GuardSettings
 from hrc_drake.cell.controller.intent import MotionIntent
 from hrc_drake.cell.controller.keep_clear import KeepClearSettings
@@ -36,7 +36,6 @@ from hrc_drake.cell.controller.supervisor import (
     TaskRecord,
 )
 from hrc_drake.cell.person import desk_of
-from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.robot_envelope import RobotEnvelope
 from hrc_drake.cell.ssm import NEAR_SPEED
 from hrc_drake.cell_models import CellDesign
@@ -145,14 +144,15 @@ def keep_clear_settings(
     )
 
     def scale(q, qdot, opening, carrying, centres, radii, velocities) -> float:
-        centres, radii, velocities = distinct_spheres(centres, radii, velocities)
+        spheres = forecast_body(centres, radii, velocities)
         # Far from every sphere the monitor cannot limit: skip its full assessment.
         wrist = envelope.pose(q, opening)[1]
-        near = np.linalg.norm(centres[None, :, :] - wrist[:, None, :], axis=2) - radii[None]
-        if near.min() > reach + safety.slow_band + safety.human_uncertainty:
+        near = spheres.centres[None, :, :] - wrist[:, None, :]
+        if (np.linalg.norm(near, axis=2) - spheres.radii[None]).min() > (
+            reach + safety.slow_band + safety.human_uncertainty
+        ):
             return 1.0
         intent = MotionIntent(qdot=qdot, carrying=carrying, moving=True, rate=1.0)
-        spheres = BodySpheres(centres, radii, velocities)
         reading = assess(
             envelope, q, qdot, spheres, intent, safety, acceleration, opening, period, lag
         )

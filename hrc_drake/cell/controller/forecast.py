@@ -10,7 +10,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from hrc_drake.cell.person import ARM_SPHERES, body_samples
+from hrc_drake.cell.person import ARM_SPHERES, BODY_GROUPS, BODY_RADII, body_samples
+from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.hri.activity import Desk, HandTimeline, Person, Stay, desk_stays, stays_timeline
 from hrc_drake.motion.clearance import Occupancy
 
@@ -149,4 +150,16 @@ def distinct_spheres(
     return centres[first], radii[first], velocities[first]
 
 
-__all__ = ["Anchor", "OperatorForecast", "distinct_spheres"]
+def forecast_body(centres: np.ndarray, radii: np.ndarray, velocities: np.ndarray) -> BodySpheres:
+    """One forecast sample (`Occupancy` at one time) as the separation monitor reads a tracked
+    body: each repeated sphere once (`distinct_spheres`) and, where the sample begins with a
+    whole body (`OperatorForecast.occupancy`'s first timeline, which `distinct_spheres` keeps
+    in place), that body's parts, so that the monitor permits no approach to the head
+    (`hrc_drake.cell.person.touchable`) against the forecast as against the tracked body."""
+    centres, radii, velocities = distinct_spheres(centres, radii, velocities)
+    whole = len(BODY_RADII)
+    begins_whole = len(radii) >= whole and np.array_equal(radii[:whole], BODY_RADII)
+    return BodySpheres(centres, radii, velocities, BODY_GROUPS if begins_whole else ())
+
+
+__all__ = ["Anchor", "OperatorForecast", "distinct_spheres", "forecast_body"]
