@@ -154,11 +154,10 @@ def body_samples(person: Person, timeline: HandTimeline, times: np.ndarray) -> O
     centres = np.array(
         [_sphere_centres(stance, tuple(timeline.at(t)), person.left_handed) for t in times]
     )
-    radii = _RADII
     velocities = np.zeros_like(centres)
     if len(times) > 1:
         velocities = np.gradient(centres, times, axis=0)
-    return Occupancy(np.asarray(times, dtype=float), centres, np.asarray(radii), velocities)
+    return Occupancy(np.asarray(times, dtype=float), centres, _RADII, velocities)
 
 
 # Every whole body's spheres (`BodyPose.spheres`): their radii and the parts' index ranges.
