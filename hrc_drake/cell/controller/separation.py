@@ -81,6 +81,10 @@ _ROOT_SLACK = 1e-9
 # to stopping short of the person on T_r + sampling alone, the function stopped the arm 69
 # times in 8 runs of monitoring alone on `shared-desk` (benchmarks/reports/separation_standard.md).
 MONITOR_LAG = 2
+# Within `slow_band` of S_p(s) the plan goes on at most at this share of its speed, as long as
+# it keeps S_p(s) itself (our choice: slow enough that the ramp down from it takes a few
+# millimetres).
+BAND_CREEP = 0.1
 # A plan allowed slower than this share of its speed stops instead: the creep toward a person
 # slows in proportion to the room left, so it would come ever closer and never stand (our
 # choice).
@@ -254,6 +258,12 @@ def assess(
     # contact speed toward the person.
     room = gap - config.slow_band
     separated = planned_scales(v_h, gap, v_r1, t_r + sampling, t_s1, config, room)
+    if separated.min() < BAND_CREEP:
+        # Within the band the plan slows to a creep that still keeps S_p(s), rather than
+        # stopping: else an arm that came into it beside a person who stands still stood as
+        # long as they did, though its path stayed clear of S_p (habitual, constant speed).
+        within = planned_scales(v_h, gap, v_r1, t_r + sampling, t_s1, config, gap)
+        separated = np.maximum(separated, np.minimum(within, BAND_CREEP))
     slow = CONTACT_SHARE * config.contact_speed / np.maximum(v_r1, _SLOWEST)
     # ... and only as fast as lets it stop short of the person where they are now: power and
     # force limiting permits a person coming into the robot, not the robot driving into them.
