@@ -9,11 +9,16 @@ from pydrake.systems.analysis import Simulator
 
 from hrc_drake.cell.controller.intent import MotionIntent
 from hrc_drake.cell.controller.separation import (
+    BAND_CREEP,
+    STAND_BEFORE_CREEP,
+    STILL_SPEED,
+    BandCreep,
     BodyAge,
     ControllerSeparationMonitor,
     SafetyLog,
     SeparationReading,
     assess,
+    band_creep_step,
     log_step,
     planned_distance,
     planned_scales,
@@ -23,7 +28,7 @@ from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.robot_envelope import RobotEnvelope, nearest_points
 from hrc_drake.cell.run.run import run_scenario, shared_planner
 from hrc_drake.cell.scenario import LEAN, load_cell_scenario, motion_options
-from hrc_drake.cell.ssm import allowed_scale
+from hrc_drake.cell.ssm import NEAR_SPEED, allowed_scale
 from hrc_drake.cell.station.build import make_cell_station, station_scenario
 from hrc_drake.cell.station.operator_body import ReachInto
 from hrc_drake.motion.plan import Stage
@@ -340,6 +345,61 @@ def test_the_allowed_scale_keeps_the_protective_separation(cell):
     assert at_s.margin >= config.slow_band - 1e-9
     faster = MotionIntent(qdot=1.1 * s * qdot)
     assert assess(envelope, q, 1.1 * s * qdot, hand, faster, config, 3.0, 0.05).limit < 0.95
+
+
+def test_within_the_slow_band_the_plan_creeps_on_while_it_keeps_s_p(cell):
+    """A person standing still beside the path (separation alone, constant human speed): an
+    arm within `slow_band` of S_p stands; allowed the band's creep (`band_creep`), it goes on
+    toward them at most at BAND_CREEP, at a speed that still keeps S_p, so a still person does
+    not hold it forever; closer than the S_p of an arm at rest it stands even so."""
+    _, envelope = cell
+    q, qdot = np.array(POSTURES[0]), np.array([0.6, 0.3, 0.0, 0.0, 0.0, 0.0])
+    p, v = _tcp_motion(envelope, q, qdot)
+    direction = v / np.linalg.norm(v)
+    config = SafetyConfig(contact_speed=0.0, human_speed=HumanSpeed.CONSTANT)
+
+    def reading(distance, velocity=qdot, creep=True):
+        torso = _one_sphere(p + distance * direction, radius=0.15)
+        moving = MotionIntent(qdot=velocity, moving=True)
+        return assess(envelope, q, velocity, torso, moving, config, 3.0, None, 0.02, 0.0, creep)
+
+    # S_p of the arm at rest: the person's travel at 2.0 m/s over T_r and a period, and Z_d.
+    at_rest = NEAR_SPEED * (config.reaction_time + 0.02) + config.human_uncertainty
+    distances = np.linspace(0.3, 0.8, 501)
+    gaps = np.array([reading(d, 0 * qdot).separation for d in distances])
+    in_band = distances[np.argmin(np.abs(gaps - (at_rest + config.slow_band / 2)))]
+    too_close = distances[np.argmin(np.abs(gaps - (at_rest - 0.01)))]
+    assert reading(in_band, creep=False).limit == 0.0
+    creep = reading(in_band).limit
+    assert 0.0 < creep <= BAND_CREEP
+    at_creep = reading(in_band, creep * qdot)
+    assert not at_creep.short and at_creep.margin > 0.0
+    assert reading(too_close).limit == 0.0
+
+
+def test_the_band_creep_comes_after_a_second_held_beside_a_still_body_and_ends_when_it_moves():
+    """`band_creep_step`: the creep is allowed once the plan has been held (limit 0) for
+    STAND_BEFORE_CREEP beside a body slower than STILL_SPEED; it stays while the arm creeps in
+    the band, and ends when the body moves, the plan stops moving, or the arm leaves the band."""
+    still = _one_sphere((0.5, 0.0, 0.2))
+    moving_body = _one_sphere((0.5, 0.0, 0.2), velocity=(2 * STILL_SPEED, 0.0, 0.0))
+    plan = MotionIntent(qdot=np.full(6, 0.3), moving=True, rate=0.0)
+    held, creeping, free = (SeparationReading(limit=x) for x in (0.0, BAND_CREEP, 0.5))
+    creep, period = BandCreep(), 0.02
+    steps = 0
+    while not creep.on:
+        creep = band_creep_step(creep, held, plan, still, period)
+        steps += 1
+    assert steps == round(STAND_BEFORE_CREEP / period)
+    assert band_creep_step(creep, creeping, plan, still, period).on
+    assert not band_creep_step(creep, creeping, plan, moving_body, period).on
+    assert not band_creep_step(creep, free, plan, still, period).on
+    assert not band_creep_step(creep, held, MotionIntent(), still, period).on
+    # Held beside a body that moves, the plan never creeps.
+    creep = BandCreep()
+    for _ in range(3 * steps):
+        creep = band_creep_step(creep, held, plan, moving_body, period)
+    assert not creep.on and creep.stood == 0.0
 
 
 def test_allowed_scale_vectorised_matches_each_entrys_root():

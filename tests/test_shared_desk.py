@@ -368,6 +368,28 @@ def test_with_separation_alone_predictive_waits_only_where_a_wait_clears_the_mot
     assert settings.forecast is not None and settings.clear_only is clear_only
 
 
+@pytest.mark.slow
+def test_a_person_standing_still_beside_the_path_does_not_hold_the_robot_forever():
+    """Separation alone at ISO 13855's constant speed: the habitual operator waits at the desk
+    while the robot carries the second part past them, and the carry comes within the monitor's
+    slow band of S_p from their torso. The arm creeps on there as fast as keeps S_p, instead of
+    standing for as long as the person does (before, it stood from 68 s to the run's 900 s
+    cap), and the run keeps S_p by its own check."""
+    from hrc_drake.cell.run.run import run_scenario
+    from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+
+    texts = [
+        "{operator: {model: habitual, seed: 0}, interaction: {mode: anticipate}}",
+        "{safety: {separation: reactive, human_speed: constant, contact_speed: 0.0}}",
+        "{body: {rest_hand: [0.9, 0.10, 0.06]}}",
+        LEAN,
+    ]
+    result = run_scenario(load_cell_scenario("shared-desk", texts))
+    assert result.done and not result.collisions
+    assert result.sim_time < 200.0
+    assert result.safety_check.violations == 0 and result.safety_check.body_contacts == 0
+
+
 def _forecast_monitor():
     """(settings, envelope, options, scenario) of `shared-desk`'s predictive separation."""
     from hrc_drake.cell.controller.build import keep_clear_settings

@@ -27,7 +27,11 @@ hand's bounded travel, `SafetyConfig.hand_acceleration`).
 
 `speed_limit` (the Supervisor's input) is the largest speed scale s ∈ [0, 1] of the plan at which
 every pair keeps at least S_p(s) + `slow_band`, with the plan's own velocities scaled by s (S_p
-is quadratic in s): 1 is full speed, 0 a stop. The monitor's update logs each period
+is quadratic in s): 1 is full speed, 0 a stop. The band keeps room for the monitor's lag and
+for a hand that starts to move; but once the plan has stood in it for `STAND_BEFORE_CREEP`
+beside a body that stands still, it creeps on at `BAND_CREEP` at most, as fast as keeps S_p(s)
+itself, for as long as the body stays still (`BandCreep`): else a person who waits beside the
+path held the robot for as long as they waited. The monitor's update logs each period
 (`SafetyLog`): least separation, least margin (separation − S_p with the measured velocities)
 while the robot moves, violations (steps where the robot moved with separation < S_p under its
 own command: its plan moving it, or stopping it from a move), steps moved closer than S_p by an
@@ -81,10 +85,15 @@ _ROOT_SLACK = 1e-9
 # to stopping short of the person on T_r + sampling alone, the function stopped the arm 69
 # times in 8 runs of monitoring alone on `shared-desk` (benchmarks/reports/separation_standard.md).
 MONITOR_LAG = 2
-# Within `slow_band` of S_p(s) the plan goes on at most at this share of its speed, as long as
-# it keeps S_p(s) itself (our choice: slow enough that the ramp down from it takes a few
-# millimetres).
+# Beside a body that stands still, a plan held in `slow_band` goes on at most at this share of
+# its speed, as long as it keeps S_p(s) itself (our choice: the ramp down from it takes a few
+# millimetres). Still: every sphere slower than STILL_SPEED; held first for STAND_BEFORE_CREEP.
+# Creeping in the band at once cost the band its room: on lean `shared-desk` (separation alone)
+# the station's safety function then stopped the arm 77 times in 8 runs of monitoring alone,
+# and the unseen person came inside S_p 57 times, where both were 0.
 BAND_CREEP = 0.1
+STILL_SPEED = 0.05  # m/s
+STAND_BEFORE_CREEP = 1.0  # s
 # A plan allowed slower than this share of its speed stops instead: the creep toward a person
 # slows in proportion to the room left, so it would come ever closer and never stand (our
 # choice).
@@ -154,6 +163,37 @@ class SafetyLog:
             "stopped_time": round(self.stopped_time, 3),
             "ssm_delay": round(self.ssm_delay, 3),
         }
+
+
+@dataclass(frozen=True)
+class BandCreep:
+    """Whether the plan may creep on within the slow band (`assess`'s `band_creep`): `on` once
+    it has stood there `STAND_BEFORE_CREEP` (`stood` [s]) beside a body that stands still, and
+    until the body moves, the plan stops moving or the arm is out of the band."""
+
+    stood: float = 0.0
+    on: bool = False
+
+    def __deepcopy__(self, memo) -> BandCreep:
+        return self  # immutable once made
+
+
+def band_creep_step(
+    creep: BandCreep,
+    reading: SeparationReading,
+    intent: MotionIntent,
+    body: BodySpheres,
+    period: float,
+) -> BandCreep:
+    """`creep` a monitor period later, after `reading` (made with `creep`) of `body`."""
+    speeds = np.linalg.norm(np.asarray(body.velocities, dtype=float).reshape(-1, 3), axis=1)
+    still = len(speeds) > 0 and not reading.stale and float(speeds.max()) < STILL_SPEED
+    if not (still and plan_moves(intent)):
+        return BandCreep()
+    if creep.on:
+        return creep if reading.limit <= BAND_CREEP else BandCreep()
+    stood = creep.stood + period if reading.limit == 0.0 else 0.0
+    return BandCreep(stood, stood >= STAND_BEFORE_CREEP - 1e-9)
 
 
 def planned_distance(s, v_h, gap, v_r1, t_rp: float, t_s1: float, config: SafetyConfig):
@@ -227,6 +267,7 @@ def assess(
     opening: float | None = None,
     sampling: float = 0.0,
     lag: float = 0.0,
+    band_creep: bool = False,
 ) -> SeparationReading:
     """One step of the monitor (see the module docstring) without a diagram: the arm at
     measured `q`, `v` (UR3_JOINTS order), the gripper at the measured `opening` (None: not
@@ -235,7 +276,8 @@ def assess(
     period, so that the function, which judges a period late, need not stop it. Closer than
     S_p, where the plan only creeps toward the person as fast as lets it stop short of them,
     the arm may also go on for `lag` [s] at the speed it has before a limit set now slows it
-    (`MONITOR_LAG`). Poses `envelope`'s own context (its only side effect)."""
+    (`MONITOR_LAG`). With `band_creep` the plan creeps on within the slow band (`BandCreep`).
+    Poses `envelope`'s own context (its only side effect)."""
     v = np.asarray(v, dtype=float)
     moving = bool(np.abs(v).max(initial=0.0) > config.moving_speed)
     commanded = np.asarray(intent.qdot, dtype=float) * intent.rate
@@ -258,10 +300,7 @@ def assess(
     # contact speed toward the person.
     room = gap - config.slow_band
     separated = planned_scales(v_h, gap, v_r1, t_r + sampling, t_s1, config, room)
-    if separated.min() < BAND_CREEP:
-        # Within the band the plan slows to a creep that still keeps S_p(s), rather than
-        # stopping: else an arm that came into it beside a person who stands still stood as
-        # long as they did, though its path stayed clear of S_p (habitual, constant speed).
+    if band_creep and separated.min() < BAND_CREEP:
         within = planned_scales(v_h, gap, v_r1, t_r + sampling, t_s1, config, gap)
         separated = np.maximum(separated, np.minimum(within, BAND_CREEP))
     slow = CONTACT_SHARE * config.contact_speed / np.maximum(v_r1, _SLOWEST)
@@ -386,11 +425,16 @@ class ControllerSeparationMonitor(LeafSystem):
         )
         self.DeclareVectorOutputPort("speed_limit", BasicVector(1), self._calc_limit)
         self._log_index = self.DeclareAbstractState(AbstractValue.Make(SafetyLog()))
+        self._creep_index = self.DeclareAbstractState(AbstractValue.Make(BandCreep()))
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
 
     def log(self, context) -> SafetyLog:
         """The log in this system's context."""
         return context.get_abstract_state(self._log_index).get_value()
+
+    def creep(self, context) -> BandCreep:
+        """Whether the plan may creep on within the slow band, in this system's context."""
+        return context.get_abstract_state(self._creep_index).get_value()
 
     def _calc_limit(self, context, output) -> None:
         output.SetFromVector([self._reading_port.Eval(context).limit])
@@ -413,6 +457,7 @@ class ControllerSeparationMonitor(LeafSystem):
             opening,
             self._period + reading_age(body, context.get_time()),
             MONITOR_LAG * self._period,
+            self.creep(context).on,
         )
         if stale_reading(body, context.get_time(), self._age):
             # No body seen: the person may be anywhere, so the plan stops (docs/hardware.md,
@@ -421,23 +466,28 @@ class ControllerSeparationMonitor(LeafSystem):
         output.set_value(reading)
 
     def _update(self, context, state) -> None:
-        log = log_step(
-            self.log(context),
-            self._reading_port.Eval(context),
-            self._intent_port.Eval(context),
-            self._period,
-        )
+        reading = self._reading_port.Eval(context)
+        intent = self._intent_port.Eval(context)
+        log = log_step(self.log(context), reading, intent, self._period)
         state.get_mutable_abstract_state(self._log_index).set_value(log)
+        body = self._body_port.Eval(context)
+        creep = band_creep_step(self.creep(context), reading, intent, body, self._period)
+        state.get_mutable_abstract_state(self._creep_index).set_value(creep)
 
 
 __all__ = [
+    "BAND_CREEP",
     "MONITOR_LAG",
     "SLOWEST_SCALE",
+    "STAND_BEFORE_CREEP",
+    "STILL_SPEED",
+    "BandCreep",
     "BodyAge",
     "ControllerSeparationMonitor",
     "SafetyLog",
     "SeparationReading",
     "assess",
+    "band_creep_step",
     "log_step",
     "plan_moves",
     "planned_distance",
