@@ -350,8 +350,9 @@ def test_the_allowed_scale_keeps_the_protective_separation(cell):
 def test_within_the_slow_band_the_plan_creeps_on_while_it_keeps_s_p(cell):
     """A person standing still beside the path (separation alone, constant human speed): an
     arm within `slow_band` of S_p stands; allowed the band's creep (`band_creep`), it goes on
-    toward them at most at BAND_CREEP, at a speed that still keeps S_p, so a still person does
-    not hold it forever; closer than the S_p of an arm at rest it stands even so."""
+    toward them at most at BAND_CREEP, at a speed that keeps S_p even at twice its speed, so
+    a still person does not hold it forever; closer than the S_p of an arm at rest it stands
+    even so."""
     _, envelope = cell
     q, qdot = np.array(POSTURES[0]), np.array([0.6, 0.3, 0.0, 0.0, 0.0, 0.0])
     p, v = _tcp_motion(envelope, q, qdot)
@@ -372,8 +373,9 @@ def test_within_the_slow_band_the_plan_creeps_on_while_it_keeps_s_p(cell):
     assert reading(in_band, creep=False).limit == 0.0
     creep = reading(in_band).limit
     assert 0.0 < creep <= BAND_CREEP
-    at_creep = reading(in_band, creep * qdot)
-    assert not at_creep.short and at_creep.margin > 0.0
+    # It keeps S_p with room for the servo to overshoot it twofold.
+    overshoot = reading(in_band, 2 * creep * qdot)
+    assert not overshoot.short and overshoot.margin > 0.0
     assert reading(too_close).limit == 0.0
 
 
