@@ -1,0 +1,159 @@
+"""What separation alone could cost at best on `shared-desk`'s paths ->
+benchmarks/reports/separation_bound.md.
+
+A bound, not a controller. With separation alone (`safety.contact_speed: 0`, the body's resting
+hand behind the table edge: `bench_separation_standard.ALONE`) the operator who stands at the
+desk slows the robot twice over: the hand and arm that point and fetch beside its path, and the
+torso and head, which stand still at the table edge all run long. Predictive motion can only
+answer the first: a forecast tells it when the hand will be where, but the torso is always
+there. So the least time of any controller that keeps S_p on these paths is at most that of a
+monitor that keeps it from the torso and head alone, as though it knew the hand's every move
+and never had to slow for it.
+
+This script measures that bound beside monitoring alone and monitoring off, in one run each:
+
+- `monitoring off`: no monitor, no station safety function (the floor);
+- `monitoring alone, tracked`: the cell's default monitor (the ceiling predictive is compared
+  with in `separation_standard_alone.md`);
+- `torso and head only`: the same monitor reading only the body's torso and head spheres, with
+  the station's safety function off (it would stop the arm for the hand). The run's check
+  still counts the shortfalls from the whole body: they are the hand's, and the bound's price.
+
+The report gives each configuration's mean time and the bound's ratios: to monitoring alone
+(issue 30 asks predictive for ≤ 0.80 of it) and to monitoring off (the price of safety, asked
+≤ 1.03). Where the bound's ratio is above a goal, no timing on these paths reaches it.
+
+Usage: ``python benchmarks/bench_separation_bound.py [--seeds 1] [--workers 2] [--out PATH]``
+(lean settings: 0.5 s holds, as `bench_separation_standard.py --lean`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import statistics
+import sys
+from pathlib import Path
+
+from bench_separation_standard import ALONE, INTERACTIONS, POPULATIONS
+from cell_pool import pooled_loop, run_pool
+
+from hrc_drake.atomic import atomic_write_text
+
+OFF, ALONE_TRACKED, BOUND = "monitoring off", "monitoring alone, tracked", "torso and head only"
+CONFIGURATIONS = {
+    OFF: "{safety: {enabled: false, separation: reactive, function: {enabled: false}}}",
+    ALONE_TRACKED: "{safety: {separation: reactive}}",
+    BOUND: "{safety: {separation: reactive, function: {enabled: false}}}",
+}
+REPORT = Path(__file__).parent / "reports" / "separation_bound.md"
+# The parts of `hrc_drake.cell.person.BODY_GROUPS` the bound's monitor reads: torso, head.
+STANDING_PARTS = (3, 4)
+_torso_only = False  # set per job in a pool's worker: the monitor reads the standing parts only
+
+
+def _standing_assess(assess):
+    """`assess` that, while `_torso_only`, hands the monitor only the body's standing parts."""
+    from hrc_drake.cell.ports import BodySpheres
+
+    def standing(envelope, q, v, body, *args, **kwargs):
+        if _torso_only and len(body.groups) > max(STANDING_PARTS):
+            start, end = body.groups[STANDING_PARTS[0]][0], body.groups[STANDING_PARTS[-1]][1]
+            body = BodySpheres(
+                body.centres[start:end],
+                body.radii[start:end],
+                body.velocities[start:end],
+                (),
+                body.stamp,
+            )
+        return assess(envelope, q, v, body, *args, **kwargs)
+
+    return standing
+
+
+def one_run(job: tuple) -> dict:
+    """One run of (configuration, population, interaction, seed): its figures."""
+    global _torso_only
+    import hrc_drake.cell.controller.separation as separation
+    from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+
+    if not hasattr(separation.assess, "__wrapped_standing__"):
+        separation.assess = _standing_assess(separation.assess)
+        separation.assess.__wrapped_standing__ = True
+    configuration, population, interaction, seed = job
+    _torso_only = configuration == BOUND
+    operator = (
+        f"{{operator: {{model: {population}, seed: {seed}}}, interaction: {{mode: {interaction}}}}}"
+    )
+    texts = [operator, CONFIGURATIONS[configuration], ALONE, LEAN]
+    scenario = load_cell_scenario("shared-desk", texts)
+    result = pooled_loop(scenario, scenario.assembly).run()
+    return {
+        "job": job,
+        "terminal": result.done,
+        "seconds": result.sim_time,
+        "violations": result.safety_check.violations,
+    }
+
+
+def report(runs: list[dict], args, wall: float) -> str:
+    """The markdown report."""
+
+    def mean(configuration: str) -> float:
+        return statistics.fmean(r["seconds"] for r in runs if r["job"][0] == configuration)
+
+    rows = [
+        f"| {c} | {sum(r['terminal'] for r in runs if r['job'][0] == c)}"
+        f"/{sum(r['job'][0] == c for r in runs)} | "
+        f"{sum(r['violations'] for r in runs if r['job'][0] == c)} | {mean(c):.2f} |"
+        for c in CONFIGURATIONS
+    ]
+    bound, alone, off = mean(BOUND), mean(ALONE_TRACKED), mean(OFF)
+    return "\n".join(
+        [
+            "# The least separation alone can cost on `shared-desk`'s paths",
+            "",
+            f"`shared-desk`, populations {', '.join(POPULATIONS)}, interaction "
+            f"{' and '.join(INTERACTIONS)}, operator seeds 0–{args.seeds - 1}; one run each, "
+            f"lean settings (0.5 s holds); separation alone, every run with `{ALONE}`. "
+            f"`python benchmarks/bench_separation_bound.py --seeds {args.seeds}` on "
+            f"{platform.machine()}, {len(runs)} runs, {wall:.0f} s wall.",
+            "",
+            "`torso and head only` is a bound, not a controller: the monitor keeps S_p from the "
+            "standing torso and head alone, as though it knew the hand's every move; its "
+            "violations (the run's own check, the whole body) are the hand's.",
+            "",
+            "| configuration | terminal | violations | mean time [s] |",
+            "|---|---|---|---|",
+            *rows,
+            "",
+            f"- Bound ÷ monitoring alone, tracked: **{bound / alone:.3f}** (predictive's goal "
+            "≤ 0.80: above it, no timing on these paths reaches it)",
+            f"- Bound ÷ monitoring off: **{bound / off:.3f}** (the price of safety's goal ≤ 1.03)",
+            "",
+        ]
+    )
+
+
+def main(argv=None) -> int:
+    """Run the three configurations on every population, mode and seed; write the report."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=1)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--out", type=Path, default=REPORT)
+    args = parser.parse_args(argv)
+    jobs = [
+        (c, p, i, s)
+        for c in CONFIGURATIONS
+        for p in POPULATIONS
+        for i in INTERACTIONS
+        for s in range(args.seeds)
+    ]
+    runs, wall = run_pool(one_run, jobs, args.workers)
+    atomic_write_text(args.out, report(runs, args, wall))
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
