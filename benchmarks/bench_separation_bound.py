@@ -23,8 +23,11 @@ The report gives each configuration's mean time and the bound's ratios: to monit
 (issue 30 asks predictive for ≤ 0.80 of it) and to monitoring off (the price of safety, asked
 ≤ 1.03). Where the bound's ratio is above a goal, no timing on these paths reaches it.
 
-Usage: ``python benchmarks/bench_separation_bound.py [--seeds 1] [--workers 2] [--out PATH]``
-(lean settings: 0.5 s holds, as `bench_separation_standard.py --lean`).
+``--band M`` gives the bound's monitor a slow band of M m instead of the default 0.05 m
+(`safety.slow_band`, the room it keeps beyond S_p; 0: it plans to the standard's own S_p).
+
+Usage: ``python benchmarks/bench_separation_bound.py [--seeds 1] [--workers 2] [--band M]
+[--out PATH]`` (lean settings: 0.5 s holds, as `bench_separation_standard.py --lean`).
 """
 
 from __future__ import annotations
@@ -80,12 +83,14 @@ def one_run(job: tuple) -> dict:
     if not hasattr(separation.assess, "__wrapped_standing__"):
         separation.assess = _standing_assess(separation.assess)
         separation.assess.__wrapped_standing__ = True
-    configuration, population, interaction, seed = job
+    configuration, population, interaction, seed, band = job
     _torso_only = configuration == BOUND
     operator = (
         f"{{operator: {{model: {population}, seed: {seed}}}, interaction: {{mode: {interaction}}}}}"
     )
     texts = [operator, CONFIGURATIONS[configuration], ALONE, LEAN]
+    if _torso_only and band is not None:
+        texts.append(f"{{safety: {{slow_band: {band}}}}}")
     scenario = load_cell_scenario("shared-desk", texts)
     result = pooled_loop(scenario, scenario.assembly).run()
     return {
@@ -116,7 +121,8 @@ def report(runs: list[dict], args, wall: float) -> str:
             f"`shared-desk`, populations {', '.join(POPULATIONS)}, interaction "
             f"{' and '.join(INTERACTIONS)}, operator seeds 0–{args.seeds - 1}; one run each, "
             f"lean settings (0.5 s holds); separation alone, every run with `{ALONE}`. "
-            f"`python benchmarks/bench_separation_bound.py --seeds {args.seeds}` on "
+            f"`python benchmarks/bench_separation_bound.py --seeds {args.seeds}"
+            f"{'' if args.band is None else f' --band {args.band}'}` on "
             f"{platform.machine()}, {len(runs)} runs, {wall:.0f} s wall.",
             "",
             "`torso and head only` is a bound, not a controller: the monitor keeps S_p from the "
@@ -140,10 +146,11 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=1)
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--band", type=float, default=None)
     parser.add_argument("--out", type=Path, default=REPORT)
     args = parser.parse_args(argv)
     jobs = [
-        (c, p, i, s)
+        (c, p, i, s, args.band)
         for c in CONFIGURATIONS
         for p in POPULATIONS
         for i in INTERACTIONS
