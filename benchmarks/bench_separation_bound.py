@@ -6,9 +6,9 @@ hand behind the table edge: `bench_separation_standard.ALONE`) the operator who 
 desk slows the robot twice over: the hand and arm that point and fetch beside its path, and the
 torso and head, which stand still at the table edge all run long. Predictive motion can only
 answer the first: a forecast tells it when the hand will be where, but the torso is always
-there. So the least time of any controller that keeps S_p on these paths is at most that of a
-monitor that keeps it from the torso and head alone, as though it knew the hand's every move
-and never had to slow for it.
+there. So a controller that keeps S_p from the torso as the cell's monitor does, on these
+paths, is no faster than that monitor keeping S_p from the torso and head alone, as though it
+knew the hand's every move and never had to slow for it.
 
 This script measures that bound beside monitoring alone and monitoring off, in one run each:
 
@@ -21,12 +21,14 @@ This script measures that bound beside monitoring alone and monitoring off, in o
 
 The report gives each configuration's mean time and the bound's ratios: to monitoring alone
 (issue 30 asks predictive for ≤ 0.80 of it) and to monitoring off (the price of safety, asked
-≤ 1.03). Where the bound's ratio is above a goal, no timing on these paths reaches it.
+≤ 1.03). Where the bound's ratio is above a goal, no timing of these paths reaches it with that
+slow band.
 
-``--band M`` gives the bound's monitor a slow band of M m instead of the default 0.05 m
-(`safety.slow_band`, the room it keeps beyond S_p; 0: it plans to the standard's own S_p).
+The bound runs once for each slow band of ``--bands`` (default 0.05 m, the cell's, and 0: the
+monitor then plans to the standard's own S_p; `safety.slow_band`): the room the cell's monitor
+keeps beyond S_p is its own choice, and beside a torso that never leaves it costs time.
 
-Usage: ``python benchmarks/bench_separation_bound.py [--seeds 1] [--workers 2] [--band M]
+Usage: ``python benchmarks/bench_separation_bound.py [--seeds 1] [--workers 2] [--bands M ...]
 [--out PATH]`` (lean settings: 0.5 s holds, as `bench_separation_standard.py --lean`).
 """
 
@@ -89,7 +91,7 @@ def one_run(job: tuple) -> dict:
         f"{{operator: {{model: {population}, seed: {seed}}}, interaction: {{mode: {interaction}}}}}"
     )
     texts = [operator, CONFIGURATIONS[configuration], ALONE, LEAN]
-    if _torso_only and band is not None:
+    if band is not None:
         texts.append(f"{{safety: {{slow_band: {band}}}}}")
     scenario = load_cell_scenario("shared-desk", texts)
     result = pooled_loop(scenario, scenario.assembly).run()
@@ -104,16 +106,30 @@ def one_run(job: tuple) -> dict:
 def report(runs: list[dict], args, wall: float) -> str:
     """The markdown report."""
 
-    def mean(configuration: str) -> float:
-        return statistics.fmean(r["seconds"] for r in runs if r["job"][0] == configuration)
+    def of(configuration: str, band) -> list[dict]:
+        return [r for r in runs if r["job"][0] == configuration and r["job"][4] == band]
 
-    rows = [
-        f"| {c} | {sum(r['terminal'] for r in runs if r['job'][0] == c)}"
-        f"/{sum(r['job'][0] == c for r in runs)} | "
-        f"{sum(r['violations'] for r in runs if r['job'][0] == c)} | {mean(c):.2f} |"
-        for c in CONFIGURATIONS
-    ]
-    bound, alone, off = mean(BOUND), mean(ALONE_TRACKED), mean(OFF)
+    def row(label: str, rows: list[dict]) -> str:
+        return (
+            f"| {label} | {sum(r['terminal'] for r in rows)}/{len(rows)} | "
+            f"{sum(r['violations'] for r in rows)} | "
+            f"{statistics.fmean(r['seconds'] for r in rows):.2f} |"
+        )
+
+    def mean(rows: list[dict]) -> float:
+        return statistics.fmean(r["seconds"] for r in rows)
+
+    off, alone = of(OFF, None), of(ALONE_TRACKED, None)
+    lines = [row(OFF, off), row(ALONE_TRACKED, alone)]
+    ratios = []
+    for band in args.bands:
+        bound = of(BOUND, band)
+        lines.append(row(f"{BOUND}, slow band {band} m", bound))
+        ratios.append(
+            f"- Slow band {band} m: bound ÷ monitoring alone **{mean(bound) / mean(alone):.3f}** "
+            f"(predictive's goal ≤ 0.80), ÷ monitoring off **{mean(bound) / mean(off):.3f}** "
+            "(the price of safety's goal ≤ 1.03)"
+        )
     return "\n".join(
         [
             "# The least separation alone can cost on `shared-desk`'s paths",
@@ -121,37 +137,38 @@ def report(runs: list[dict], args, wall: float) -> str:
             f"`shared-desk`, populations {', '.join(POPULATIONS)}, interaction "
             f"{' and '.join(INTERACTIONS)}, operator seeds 0–{args.seeds - 1}; one run each, "
             f"lean settings (0.5 s holds); separation alone, every run with `{ALONE}`. "
-            f"`python benchmarks/bench_separation_bound.py --seeds {args.seeds}"
-            f"{'' if args.band is None else f' --band {args.band}'}` on "
-            f"{platform.machine()}, {len(runs)} runs, {wall:.0f} s wall.",
+            f"`python benchmarks/bench_separation_bound.py --seeds {args.seeds} --bands "
+            f"{' '.join(str(b) for b in args.bands)}` on {platform.machine()}, {len(runs)} "
+            f"runs, {wall:.0f} s wall.",
             "",
-            "`torso and head only` is a bound, not a controller: the monitor keeps S_p from the "
-            "standing torso and head alone, as though it knew the hand's every move; its "
-            "violations (the run's own check, the whole body) are the hand's.",
+            f"`{BOUND}` is a bound, not a controller: the monitor keeps S_p from the standing "
+            "torso and head alone, as though it knew the hand's every move, with the station's "
+            "safety function off; its violations (the run's own check, the whole body) are the "
+            "hand's. Its slow band is the room it keeps beyond S_p (`safety.slow_band`; the "
+            "cell's is 0.05 m; 0: the standard's own S_p).",
             "",
             "| configuration | terminal | violations | mean time [s] |",
             "|---|---|---|---|",
-            *rows,
+            *lines,
             "",
-            f"- Bound ÷ monitoring alone, tracked: **{bound / alone:.3f}** (predictive's goal "
-            "≤ 0.80: above it, no timing on these paths reaches it)",
-            f"- Bound ÷ monitoring off: **{bound / off:.3f}** (the price of safety's goal ≤ 1.03)",
+            *ratios,
             "",
         ]
     )
 
 
 def main(argv=None) -> int:
-    """Run the three configurations on every population, mode and seed; write the report."""
+    """Run the configurations on every population, mode and seed; write the report."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=1)
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--band", type=float, default=None)
+    parser.add_argument("--bands", type=float, nargs="+", default=[0.05, 0.0])
     parser.add_argument("--out", type=Path, default=REPORT)
     args = parser.parse_args(argv)
     jobs = [
-        (c, p, i, s, args.band)
-        for c in CONFIGURATIONS
+        (c, p, i, s, band)
+        for c, bands in ((OFF, [None]), (ALONE_TRACKED, [None]), (BOUND, args.bands))
+        for band in bands
         for p in POPULATIONS
         for i in INTERACTIONS
         for s in range(args.seeds)
