@@ -8,7 +8,9 @@ first Done-when item of issue 30 over the catalogue, where `bench_separation_sta
 (`bench_separation_standard.ALONE`: no contact-speed allowance, the resting hand behind the
 table edge). Each row: whether the run ended terminal in the states `react` visits for the
 scenario (`bench_camera.expected_names`), the check's violations (and those beyond the contact
-speed) and body contacts, the station's safety-function stops, and the simulated time.
+speed) and body contacts, the station's safety-function stops, and the simulated time. The
+report goes to `separation_catalogue.md`, with ``--separation-alone`` to
+`separation_catalogue_alone.md`.
 
 Usage: ``python benchmarks/bench_separation_catalogue.py [--separation-alone] [--workers 2]
 [--only NAME ...] [--out PATH]``.
@@ -34,6 +36,7 @@ CONFIGURATIONS = {
     "predictive, constant": "{safety: {separation: predictive, human_speed: constant}}",
 }
 REPORT = Path(__file__).parent / "reports" / "separation_catalogue.md"
+REPORT_ALONE = REPORT.with_name("separation_catalogue_alone.md")
 
 
 def one_run(job: tuple) -> dict:
@@ -101,13 +104,14 @@ def main(argv=None) -> int:
     parser.add_argument("--separation-alone", action="store_true")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--only", nargs="+", metavar="NAME")
-    parser.add_argument("--out", type=Path, default=REPORT)
+    parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args(argv)
+    out = args.out or (REPORT_ALONE if args.separation_alone else REPORT)
     names = args.only or sorted(p.stem for p in scenarios_dir().glob("*.yaml"))
     jobs = [(n, c, args.separation_alone) for n in names for c in CONFIGURATIONS]
     runs, wall = run_pool(one_run, jobs, args.workers)
-    atomic_write_text(args.out, report(runs, args, wall))
-    print(f"wrote {args.out}")
+    atomic_write_text(out, report(runs, args, wall))
+    print(f"wrote {out}")
     return 0
 
 
