@@ -157,12 +157,23 @@ def report(runs: list[dict], args, wall: float) -> str:
     )
 
 
+def _band(text: str) -> float:
+    """A slow band from the command line: a length ≥ 0 [m]."""
+    try:
+        band = float(text)
+    except ValueError:
+        band = -1.0
+    if not band >= 0.0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a slow band: give metres >= 0")
+    return band
+
+
 def main(argv=None) -> int:
     """Run the configurations on every population, mode and seed; write the report."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=1)
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--bands", type=float, nargs="+", default=[0.05, 0.0])
+    parser.add_argument("--bands", type=_band, nargs="+", default=[0.05, 0.0], metavar="M")
     parser.add_argument("--out", type=Path, default=REPORT)
     args = parser.parse_args(argv)
     jobs = [

@@ -103,11 +103,12 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--separation-alone", action="store_true")
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--only", nargs="+", metavar="NAME")
+    catalogue = sorted(p.stem for p in scenarios_dir().glob("*.yaml"))
+    parser.add_argument("--only", nargs="+", metavar="NAME", choices=catalogue)
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args(argv)
     out = args.out or (REPORT_ALONE if args.separation_alone else REPORT)
-    names = args.only or sorted(p.stem for p in scenarios_dir().glob("*.yaml"))
+    names = args.only or catalogue
     jobs = [(n, c, args.separation_alone) for n in names for c in CONFIGURATIONS]
     runs, wall = run_pool(one_run, jobs, args.workers)
     atomic_write_text(out, report(runs, args, wall))
