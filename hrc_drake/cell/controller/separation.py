@@ -263,6 +263,17 @@ def planned_scales(v_h, gap, v_r1, t_rp: float, t_s1: float, config: SafetyConfi
     return np.where(full, 1.0, np.where(blocked, 0.0, scales))
 
 
+def banded_scales(v_h, gap, v_r1, t_rp: float, t_s1: float, config: SafetyConfig, creep: bool):
+    """Per pair, the plan's speed scale that keeps S_p(s) + `slow_band` (`planned_scales`);
+    with `creep` (`BandCreep`), within the band at least `CREEP_SHARE` of the scale that keeps
+    S_p(s) itself, up to `BAND_CREEP`."""
+    separated = planned_scales(v_h, gap, v_r1, t_rp, t_s1, config, gap - config.slow_band)
+    if creep and separated.min() < BAND_CREEP:
+        within = planned_scales(v_h, gap, v_r1, t_rp, t_s1, config, gap)
+        separated = np.maximum(separated, np.minimum(CREEP_SHARE * within, BAND_CREEP))
+    return separated
+
+
 def assess(
     envelope: RobotEnvelope,
     q: np.ndarray,
@@ -305,11 +316,7 @@ def assess(
     s_p = protective_distance(person_travel(v_h, gap, t_r + t_s, config), v_r, t_s, config)
     # Planned: the plan at scale s keeps S_p(s) + slow_band, or moves no faster than the
     # contact speed toward the person.
-    room = gap - config.slow_band
-    separated = planned_scales(v_h, gap, v_r1, t_r + sampling, t_s1, config, room)
-    if band_creep and separated.min() < BAND_CREEP:
-        within = planned_scales(v_h, gap, v_r1, t_r + sampling, t_s1, config, gap)
-        separated = np.maximum(separated, np.minimum(CREEP_SHARE * within, BAND_CREEP))
+    separated = banded_scales(v_h, gap, v_r1, t_r + sampling, t_s1, config, band_creep)
     slow = CONTACT_SHARE * config.contact_speed / np.maximum(v_r1, _SLOWEST)
     # ... and only as fast as lets it stop short of the person where they are now: power and
     # force limiting permits a person coming into the robot, not the robot driving into them.
@@ -495,6 +502,7 @@ __all__ = [
     "SeparationReading",
     "assess",
     "band_creep_step",
+    "banded_scales",
     "log_step",
     "plan_moves",
     "planned_distance",
