@@ -13,6 +13,7 @@ from hrc_drake.motion.clearance import (
 )
 from hrc_drake.motion.path_time import (
     LEVELS,
+    PAYS,
     POSE_STEP,
     STEP,
     SpeedCap,
@@ -25,6 +26,9 @@ from hrc_drake.motion.path_time import (
 from hrc_drake.motion.plan import MotionTiming, Plan, Segment, Stage
 
 ACCELERATION = 5.0  # rad/s²
+# rad/s²: a ramp slow enough that an arm which stands back for a hand and passes it at speed
+# arrives over a step (PAYS) before monitoring alone, which sets off from rest at the hand
+SLOW = 1.0
 DURATION = 3.0  # s: the one motion's time at full speed
 
 
@@ -174,8 +178,36 @@ def test_the_monitor_is_asked_about_the_gripper_at_the_plans_opening():
     assert time_around(closed, 0.0, 0.0, sits, stops_wide_fingers, 6.0) == ()
     assert len(time_around(wide, 0.0, 0.0, sits, stops_wide_fingers, 6.0)) == 1
     for plan, slowed in ((closed, False), (wide, True)):
-        timing = path_time_around(plan, 0.0, 0.0, 0.0, sits, stops_wide_fingers, 6.0, ACCELERATION)
-        assert bool(timing.holds or timing.caps) == slowed
+        asked: list[float] = []
+
+        def recorded(q, qdot, opening, *rest, asked=asked) -> float:
+            asked.append(opening)
+            return stops_wide_fingers(q, qdot, opening, *rest)
+
+        path_time_around(plan, 0.0, 0.0, 0.0, sits, recorded, 6.0, ACCELERATION)
+        assert asked and set(asked) == {plan.gripper.value(0.0).item()}
+        path = motion_path(plan, 0.0, DURATION, POSE_STEP)
+        profile = time_path(path, 0.0, sits, stops_wide_fingers, ACCELERATION, longest=6.0)
+        assert (profile.arrival > DURATION + STEP) == slowed
+
+
+def test_a_timing_is_followed_only_where_it_arrives_a_step_before_monitoring_alone():
+    """With a slow ramp (1 rad/s²) and a monitor that only stops, the arm that waits back for
+    the hand on its path passes it at speed: 0.17 s sooner than monitoring alone, which stops
+    at the hand and sets off from rest. That timing is followed (a hold, a cap). Against a
+    graded monitor the best timing gains 0.01 s, less than PAYS: the motion is left to the
+    monitor, with neither a hold nor a cap, and so costs nothing either."""
+    plan, sits, slow = _plan(), _sits(at=0.6, until=2.0), 1.0
+    path = motion_path(plan, 0.0, DURATION, POSE_STEP)
+    for monitor, pays in ((_stops_near, True), (_graded, False)):
+        best = time_path(path, 0.0, sits, monitor, slow, longest=6.0)
+        alone = reactive_profile(path, 0.0, sits, monitor, slow)
+        assert best.arrival <= alone.arrival + 1e-9
+        assert (best.arrival <= alone.arrival - PAYS) == pays
+        timing = path_time_around(plan, 0.0, 0.0, 0.0, sits, monitor, 6.0, slow)
+        assert bool(timing.holds) == bool(timing.caps) == pays
+        if pays:
+            assert timing.holds[0].until == pytest.approx(best.wait)
 
 
 def test_the_forecast_delay_asks_the_monitor_once_per_pose_and_sample_over_every_wait():
@@ -269,18 +301,17 @@ def test_the_speed_changes_within_the_joint_acceleration_limit():
 def test_the_plan_timing_caps_the_speed_where_it_goes_slower_than_the_monitor_allows():
     plan = _plan()
     # Under way at full speed at plan time 0.5, a hand near the path's end until 3 s: the arm
-    # stops at once, back from the hand (where the monitor alone would go on), and goes on
-    # when the hand has left.
+    # brakes back from the hand (where the monitor alone would go on to it and stop there),
+    # and goes on before the hand has left, to pass at speed (SLOW ramp: that pays).
     sits = _sits(0.8, 3.0)
-    timing = path_time_around(
-        plan, 0.5, 0.0, 1.0, sits, _graded, max_wait=6.0, acceleration=ACCELERATION
-    )
+    timing = path_time_around(plan, 0.5, 0.0, 1.0, sits, _stops_near, 6.0, SLOW)
     assert timing.holds == ()  # under way: no wait at a rest point
     (cap,) = timing.caps
     assert (cap.tau0, cap.tau1, cap.start) == (0.5, DURATION, 0.0)
     assert min(cap.speeds) == 0.0
     # The cap is the lower of this step's speed and the next one's, 1 past the timing.
-    k = int(np.argmax(np.array(cap.speeds) > 0.0))
+    stopped = int(np.argmax(np.array(cap.speeds) == 0.0))
+    k = stopped + int(np.argmax(np.array(cap.speeds[stopped:]) > 0.0))
     assert 0.0 == speed_cap(timing.caps, (k - 1) * STEP + 0.01, 1.0) < cap.speeds[k]
     assert speed_cap(timing.caps, k * STEP + 0.01, 1.0) == min(cap.speeds[k : k + 2])
     assert speed_cap(timing.caps, 100.0, 1.0) == 1.0
@@ -298,33 +329,43 @@ def test_the_cap_leaves_the_steps_at_the_monitors_limit_to_the_monitor():
     plan = _plan()
     sits = _sits(0.6, 2.0)
     path = motion_path(plan, 0.0, plan.duration, POSE_STEP)
-    profile = time_path(path, 0.0, sits, _graded, ACCELERATION, longest=6.0)
+    profile = time_path(path, 0.0, sits, _stops_near, SLOW, longest=6.0)
     # at_limit: the level the monitor allows at the step's pose (the nearest sampled one) is
-    # no higher than the one taken.
+    # no higher than the one taken (or the ramp keeps it lower as it speeds up, SLOW).
     for t, tau, s, at_limit in zip(
         profile.times, profile.taus, profile.speeds, profile.at_limit, strict=True
     ):
         p = int(np.argmin(np.abs(path.taus - tau)))
         i = sits.at(t)
-        allowed = _graded(path.q[p], path.qdot[p], 0.0, None, sits.centres[i], sits.radii, None)
-        assert at_limit == (int(np.floor(allowed * LEVELS + 1e-6)) <= round(s * LEVELS))
+        allowed = _stops_near(path.q[p], path.qdot[p], 0.0, None, sits.centres[i], sits.radii, 0)
+        if int(np.floor(allowed * LEVELS + 1e-6)) <= round(s * LEVELS):
+            assert at_limit
+        if not at_limit:
+            assert s < allowed
     assert profile.at_limit.any() and not profile.at_limit.all()
-    timing = path_time_around(plan, 0.0, 0.0, 0.0, sits, _graded, 6.0, ACCELERATION)
+    timing = path_time_around(plan, 0.0, 0.0, 0.0, sits, _stops_near, 6.0, SLOW)
     (cap,) = timing.caps
+    # The cap starts where the wait at the motion's start (a hold) ends.
+    at_limit, chosen = profile.at_limit[round(profile.wait / STEP) :], profile.speeds
+    chosen = chosen[round(profile.wait / STEP) :]
     speeds = np.array(cap.speeds)
-    assert np.all(speeds[profile.at_limit] == 1.0)
-    assert np.array_equal(speeds[~profile.at_limit], profile.speeds[~profile.at_limit])
+    assert np.all(speeds[at_limit] == 1.0)
+    assert np.array_equal(speeds[~at_limit], chosen[~at_limit])
+    assert (~at_limit).any()
 
 
 def test_a_hand_on_the_path_past_the_longest_wait_is_waited_for_at_most_that_long():
     plan = _plan()
     # The hand sits where the arm starts: it may not move until the hand leaves at 3 s.
     sits = _sits(at=0.0, until=3.0)
-    timing = path_time_around(plan, 0.0, 0.0, 0.0, sits, _graded, 1.0, ACCELERATION)
+    path = motion_path(plan, 0.0, plan.duration, POSE_STEP)
+    profile = time_path(path, 0.0, sits, _graded, ACCELERATION, longest=1.0)
     # The monitor holds it, so it waits there past the longest wait all the same, and goes
-    # as soon as the monitor lets it.
-    (hold,) = timing.holds
-    assert 1.0 < hold.until <= 3.0 + STEP
+    # as soon as the monitor lets it: as monitoring alone does, so the motion is left to it.
+    assert 1.0 < profile.wait <= 3.0 + STEP
+    alone = reactive_profile(path, 0.0, sits, _graded, ACCELERATION)
+    assert profile.arrival > alone.arrival - PAYS
+    assert path_time_around(plan, 0.0, 0.0, 0.0, sits, _graded, 1.0, ACCELERATION).holds == ()
     assert SpeedCap(0.0, 1.0, 0.0, (0.5,), (0.0,)).at(-1.0) == 0.5
 
 

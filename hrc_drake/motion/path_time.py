@@ -38,6 +38,10 @@ from hrc_drake.motion.plan import Plan
 STEP = 0.1  # s per step of the search: the forecast's own sampling (OperatorForecast.SAMPLE)
 LEVELS = 20  # speed levels above 0: s ∈ {0, 1/20, ..., 1}
 POSE_STEP = 0.1  # s of plan time between the poses the monitor is asked about
+# s: a motion's timing is followed only where it arrives at least this much before monitoring
+# alone's own timing against the same forecast; elsewhere the monitor alone times it, so that
+# a timing that gains nothing costs nothing either (see `path_time_around`).
+PAYS = STEP
 _EPS = 1e-6
 _REST = 1e-6  # rad/s: a path this slow is at rest (the speed may jump there)
 
@@ -70,8 +74,9 @@ class _Lattice:
     over that window counts, as the run's own check counts the person's (the monitor itself
     knows only their speed now)."""
 
-    def __init__(self, path, begin, occupancy, scale, acceleration, reaction=None):
+    def __init__(self, path, begin, occupancy, scale, acceleration, reaction=None, raw=None):
         self.path, self.begin, self.occupancy, self.scale = path, begin, occupancy, scale
+        self.acceleration = acceleration
         h = STEP / LEVELS
         self.length = max(1, int(np.ceil((path.taus[-1] - path.taus[0]) / h - _EPS)))
         taus = path.taus[0] + np.arange(self.length + 1) * h
@@ -88,7 +93,15 @@ class _Lattice:
         window = 0.0 if reaction is None else reaction + fast / acceleration
         self.window = np.ceil(np.broadcast_to(window, fast.shape) / STEP - _EPS).astype(int)
         self._allowed: dict[int, np.ndarray] = {}
-        self._raw: dict[tuple[int, int], int] = {}
+        # The monitor's own levels, (pose, step) → level; shared with `unwindowed`'s lattice.
+        self._raw: dict[tuple[int, int], int] = {} if raw is None else raw
+
+    def unwindowed(self) -> _Lattice:
+        """The same lattice with the monitor's own limit at each step (no reaction window),
+        asking the monitor nothing this one has asked already."""
+        return _Lattice(
+            self.path, self.begin, self.occupancy, self.scale, self.acceleration, raw=self._raw
+        )
 
     def tau(self, cell: int) -> float:
         """The plan time of a cell."""
@@ -189,6 +202,12 @@ def time_path(
     arrive within the forecast and the time to run the path after it (it always can: past the
     forecast nothing limits it)."""
     lattice = _Lattice(path, begin, occupancy, scale, acceleration, reaction)
+    return _search(lattice, speed, longest)
+
+
+def _search(lattice: _Lattice, speed: float, longest: float) -> Profile | None:
+    """`time_path` on a lattice built already."""
+    path, occupancy, begin = lattice.path, lattice.occupancy, lattice.begin
     end = occupancy.times[-1] if len(occupancy.times) else begin
     steps = int(np.ceil((max(end - begin, 0.0) + path.taus[-1] - path.taus[0]) / STEP))
     steps += 2 * LEVELS + 2
@@ -262,6 +281,11 @@ def reactive_profile(
     """Monitoring alone's timing of `path` on the same lattice (the same `reaction`), after a
     `wait` at its start: each step the speed goes toward the level allowed, within the ramp."""
     lattice = _Lattice(path, begin, occupancy, scale, acceleration, reaction)
+    return _reactive(lattice, speed, wait)
+
+
+def _reactive(lattice: _Lattice, speed: float, wait: float = 0.0) -> Profile:
+    """`reactive_profile` on a lattice built already."""
     level = start_level = int(np.floor(np.clip(speed, 0.0, 1.0) * LEVELS + _EPS))
     cell, k = 0, 0
     cells, levels = [], []
@@ -369,17 +393,12 @@ def path_time_around(
         if spent is not None and abs(spent[0] - motion.start) < _EPS:
             longest = max(0.0, max_wait - spent[1])
         path = motion_path(plan, start, stop, POSE_STEP)
-        profile = time_path(
-            path,
-            begin,
-            occupancy,
-            scale,
-            acceleration,
-            speed if under_way else 0.0,
-            np.inf if under_way else longest,
-            reaction,
-        )
-        if profile is None:
+        lattice = _Lattice(path, begin, occupancy, scale, acceleration, reaction)
+        setting_off = speed if under_way else 0.0
+        profile = _search(lattice, setting_off, np.inf if under_way else longest)
+        alone = _reactive(lattice.unwindowed(), setting_off)
+        if profile is None or profile.arrival > alone.arrival - PAYS:
+            t = alone.arrival  # left to the monitor: its own timing is as soon
             continue
         wait = 0.0 if under_way else profile.wait
         if wait > 0.0:
