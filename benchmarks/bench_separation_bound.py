@@ -14,15 +14,17 @@ This script measures that bound beside monitoring alone and monitoring off, in o
 
 - `monitoring off`: no monitor, no station safety function (the floor);
 - `monitoring alone, tracked`: the cell's default monitor (the ceiling predictive is compared
-  with in `separation_standard_alone.md`);
+  with in `separation_standard_alone.md`), at each slow band of ``--bands`` too, with the
+  station's safety function on: the issue's reference is the fastest monitoring alone with 0
+  violations, and a smaller band speeds monitoring alone up as well;
 - `torso and head only`: the same monitor reading only the body's torso and head spheres, with
   the station's safety function off (it would stop the arm for the hand). The run's check
   still counts the shortfalls from the whole body: they are the hand's, and the bound's price.
 
 The report gives each configuration's mean time and the bound's ratios: to monitoring alone
-(issue 30 asks predictive for ≤ 0.80 of it) and to monitoring off (the price of safety, asked
-≤ 1.03). Where the bound's ratio is above a goal, no timing of these paths reaches it with that
-slow band.
+at the same band and to the fastest monitoring alone with 0 violations (issue 30 asks
+predictive for ≤ 0.80 of it), and to monitoring off (the price of safety, asked ≤ 1.03). Where
+the bound's ratio is above a goal, no timing of these paths reaches it with that slow band.
 
 The bound runs once for each slow band of ``--bands`` (default 0.05 m, the cell's, and 0: the
 monitor then plans to the standard's own S_p; `safety.slow_band`): the room the cell's monitor
@@ -95,11 +97,13 @@ def one_run(job: tuple) -> dict:
         texts.append(f"{{safety: {{slow_band: {band}}}}}")
     scenario = load_cell_scenario("shared-desk", texts)
     result = pooled_loop(scenario, scenario.assembly).run()
+    function = result.safety_function
     return {
         "job": job,
         "terminal": result.done,
         "seconds": result.sim_time,
         "violations": result.safety_check.violations,
+        "stops": function.safeguard_stops + function.protective_stops,
     }
 
 
@@ -112,23 +116,38 @@ def report(runs: list[dict], args, wall: float) -> str:
     def row(label: str, rows: list[dict]) -> str:
         return (
             f"| {label} | {sum(r['terminal'] for r in rows)}/{len(rows)} | "
-            f"{sum(r['violations'] for r in rows)} | "
+            f"{sum(r['violations'] for r in rows)} | {sum(r['stops'] for r in rows)} | "
             f"{statistics.fmean(r['seconds'] for r in rows):.2f} |"
         )
 
     def mean(rows: list[dict]) -> float:
         return statistics.fmean(r["seconds"] for r in rows)
 
-    off, alone = of(OFF, None), of(ALONE_TRACKED, None)
-    lines = [row(OFF, off), row(ALONE_TRACKED, alone)]
-    ratios = []
+    off = of(OFF, None)
+    lines = [row(OFF, off)]
     for band in args.bands:
-        bound = of(BOUND, band)
-        lines.append(row(f"{BOUND}, slow band {band} m", bound))
+        lines.append(row(f"{ALONE_TRACKED}, slow band {band} m", of(ALONE_TRACKED, band)))
+    for band in args.bands:
+        lines.append(row(f"{BOUND}, slow band {band} m", of(BOUND, band)))
+    compliant = [b for b in args.bands if not sum(r["violations"] for r in of(ALONE_TRACKED, b))]
+    fastest = min(compliant, key=lambda b: mean(of(ALONE_TRACKED, b)), default=None)
+    ratios = [
+        "The fastest monitoring alone with 0 violations: "
+        + ("none" if fastest is None else f"slow band {fastest} m")
+        + "."
+    ]
+    for band in args.bands:
+        bound, alone = of(BOUND, band), of(ALONE_TRACKED, band)
+        reference = (
+            ""
+            if fastest is None
+            else (f", ÷ the fastest **{mean(bound) / mean(of(ALONE_TRACKED, fastest)):.3f}**")
+        )
         ratios.append(
-            f"- Slow band {band} m: bound ÷ monitoring alone **{mean(bound) / mean(alone):.3f}** "
-            f"(predictive's goal ≤ 0.80), ÷ monitoring off **{mean(bound) / mean(off):.3f}** "
-            "(the price of safety's goal ≤ 1.03)"
+            f"- Slow band {band} m: bound ÷ monitoring alone at that band "
+            f"**{mean(bound) / mean(alone):.3f}**{reference} (predictive's goal ≤ 0.80), "
+            f"÷ monitoring off **{mean(bound) / mean(off):.3f}** (the price of safety's goal "
+            "≤ 1.03)"
         )
     return "\n".join(
         [
@@ -147,8 +166,11 @@ def report(runs: list[dict], args, wall: float) -> str:
             "hand's. Its slow band is the room it keeps beyond S_p (`safety.slow_band`; the "
             "cell's is 0.05 m; 0: the standard's own S_p).",
             "",
-            "| configuration | terminal | violations | mean time [s] |",
-            "|---|---|---|---|",
+            "Safety function stops: the station's safeguard and protective stops (off for the "
+            "bound and for monitoring off).",
+            "",
+            "| configuration | terminal | violations | safety function stops | mean time [s] |",
+            "|---|---|---|---|---|",
             *lines,
             "",
             *ratios,
@@ -178,7 +200,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     jobs = [
         (c, p, i, s, band)
-        for c, bands in ((OFF, [None]), (ALONE_TRACKED, [None]), (BOUND, args.bands))
+        for c, bands in ((OFF, [None]), (ALONE_TRACKED, args.bands), (BOUND, args.bands))
         for band in bands
         for p in POPULATIONS
         for i in INTERACTIONS

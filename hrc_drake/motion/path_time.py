@@ -19,10 +19,14 @@ profiles of the same lattice, so the search's arrival is never later than theirs
 same forecast (on the lattice; with LEVELS = 20 levels the quantised allowed scale is at most
 1/20 below the monitor's own).
 
-`path_time_around` times each motion of a plan that way, one after the other, and returns what
-the Supervisor follows: a `Hold` for a wait at a motion's start (a rest point) and a `SpeedCap`
-for the speed along it where the timing goes slower than the monitor would allow (elsewhere
-the monitor's own limit governs). Monitoring stays underneath and acts on the body as
+`path_time_around` times each motion of a plan that way, one after the other, and keeps a
+motion's timing only where it arrives at least PAYS before monitoring alone's own (the
+monitor's limit at every step, no reaction window): on a path whose limit depends on the pose
+and the time only, going as fast as allowed is nearly the earliest, and a timing that gains
+less than a step would only add the following's lag. It returns what the Supervisor
+follows: a `Hold` for a wait at a motion's start (a rest point) and a `SpeedCap` for the
+speed along it where the timing goes slower than the monitor would allow (elsewhere the
+monitor's own limit governs). Monitoring stays underneath and acts on the body as
 measured.
 """
 
