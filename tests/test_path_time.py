@@ -381,8 +381,8 @@ def test_an_unknown_timing_is_a_one_line_error():
 
 def test_the_shared_desk_timed_along_its_paths_keeps_separation_and_stands_on_its_way():
     """A lean shared desk (the operator who follows, seed 0) with `timing: path_time`: the
-    arm stands still on its way for the forecast hand (wait timing stands only at rest points:
-    no stopped time), and the run's own check finds no violation."""
+    arm stands still on its way for the hand (where no timing pays a step, the monitor stops
+    it there, as it does monitoring alone), and the run's own check finds no violation."""
     from hrc_drake.cell.run.run import run_scenario
     from hrc_drake.cell.scenario import LEAN, load_cell_scenario
 
