@@ -131,9 +131,11 @@ def report(runs: list[dict], args, wall: float) -> str:
         lines.append(row(f"{BOUND}, slow band {band} m", of(BOUND, band)))
     compliant = [b for b in args.bands if not sum(r["violations"] for r in of(ALONE_TRACKED, b))]
     fastest = min(compliant, key=lambda b: mean(of(ALONE_TRACKED, b)), default=None)
+    stops = 0 if fastest is None else sum(r["stops"] for r in of(ALONE_TRACKED, fastest))
     ratios = [
         "The fastest monitoring alone with 0 violations: "
         + ("none" if fastest is None else f"slow band {fastest} m")
+        + (f", which the station's safety function stopped {stops} times" if stops else "")
         + "."
     ]
     for band in args.bands:
