@@ -378,7 +378,9 @@ def path_time_around(
     before as timed; the still parts between them at full speed. A motion under way is timed
     from where the arm is; one to come may wait at its start at most `max_wait` in all
     (`spent`: (plan time, seconds) waited there already); `reaction`: as `time_path`'s. A
-    motion the forecast does not reach is left to the monitor."""
+    motion the forecast does not reach is left to the monitor, and so is one whose timing
+    arrives less than PAYS before monitoring alone's own (the monitor's limit at every step,
+    on the same lattice)."""
     end_tau = plan.duration if end_tau is None else end_tau
     holds: list[Hold] = []
     caps: list[SpeedCap] = []
