@@ -201,7 +201,7 @@ def band_creep_step(
 ) -> BandCreep:
     """`creep` a monitor period later, after `reading` (made with `creep`) of `body`."""
     centres = np.asarray(body.centres, dtype=float).reshape(-1, 3)
-    if not len(centres) or reading.stale or not plan_goes_on(intent):
+    if not len(centres) or reading.stale or not plan_moves(intent):
         return BandCreep()
     anchor = creep.anchor
     if anchor is not None and (
@@ -385,15 +385,6 @@ def log_step(
     return log
 
 
-def plan_goes_on(intent: MotionIntent) -> bool:
-    """Whether the plan has the arm moving or stopped on its way (`plan_moves`), or stopped
-    (rate 0) at a motion's start, where its own velocity is zero but not its velocity ahead:
-    an arm held in the slow band before it sets off stood there for good otherwise (the
-    habitual operator's lean run with realistic sensors never began its first carry)."""
-    ahead = float(np.abs(intent.velocities_ahead()).max(initial=0.0))
-    return plan_moves(intent) or (intent.rate <= 1e-9 and ahead > 1e-9)
-
-
 def plan_moves(intent: MotionIntent) -> bool:
     """Whether the plan has the arm moving at this point: `intent.moving`, or stopped (rate 0)
     where the plan's own velocity is not zero (held still for bolts, or between tasks, the
@@ -528,7 +519,6 @@ __all__ = [
     "band_creep_step",
     "banded_scales",
     "log_step",
-    "plan_goes_on",
     "plan_moves",
     "planned_distance",
     "planned_scales",
