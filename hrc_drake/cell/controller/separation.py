@@ -43,7 +43,7 @@ slowed and stopped while the plan moves the arm.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -88,8 +88,7 @@ _ROOT_SLACK = 1e-9
 MONITOR_LAG = 2
 # Beside a body that stands still, a plan held in `slow_band` goes on at most at this share of
 # its speed, as long as it keeps S_p(s) itself (our choice: the ramp down from it takes a few
-# millimetres). Still: every sphere within STILL_DRIFT of where it was when the plan was first
-# held; held first for STAND_BEFORE_CREEP.
+# millimetres). Still: every sphere slower than STILL_SPEED; held first for STAND_BEFORE_CREEP.
 # Creeping in the band at once cost the band its room: on lean `shared-desk` (separation alone)
 # the station's safety function then stopped the arm 77 times in 8 runs of monitoring alone,
 # and the unseen person came inside S_p 57 times, where both were 0.
@@ -97,14 +96,10 @@ BAND_CREEP = 0.1
 # ... and at this share of the speed that keeps S_p(s) exactly: the servo overshoots its command
 # by a few per cent, and each 0.01 rad/s more adds 2 ms to T_s and 4 mm to S_h at 2.0 m/s (at
 # the exact root the station's safety function stopped the arm 6 times in the 8 runs of
-# monitoring alone and 20 times in those against the unseen person).
+# monitoring alone and 20 times in those against the unseen person). Still is judged on the
+# tracked velocities, so with `sensors: realistic` (5 cm/s of noise) the creep rarely starts.
 CREEP_SHARE = 0.5
-# Still is judged on how far the body moved, not on its tracked velocities: with `sensors:
-# realistic` (5 cm/s of noise on each velocity) a standing person's spheres were never all
-# below 5 cm/s, and the habitual operator's lean run at constant speed stood again to the 900 s
-# cap. The tracker's centres carry 1 cm of noise per axis (`hrc_drake.scenario.sensors`), so a
-# still sphere's two readings differ by more than 8 cm once in about two million (our choice).
-STILL_DRIFT = 0.08  # m
+STILL_SPEED = 0.05  # m/s
 STAND_BEFORE_CREEP = 1.0  # s
 # A plan allowed slower than this share of its speed stops instead: the creep toward a person
 # slows in proportion to the room left, so it would come ever closer and never stand (our
@@ -181,12 +176,10 @@ class SafetyLog:
 class BandCreep:
     """Whether the plan may creep on within the slow band (`assess`'s `band_creep`): `on` once
     it has stood there `STAND_BEFORE_CREEP` (`stood` [s]) beside a body that stands still, and
-    until the body moves, the plan stops moving or the arm is out of the band. `anchor`: the
-    body's sphere centres when the plan was first held, against which its moves count."""
+    until the body moves, the plan stops moving or the arm is out of the band."""
 
     stood: float = 0.0
     on: bool = False
-    anchor: np.ndarray | None = field(default=None, compare=False)
 
     def __deepcopy__(self, memo) -> BandCreep:
         return self  # immutable once made
@@ -200,22 +193,14 @@ def band_creep_step(
     period: float,
 ) -> BandCreep:
     """`creep` a monitor period later, after `reading` (made with `creep`) of `body`."""
-    centres = np.asarray(body.centres, dtype=float).reshape(-1, 3)
-    if not len(centres) or reading.stale or not plan_moves(intent):
+    speeds = np.linalg.norm(np.asarray(body.velocities, dtype=float).reshape(-1, 3), axis=1)
+    still = len(speeds) > 0 and not reading.stale and float(speeds.max()) < STILL_SPEED
+    if not (still and plan_moves(intent)):
         return BandCreep()
-    anchor = creep.anchor
-    if anchor is not None and (
-        anchor.shape != centres.shape
-        or float(np.linalg.norm(centres - anchor, axis=1).max()) > STILL_DRIFT
-    ):
-        return BandCreep()  # the body moved (or another body is seen)
     if creep.on:
         return creep if reading.limit <= BAND_CREEP else BandCreep()
-    if reading.limit != 0.0:
-        return BandCreep()
-    stood = creep.stood + period
-    anchor = centres.copy() if anchor is None else anchor
-    return BandCreep(stood, stood >= STAND_BEFORE_CREEP - 1e-9, anchor)
+    stood = creep.stood + period if reading.limit == 0.0 else 0.0
+    return BandCreep(stood, stood >= STAND_BEFORE_CREEP - 1e-9)
 
 
 def planned_distance(s, v_h, gap, v_r1, t_rp: float, t_s1: float, config: SafetyConfig):
@@ -509,7 +494,7 @@ __all__ = [
     "MONITOR_LAG",
     "SLOWEST_SCALE",
     "STAND_BEFORE_CREEP",
-    "STILL_DRIFT",
+    "STILL_SPEED",
     "BandCreep",
     "BodyAge",
     "ControllerSeparationMonitor",
