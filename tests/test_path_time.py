@@ -197,14 +197,14 @@ def test_a_timing_is_followed_only_where_it_arrives_a_step_before_monitoring_alo
     at the hand and sets off from rest. That timing is followed (a hold, a cap). Against a
     graded monitor the best timing gains 0.01 s, less than PAYS: the motion is left to the
     monitor, with neither a hold nor a cap, and so costs nothing either."""
-    plan, sits, slow = _plan(), _sits(at=0.6, until=2.0), 1.0
+    plan, sits = _plan(), _sits(at=0.6, until=2.0)
     path = motion_path(plan, 0.0, DURATION, POSE_STEP)
     for monitor, pays in ((_stops_near, True), (_graded, False)):
-        best = time_path(path, 0.0, sits, monitor, slow, longest=6.0)
-        alone = reactive_profile(path, 0.0, sits, monitor, slow)
+        best = time_path(path, 0.0, sits, monitor, SLOW, longest=6.0)
+        alone = reactive_profile(path, 0.0, sits, monitor, SLOW)
         assert best.arrival <= alone.arrival + 1e-9
         assert (best.arrival <= alone.arrival - PAYS) == pays
-        timing = path_time_around(plan, 0.0, 0.0, 0.0, sits, monitor, 6.0, slow)
+        timing = path_time_around(plan, 0.0, 0.0, 0.0, sits, monitor, 6.0, SLOW)
         assert bool(timing.holds) == bool(timing.caps) == pays
         if pays:
             assert timing.holds[0].until == pytest.approx(best.wait)
