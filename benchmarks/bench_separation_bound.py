@@ -43,9 +43,7 @@ import sys
 from pathlib import Path
 
 from bench_separation_standard import ALONE, INTERACTIONS, POPULATIONS
-from cell_pool import pooled_loop, run_pool
-
-from hrc_drake.atomic import atomic_write_text
+from cell_pool import pooled_loop, run_pool, write_report
 
 OFF, ALONE_TRACKED, BOUND = "monitoring off", "monitoring alone, tracked", "torso and head only"
 CONFIGURATIONS = {
@@ -209,8 +207,7 @@ def main(argv=None) -> int:
         for s in range(args.seeds)
     ]
     runs, wall = run_pool(one_run, jobs, args.workers)
-    atomic_write_text(args.out, report(runs, args, wall))
-    print(f"wrote {args.out}")
+    write_report(report(runs, args, wall), args.out)
     return 0
 
 

@@ -24,9 +24,8 @@ import sys
 from pathlib import Path
 
 from bench_separation_standard import ALONE
-from cell_pool import pooled_loop, run_pool
+from cell_pool import pooled_loop, run_pool, write_report
 
-from hrc_drake.atomic import atomic_write_text
 from hrc_drake.resources import scenarios_dir
 
 CONFIGURATIONS = {
@@ -111,8 +110,7 @@ def main(argv=None) -> int:
     names = args.only or catalogue
     jobs = [(n, c, args.separation_alone) for n in names for c in CONFIGURATIONS]
     runs, wall = run_pool(one_run, jobs, args.workers)
-    atomic_write_text(out, report(runs, args, wall))
-    print(f"wrote {out}")
+    write_report(report(runs, args, wall), out)
     return 0
 
 

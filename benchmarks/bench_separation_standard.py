@@ -30,9 +30,7 @@ import statistics
 import sys
 from pathlib import Path
 
-from cell_pool import pooled_loop, run_pool
-
-from hrc_drake.atomic import atomic_write_text
+from cell_pool import pooled_loop, run_pool, write_report
 
 POPULATIONS = ("follows", "habitual", "mistake-prone", "change-of-mind")
 INTERACTIONS = ("anticipate", "wait")
@@ -230,8 +228,7 @@ def main(argv=None) -> int:
         for s in range(args.seeds)
     ]
     runs, wall = run_pool(one_run, jobs, args.workers)
-    atomic_write_text(out, report(runs, args, wall))
-    print(f"wrote {out}")
+    write_report(report(runs, args, wall), out)
     return 0
 
 

@@ -39,6 +39,15 @@ def publish(text: str, report, lean: bool) -> None:
     print(f"{text}\nwritten to {report}")
 
 
+def write_report(text: str, report) -> None:
+    """Write a benchmark's report to the `report` path (atomically), lean or not, and say
+    where (the separation benchmarks: their `--out` chooses the path)."""
+    from hrc_drake.atomic import atomic_write_text
+
+    atomic_write_text(report, text)
+    print(f"wrote {report}")
+
+
 def run_pool(one_run: Callable, jobs: Sequence, workers: int) -> tuple[list, float]:
     """(`one_run` of every job in order, wall seconds), over `workers` spawned processes, with
     a progress line on stderr."""
