@@ -15,7 +15,7 @@ import numpy as np
 
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.policy import Policy
-from hrc_drake.tasks.solve import tasks_to_finish
+from hrc_drake.tasks.policy_check import check_policy
 from hrc_drake.tasks.tokens import UNDO
 
 # (decision step from 1, state, robot's proposal) -> the task the operator performs
@@ -159,19 +159,18 @@ def minimum_effort_violations(space: StateSpace, policy: Policy) -> dict[tuple[s
     """States from which following the policy does not finish in the fewest tasks.
 
     Maps each such state to a short explanation; empty when the policy is minimum-effort from
-    every non-terminal state.
+    every non-terminal state. Judged by the number of tasks (`tasks_to_finish`: an equally
+    short route counts), on every state at once (`hrc_drake.tasks.policy_check.check_policy`).
     """
-    best = tasks_to_finish(space)
+    check = check_policy(space, policy, values=False)
     bad = {}
-    for s in np.flatnonzero(space.kind != StateKind.TERMINAL):
-        seq = space.sequence(int(s))
-        if best[s] < 0:
-            continue
-        try:
-            states, _ = run_decisions(space, policy, start=seq, max_steps=int(best[s]) + 1)
-        except DecisionError:
-            bad[seq] = f"does not finish within {best[s]} tasks"
-            continue
-        if len(states) - 1 != best[s]:
-            bad[seq] = f"takes {len(states) - 1} tasks, fewest is {best[s]}"
+    for s in np.flatnonzero(check.not_minimum).tolist():
+        steps, fewest = int(check.walks.steps[s]), int(check.fewest[s])
+        if steps >= 0:
+            why = f"takes {steps} tasks, fewest is {fewest}"
+        elif check.walks.loops[s]:
+            why = f"never finishes (the policy loops; fewest is {fewest})"
+        else:
+            why = f"never finishes (the policy gives no task on the way; fewest is {fewest})"
+        bad[space.sequence(s)] = why
     return bad

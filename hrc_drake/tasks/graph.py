@@ -11,6 +11,7 @@ State ids are canonical: by depth, then by parent, then by task in the spec's to
 from __future__ import annotations
 
 import enum
+import itertools
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -101,6 +102,12 @@ def _token_table(spec: AssemblySpec) -> TokenTable:
         part_mask=part_mask,
         part_count=np.array([p.count for p in spec.parts], dtype=np.int64),
     )
+
+
+def token_table(spec: AssemblySpec) -> TokenTable:
+    """The per-token bitmasks of `spec`: which tokens share a slot or seat, which host tokens
+    one must sit on, the tokens of each mount and part type and their counts."""
+    return _token_table(spec)
 
 
 def _popcount(x: np.ndarray) -> np.ndarray:
@@ -226,15 +233,69 @@ class StateSpace:
             if found is not None:
                 return found
             raise UnknownStateError(self.spec, seq)
-        state = 0
-        for token in seq:
-            lo = int(self.first_child[state])
-            kids = range(lo, lo + int(self.n_children[state]))
-            match = [c for c in kids if self.table.tokens[self.last[c]] == token]
-            if not match:
-                raise UnknownStateError(self.spec, seq)
-            state = match[0]
+        state = int(self.indices([seq])[0])
+        if state < 0:
+            raise UnknownStateError(self.spec, seq)
         return state
+
+    @cached_property
+    def _child_keys(self) -> np.ndarray:
+        # parent * n_tokens + last of states 1..n-1. Strictly increasing, because ids are
+        # canonical (by depth, then by parent, then by task in token order) and a parent's id
+        # is below its children's: one binary search finds the child of a (state, task) pair.
+        return self.parent[1:] * len(self.tokens) + self.last[1:]
+
+    def successors(self, states: np.ndarray, tasks: np.ndarray) -> np.ndarray:
+        """The state each (state, task) pair leads to when the task is done as named: `tasks`
+        are token indices, -1 for undo; -1 where the pair is not a feasible task (an unknown
+        state, below -1, or a task the state does not offer)."""
+        states = np.asarray(states, dtype=np.int64)
+        tasks = np.asarray(tasks, dtype=np.int64)
+        out = np.full(len(states), -1, dtype=np.int64)
+        known = (states >= 0) & (states < self.n_states)
+        undo = known & (tasks == -1) & (states > 0)
+        out[undo] = self.parent[states[undo]]
+        place = np.flatnonzero(known & (tasks >= 0) & (tasks < len(self.tokens)))
+        if len(place) and len(self._child_keys):
+            key = states[place] * len(self.tokens) + tasks[place]
+            pos = np.minimum(np.searchsorted(self._child_keys, key), len(self._child_keys) - 1)
+            found = self._child_keys[pos] == key
+            out[place[found]] = pos[found] + 1
+        return out
+
+    def indices(self, sequences) -> np.ndarray:
+        """State ids of many task sequences at once, -1 for one that is not a state: a binary
+        search per depth, no dictionary of every sequence."""
+        lengths = np.fromiter(map(len, sequences), dtype=np.int64, count=len(sequences))
+        flat = self.token_codes(itertools.chain.from_iterable(sequences), int(lengths.sum()))
+        flat[flat == -1] = -2  # "undo" is a task, never part of a sequence
+        offsets = np.cumsum(lengths) - lengths
+        ids = np.zeros(len(lengths), dtype=np.int64)
+        for k in range(int(lengths.max(initial=0))):
+            active = np.flatnonzero((lengths > k) & (ids >= 0))
+            ids[active] = self.successors(ids[active], flat[offsets[active] + k])
+        return ids
+
+    def token_codes(self, tasks, count: int) -> np.ndarray:
+        """Token indices of `count` task names (-1 for undo, -2 for anything else), mapped at
+        C speed (a million policy entries take a fraction of a second)."""
+        code = {t: i for i, t in enumerate(self.tokens)}
+        code[UNDO] = -1
+        return np.fromiter(map(code.get, tasks, itertools.repeat(-2)), dtype=np.int64, count=count)
+
+    def token_paths(self, states: np.ndarray) -> np.ndarray:
+        """The sequences of `states` as token indices, one row each, padded with -1 on the
+        right (as many columns as the deepest of them): built by walking up the parents, so a
+        chunk of states costs a few array operations per depth."""
+        states = np.asarray(states, dtype=np.int64)
+        depths = self.depth[states]
+        out = np.full((len(states), int(depths.max(initial=0))), -1, dtype=np.int64)
+        current = states.copy()
+        for level in range(out.shape[1], 0, -1):
+            rows = np.flatnonzero(depths >= level)
+            out[rows, level - 1] = self.last[current[rows]]
+            current[rows] = self.parent[current[rows]]
+        return out
 
     def configuration(self, state: int) -> frozenset[str]:
         """The tokens in place in `state`, order ignored."""

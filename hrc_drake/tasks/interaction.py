@@ -24,6 +24,9 @@ per interface (`IndicationDelay`). Two interaction modes:
     release, then go for the indicated one); during the carry the robot must also come back
     the way it went.
 
+  A task the operator indicates that the robot cannot plan (the operator's by the cost table)
+  is a swap whatever the part: the robot puts its part back, then hands the task over.
+
   `extra_seconds` is this model: piecewise linear in the delay between the committed task's
   milestones of the cost table (`EdgeCost.carry_start`, `EdgeCost.carry_end`), a first-order
   model of the cell's re-target and swap that the cell's own timings are to be compared with.
@@ -228,7 +231,7 @@ class InteractionCosts:
                 )
 
     def _figures(self, state: tuple[str, ...], committed: str, indicated: str):
-        kind = bet_kind(self.space, committed, indicated)
+        kind = self.table.bet_kind(self.space, state, committed, indicated)
         edge = self.table.cost(state, committed)
         planned = 0.0 if kind == Bet.RIGHT else self.table.bet_seconds(state, committed, indicated)
         return kind, edge.carry_start, edge.carry_end, planned
@@ -248,10 +251,12 @@ class InteractionCosts:
         return value
 
     def bets(self, state: tuple[str, ...]) -> list[str]:
-        """The placements the robot may commit to in `state` (none in `wait` mode)."""
+        """The placements the robot may commit to in `state` (none in `wait` mode, nor one the
+        robot cannot plan: the operator's by the table)."""
         if not self.interaction.anticipates:
             return []
-        return [t for t, _ in self.space.tasks(self.space.index(state)) if t != UNDO]
+        tasks = self.space.tasks(self.space.index(state))
+        return [t for t, _ in tasks if t != UNDO and not self.table.by_operator(state, t)]
 
     def commit_seconds(
         self, state: tuple[str, ...], committed: str, probabilities: Mapping[str, float]
@@ -279,8 +284,10 @@ class InteractionCosts:
 
     def play(self, state: tuple[str, ...], committed: str | None, indicated: str, delay: float):
         """The `Step` of a boundary: the robot committed to `committed` (None: waited), the
-        operator indicated `indicated` after `delay` seconds."""
-        if committed is None:
+        operator indicated `indicated` after `delay` seconds. A commitment to a task the robot
+        cannot plan (the operator's by the table) never starts: the robot waits, as the cell's
+        Supervisor does when it finds no plan for what it committed to."""
+        if committed is None or self.table.by_operator(state, committed):
             return Step(None, delay, float(delay))
         kind, start, end, planned = self._figures(tuple(state), committed, indicated)
         seconds = float(extra_seconds(kind, delay, start, end, planned))
@@ -343,7 +350,7 @@ def bet_summary(space: StateSpace, table: CostTable, interaction: Interaction) -
                 "state": list(state),
                 "committed": committed,
                 "indicated": indicated,
-                "kind": bet_kind(space, committed, indicated).value,
+                "kind": table.bet_kind(space, state, committed, indicated).value,
                 "planned": planned,
                 "expected": round(priced.expected(state, committed, indicated), 4),
             }
