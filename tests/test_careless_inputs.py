@@ -98,6 +98,7 @@ def test_a_binary_scenario_file_is_one_line(capsys, tmp_path, where):
         ["train", "--gamma", "5", "--out", "{tmp}/p.json"],
         ["react", "--mistake-prob", "-1"],
         ["react", "--mistake-prob", "nan"],
+        ["solve", "--mistake-prob", "1", "--out", "{tmp}/p.json"],
         ["costs", "--gamma", "2", "--out", "{tmp}/c.json"],
         ["simulate", "--mistake-prob", "1.5", "--record", "{tmp}/r.html"],
         ["simulate", "--gamma", "0", "--record", "{tmp}/r.html"],
@@ -107,7 +108,7 @@ def test_a_binary_scenario_file_is_one_line(capsys, tmp_path, where):
 def test_gamma_and_mistake_prob_out_of_range_are_refused_by_argparse(capsys, tmp_path, argv):
     argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
     flag = "--gamma" if "--gamma" in argv else "--mistake-prob"
-    fix = "(0, 1]" if flag == "--gamma" else "[0, 1]"
+    fix = "(0, 1]" if flag == "--gamma" else "[0, 1)"
     assert_one_line(*refused(capsys, *argv), f"hrc-drake {argv[0]}: error: argument {flag}", fix)
     assert list(tmp_path.iterdir()) == []
 
@@ -189,6 +190,20 @@ def test_evaluate_refuses_more_runs_than_the_maximum_before_any_work(capsys, mon
     argv = ["evaluate", "--decider", "exact", "--operator-model", "random", "--runs", "10000000"]
     code, out, err = refused(capsys, *argv)
     assert_one_line(code, out, err, "--runs 10000000", "at most 1,000,000", "of memory")
+
+
+def test_evaluate_refuses_a_scenario_policy_it_would_ignore(capsys, monkeypatch, tmp_path):
+    """`evaluate` runs a decider; a scenario's `policy:` would be silently left out."""
+
+    def no_work(*args):
+        raise AssertionError("the cost table was asked for")
+
+    monkeypatch.setattr(evaluate_command, "_cost_table", no_work)
+    policy = tmp_path / "p.json"
+    argv = ["evaluate", "--cell", "--decider", "exact", "--operator-model", "random", "--lean"]
+    argv += ["--scenario-text", f"{{policy: {policy}}}"]
+    code, out, err = refused(capsys, *argv)
+    assert_one_line(code, out, err, "policy:", "not used by evaluate", "hrc-drake simulate")
 
 
 def test_evaluate_says_how_long_a_long_evaluation_takes(capsys):

@@ -13,12 +13,14 @@ import sys
 import threading
 from pathlib import Path
 
+from hrc_drake.cli.adversary import add_adversary_parser
 from hrc_drake.cli.evaluate import (
     add_evaluate_parser,
     add_interaction_flags,
     add_separation_flag,
 )
 from hrc_drake.cli.tasks import (
+    cmd_check_policy,
     cmd_plot,
     cmd_policy,
     cmd_react,
@@ -36,7 +38,7 @@ from hrc_drake.tasks.decide import (
     DecisionError,
 )
 from hrc_drake.tasks.graph import UnknownStateError
-from hrc_drake.tasks.learn import SCHEDULES
+from hrc_drake.tasks.learn import DEFAULT_SCHEDULE, SCHEDULES
 from hrc_drake.tasks.policy import (
     PolicyFileError,
 )
@@ -68,11 +70,14 @@ def discount(text: str) -> float:
 
 
 def probability(text: str) -> float:
-    """`--mistake-prob`: a probability in [0, 1] (NaN refused), as `discount`."""
+    """`--mistake-prob`: a probability in [0, 1) (NaN refused), as `discount`. 1 is refused
+    too: an operator who always misplaces never finishes an assembly with a mistake-prone
+    placement, and the MDP has no value there."""
     value = _number(text)
-    if not 0.0 <= value <= 1.0:  # False for NaN too
+    if not 0.0 <= value < 1.0:  # False for NaN too
         raise argparse.ArgumentTypeError(
-            f"{text} is not a probability; give a number in [0, 1] (default 0.05)"
+            f"{text} is not a mistake probability; give a number in [0, 1) (default 0.05; 1 "
+            "would misplace every part and never finish)"
         )
     return value
 
@@ -196,6 +201,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_station(add("station", cmd_station, "serve a scenario's simulated station over LCM"))
     _add_drivers(add("drivers", cmd_drivers, "serve a scenario's real UR3 and RG2 over LCM"))
     add_evaluate_parser(add)
+    add_adversary_parser(add)
     return parser
 
 
@@ -221,7 +227,7 @@ def _common_flags() -> argparse.ArgumentParser:
         "--mistake-prob",
         type=probability,
         default=0.05,
-        help="probability in [0, 1] that the operator misplaces a part (spec `mistakes`)",
+        help="probability in [0, 1) that the operator misplaces a part (spec `mistakes`)",
     )
     return common
 
@@ -237,14 +243,23 @@ def _add_task_commands(add) -> None:
     add_force_flag(p)
     p = add("train", cmd_train, "Q-learned policy -> file")
     p.add_argument("--out", required=True, help=out_help)
-    p.add_argument("--schedule", choices=list(SCHEDULES), default="full")
+    p.add_argument(
+        "--schedule",
+        choices=list(SCHEDULES),
+        default=DEFAULT_SCHEDULE,
+        help=f"learning schedule (default {DEFAULT_SCHEDULE}: exploring starts until every "
+        "state is covered; paper: the published one; docs/tasks.md)",
+    )
     p.add_argument("--costs", type=Path, default=None, help=costs_help)
     add_force_flag(p)
-    p = add("costs", cmd_costs, "plan every task edge and bet -> cost table file (seconds)")
+    p = add("costs", cmd_costs, "plan every edge and bet a run takes -> cost table file (seconds)")
     p.add_argument("--out", type=Path, required=True)
     add_force_flag(p)
     add_interaction_flags(p, "; prices the bets with the interface's delay")
     add("policy", cmd_policy, "the policy for every state").add_argument("--policy")
+    p = add("check-policy", cmd_check_policy, "score a policy file against the exact solution")
+    p.add_argument("--policy", required=True, help="policy file (hrc-drake solve or train)")
+    p.add_argument("--costs", type=Path, default=None, help=costs_help)
     p = add("react", cmd_react, "decision loop with a scripted operator")
     p.add_argument("--policy")
     p.add_argument("--operator", default="", help='e.g. "1:F3,2:S12"')

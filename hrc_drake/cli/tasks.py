@@ -1,5 +1,5 @@
-"""The task layer's commands: `states`, `solve`, `train`, `policy`, `react`, `table2` and
-`plot` (no Drake)."""
+"""The task layer's commands: `states`, `solve`, `train`, `policy`, `check-policy`, `react`,
+`table2` and `plot` (no Drake)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,10 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from hrc_drake.hri.operator import ScriptedOperator, parse_operator_script
+from hrc_drake.memory import give_back_free_memory
 from hrc_drake.paths import UsageError, check_output_path, image_kind
 from hrc_drake.progress import ProgressLine
 from hrc_drake.scenario.load import table2_scenarios
@@ -21,14 +24,24 @@ from hrc_drake.tasks.decide import (
 )
 from hrc_drake.tasks.graph import StateSpace, generate_states
 from hrc_drake.tasks.learn import SCHEDULES, Schedule, train
+from hrc_drake.tasks.listing import (
+    policy_rows_json,
+    policy_rows_text,
+    sequences,
+    state_rows_json,
+    state_rows_text,
+    write_json_list,
+)
 from hrc_drake.tasks.mdp import MdpConfig, build_mdp
 from hrc_drake.tasks.policy import (
     POLICY_FILE,
     Policy,
     load_policy,
+    next_states,
     policy_from_choices,
     save_policy,
 )
+from hrc_drake.tasks.policy_check import check_policy, exact_next_states, load_runnable_policy
 from hrc_drake.tasks.solve import exact_policy, tasks_to_finish, timed_config
 from hrc_drake.tasks.spec import load_spec
 
@@ -51,8 +64,10 @@ def _costs(args, space: StateSpace) -> CostTable | None:
 
 
 def _policy(args, space: StateSpace) -> Policy:
+    """`--policy FILE` for a command that runs it (refused if it never finishes from some
+    state, `load_runnable_policy`), else the exact policy."""
     if getattr(args, "policy", None):
-        return load_policy(args.policy, space)
+        return load_runnable_policy(args.policy, space)
     return exact_policy(space, _mdp_config(args))
 
 
@@ -62,38 +77,18 @@ def _print_json(data) -> None:
 
 
 def cmd_states(args) -> int:
-    """Print the state table (Table 1 for the flange case)."""
+    """Print the state table (Table 1 for the flange case), row by row as it goes."""
     space = _space(args)
     best = tasks_to_finish(space)
-    rows = []
-    for s in range(space.n_states):
-        rows.append(
-            {
-                "name": space.name(s),
-                "sequence": list(space.sequence(s)),
-                "configuration": sorted(space.configuration(s)),
-                "kind": space.state_kind(s).key,
-                "tasks": [t for t, _ in space.tasks(s)],
-                "actions": sorted({space.action_label(t) for t, _ in space.tasks(s)}),
-                "tasks_to_finish": int(best[s]),
-            }
-        )
-    if all(r["name"].isdigit() for r in rows):
-        rows.sort(key=lambda r: int(r["name"]))
     if args.json:
-        _print_json(rows)
+        write_json_list(sys.stdout, state_rows_json(space, best))
         return 0
     print(
-        f"{space.spec.name}: {space.n_states} states, {len(space.configurations())} configurations"
+        f"{space.spec.name}: {space.n_states} states, {len(np.unique(space.mask))} configurations"
     )
     print(f"{'#':>4}  {'sequence':<20} {'kind':<10} {'to finish':>9}  tasks")
-    for r in rows:
-        seq = " ".join(r["sequence"]) or "(empty base)"
-        kind = r["kind"].replace("_", " ")
-        print(
-            f"{r['name']:>4}  {seq:<20} {kind:<10} {r['tasks_to_finish']:>9}  "
-            f"{', '.join(r['tasks'])}"
-        )
+    for line in state_rows_text(space, best):
+        print(line)
     return 0
 
 
@@ -120,7 +115,7 @@ def cmd_train(args) -> int:
     config = _mdp_config(args, costs)
     mdp = build_mdp(space, config)
     schedule = _schedule(args)
-    unit = "episode" if args.schedule == "paper" else "sweep"
+    unit = {"paper": "episode", "cover": "round"}.get(args.schedule, "sweep")
     with ProgressLine(f"training ({schedule.name})", unit) as bar:
         result = train(mdp, schedule, seed=args.seed, progress=bar.update)
     meta = {
@@ -131,37 +126,140 @@ def cmd_train(args) -> int:
         "gamma": config.gamma,
         "mistake_prob": config.mistake_prob,
     }
+    if result.rounds:
+        meta["rounds"] = result.rounds
+        meta["converged"] = result.converged
     if costs is not None:
         meta["cell_hash"] = costs.cell_hash
     policy = policy_from_choices(mdp, result.choice, f"q-learning/{schedule.name}", meta)
+    del mdp  # the MDP's arrays are not needed to write the file (at 10^6 states: 150 MB)
+    give_back_free_memory()
     save_policy(policy, args.out)
+    if not result.converged:
+        print(
+            f"hrc-drake train: warning: the {schedule.name} schedule stopped at its cap of "
+            f"{result.rounds} rounds before every state was covered; `hrc-drake check-policy "
+            f"--policy {args.out}` shows where the policy falls short",
+            file=sys.stderr,
+        )
+    if args.json:
+        _print_json(
+            {
+                "out": str(args.out),
+                "assembly": space.spec.name,
+                "states": space.n_states,
+                **meta,
+                "wall_time": round(result.wall_time, 3),
+            }
+        )
+        return 0
+    rounds = f" in {result.rounds} rounds" if result.rounds else ""
     print(
-        f"{result.episodes} episodes, {result.steps} steps, {result.wall_time:.2f} s -> {args.out}"
+        f"{result.episodes} episodes, {result.steps} steps{rounds}, {result.wall_time:.2f} s "
+        f"-> {args.out}"
     )
     return 0
 
 
 def cmd_policy(args) -> int:
-    """For every state: its sequence, kind, and the sequence after the proposed task."""
+    """For every state: its sequence, kind, and the sequence after the proposed task; row by
+    row, from the policy's next state per state (no dictionary of every sequence)."""
     space = _space(args)
-    policy = _policy(args, space)
-    rows = []
-    for s in range(space.n_states):
-        seq = space.sequence(s)
-        task = policy.next_task(seq)
-        nxt = None
-        if task is not None:
-            nxt = list(space.sequence(dict(space.tasks(s))[task]))
-        rows.append(
-            {"sequence": list(seq), "kind": space.state_kind(s).key, "task": task, "next": nxt}
-        )
-    if args.json:
-        _print_json(rows)
+    if getattr(args, "policy", None):
+        next_state = next_states(space, load_policy(args.policy, space))
     else:
-        for r in rows:
-            seq = " ".join(r["sequence"]) or "(start)"
-            print(f"{seq:<16} {r['kind'].replace('_', ' '):<10} -> {r['task'] or '-'}")
+        next_state = exact_next_states(space, _mdp_config(args))
+    if args.json:
+        write_json_list(sys.stdout, policy_rows_json(space, next_state))
+    else:
+        for line in policy_rows_text(space, next_state):
+            print(line)
     return 0
+
+
+def cmd_check_policy(args) -> int:
+    """Score a policy file against the exact solution: states where it is not minimum-effort,
+    states from which it never finishes (it loops), and the value gap. Exit status 1 when it
+    never finishes from some state (the commands that run a policy refuse it)."""
+    space = _space(args)
+    policy = load_policy(args.policy, space)
+    method, next_state = policy.method, next_states(space, policy)
+    del policy  # its table of sequences is not needed beside the solver's arrays
+    costs = _costs(args, space)
+    check = check_policy(space, next_state, _mdp_config(args, costs))
+    summary = {
+        "assembly": space.spec.name,
+        "policy": str(args.policy),
+        "method": method,
+        **check.summary(),
+    }
+    bad = np.flatnonzero(check.not_minimum)
+    if args.json:
+        _print_check_json(space, check, summary, bad)
+    else:
+        _print_check(space, check, summary, bad)
+    return 1 if check.unfinished.any() else 0
+
+
+CHECK_SHOWN = 10  # states the text report lists (--json lists every one)
+
+
+def _check_rows(space: StateSpace, check, states: np.ndarray):
+    """(sequence, tasks or None when it never finishes, fewest, loops) of `states`."""
+    steps, fewest = check.walks.steps[states].tolist(), check.fewest[states].tolist()
+    loops = check.walks.loops[states].tolist()
+    rows = zip(sequences(space, states), steps, fewest, loops, strict=True)
+    for seq, k, b, lp in rows:
+        yield seq, (k if k >= 0 else None), b, lp
+
+
+def _print_check_json(space: StateSpace, check, summary: dict, bad: np.ndarray) -> None:
+    """The summary, then `not_minimum_effort_states`: one compact row per state, written as
+    they go (there may be as many as states)."""
+    head = json.dumps(summary, indent=1)
+    sys.stdout.write(head[:-2] + ',\n "not_minimum_effort_states": [')
+    sep = "\n  "
+    for seq, steps, fewest, loops in _check_rows(space, check, bad):
+        row = {"sequence": seq, "tasks": steps, "fewest": fewest, "loops": loops}
+        sys.stdout.write(sep + json.dumps(row))
+        sep = ",\n  "
+    sys.stdout.write("\n ]\n}\n" if len(bad) else "]\n}\n")
+
+
+def _print_check(space: StateSpace, check, summary: dict, bad: np.ndarray) -> None:
+    s = summary
+    print(f"policy {s['policy']} ({s['method']}) on {s['assembly']}: {s['states']:,} states")
+    print(
+        f"minimum-effort from {s['minimum_effort']:,} of {s['non_terminal']:,} non-terminal "
+        f"states; not from {s['not_minimum_effort']:,}, of which {s['loops']:,} loop"
+        + (f" and {s['missing']:,} have no task" if s["missing"] else "")
+    )
+    start = s["start_tasks"]
+    print(
+        f"from the start: {'never finishes' if start is None else f'{start} tasks'} "
+        f"(fewest {s['start_fewest']})"
+    )
+    gap = s.get("value_gap")
+    if gap is not None:
+        print(f"value gap (gamma {gap['gamma']}, mistake_prob {gap['mistake_prob']}): " + _gap(gap))
+    shown = 0
+    for seq, steps, fewest, loops in _check_rows(space, check, bad[:CHECK_SHOWN]):
+        what = "loops" if loops else "never finishes" if steps is None else f"{steps} tasks"
+        print(f"  {' '.join(seq) or '(start)':<30} {what}, fewest {fewest}")
+        shown += 1
+    if len(bad) > shown:
+        print(f"  ... and {len(bad) - shown:,} more (--json lists every one)")
+
+
+def _gap(gap: dict) -> str:
+    def fmt(x):
+        return "inf" if x is None else f"{x:.4g}"
+
+    where = "" if gap["max_at"] is None else f" (at {' '.join(gap['max_at']) or '(start)'})"
+    text = f"start {fmt(gap['start'])}, max {fmt(gap['max'])}{where}, mean {fmt(gap['mean'])}"
+    if gap["infinite"]:
+        text += f" over the others; infinite from {gap['infinite']:,} (it may never finish)"
+    return text
 
 
 def cmd_react(args) -> int:
@@ -307,6 +405,7 @@ def cmd_plot(args) -> int:
 
 __all__ = [
     "check_table2_spec",
+    "cmd_check_policy",
     "cmd_plot",
     "cmd_policy",
     "cmd_react",

@@ -8,6 +8,11 @@
   pair of every non-terminal state, in a seeded random order; per-pair learning rate 1/n**0.6
   so that the estimates settle under the operator's random mistakes; stops when the greedy
   values move less than `stop_tolerance` over a sweep.
+- `CoverageSchedule` (the default, `hrc_drake.tasks.coverage`): rounds of exploring starts
+  aimed where learning is not done (loops, changes, large or stale errors, noise sampled too
+  little), vectorised over episodes; stops when full sweeps find no loop and change nothing.
+  Minimum-effort from every state on specs from 20 to 820,427 states
+  (benchmarks/reports/coverage.md).
 - `ExploringStartsSchedule`: exploring starts over *states*, not pairs — each sweep starts one
   episode from every non-terminal state, deepest states first (their values are what the
   shallower ones bootstrap from), and opens it with the state's least-tried task; then greedy
@@ -32,6 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hrc_drake.memory import give_back_free_memory
+from hrc_drake.tasks.coverage import CoverageSchedule, train_coverage
 from hrc_drake.tasks.mdp import SequenceMDP
 from hrc_drake.tasks.solve import greedy_choice, state_values
 
@@ -85,22 +92,32 @@ class ExploringStartsSchedule:
     name: str = "explore"
 
 
-Schedule = PaperSchedule | FullSchedule | ExploringStartsSchedule
-SCHEDULES = {s.name: s for s in (PaperSchedule, FullSchedule, ExploringStartsSchedule)}
+Schedule = PaperSchedule | FullSchedule | ExploringStartsSchedule | CoverageSchedule
+SCHEDULES = {
+    s.name: s for s in (CoverageSchedule, PaperSchedule, FullSchedule, ExploringStartsSchedule)
+}
+DEFAULT_SCHEDULE = CoverageSchedule.name
 
 
 @dataclass(frozen=True, eq=False)
 class LearningResult:
-    """The learned Q-table (one value per MDP edge), its greedy choices and learning curve."""
+    """The learned Q-table (one value per MDP edge), its greedy choices and learning curve.
+
+    `returns` is the return of every episode, except for `CoverageSchedule`, whose episodes run
+    by the million: there it is the mean return of each round's episodes. `converged` is False
+    when a schedule with a stop rule reached its cap instead (`CoverageSchedule.max_rounds`).
+    """
 
     q: np.ndarray
     choice: np.ndarray
-    returns: np.ndarray  # return of every episode
+    returns: np.ndarray
     episodes: int
     steps: int
     wall_time: float
     schedule: str
     seed: int
+    rounds: int = 0
+    converged: bool = True
 
     def moving_average(self, window: int = 20) -> np.ndarray:
         """Mean return over the last `window` episodes, at every episode."""
@@ -151,8 +168,25 @@ def train(
     progress: Progress | None = None,
 ) -> LearningResult:
     """Learn a Q-table for `mdp` with `schedule`; seeded, so the same seed gives the same table."""
-    rng = random.Random(seed)
     start = time.perf_counter()
+    if isinstance(schedule, CoverageSchedule):
+        # Free pages back first (building the MDP leaves many), then its batches' pages.
+        give_back_free_memory()
+        outcome = train_coverage(mdp, schedule, seed=seed, progress=progress)
+        give_back_free_memory()
+        return LearningResult(
+            q=outcome.q,
+            choice=greedy_choice(mdp, outcome.q, tie_tolerance=0.0),
+            returns=outcome.round_returns,
+            episodes=outcome.episodes,
+            steps=outcome.steps,
+            wall_time=time.perf_counter() - start,
+            schedule=schedule.name,
+            seed=seed,
+            rounds=outcome.rounds,
+            converged=outcome.converged,
+        )
+    rng = random.Random(seed)
     if isinstance(schedule, PaperSchedule):
         q, returns, steps = _train_paper(mdp, schedule, rng, progress)
     elif isinstance(schedule, ExploringStartsSchedule):
