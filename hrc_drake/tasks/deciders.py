@@ -43,6 +43,7 @@ from typing import Protocol
 import numpy as np
 
 from hrc_drake.paths import UsageError
+from hrc_drake.tasks.adversary import worst_case_levels, worst_case_q
 from hrc_drake.tasks.costs import CostTable
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.interaction import Interaction, InteractionCosts
@@ -177,7 +178,9 @@ class WorstCaseDecider:
 
     In ``anticipate`` mode each proposal is priced twice, committing to it (a misplacement then
     costs the re-target's expected seconds) and waiting (the expected delay), and the cheaper
-    worst case counts; the delay is taken at its expectation (it is not the adversary's)."""
+    worst case counts; the delay is taken at its expectation (it is not the adversary's). The
+    min-max backup and its value iteration are `hrc_drake.tasks.adversary`'s (the same game in
+    tasks there)."""
 
     name = "worst-case"
 
@@ -198,7 +201,7 @@ class WorstCaseDecider:
         self.deviates = mdp.out_dst != mdp.edge_dst[out_edge]
         base = -mdp.out_reward
         self.out_cost = (base + self.bets.wait_seconds, base + self._commit_prices(out_edge))
-        self.levels = self._solve()
+        self.levels = worst_case_levels(mdp, self.out_cost, self.deviates, self.budget)
         self.reset()
 
     def _commit_prices(self, out_edge: np.ndarray) -> np.ndarray:
@@ -220,36 +223,7 @@ class WorstCaseDecider:
     def _worst(self, w: np.ndarray, below: np.ndarray | None) -> np.ndarray:
         """Per edge, the worst completion seconds of its cheaper bet, with `w` the values with
         the same mistakes left and `below` with one fewer (None: no mistake left)."""
-        mdp = self.mdp
-        nxt = w[mdp.out_dst]
-        q = np.full(mdp.n_edges, np.inf)
-        for cost in self.out_cost:
-            if below is None:
-                # No mistake left: the operator follows.
-                val = np.where(self.deviates, -np.inf, cost + nxt)
-            else:
-                val = cost + np.where(self.deviates, below[mdp.out_dst], nxt)
-            q = np.minimum(q, np.maximum.reduceat(val, mdp.out_start[:-1]))
-        return q
-
-    def _solve(self) -> list[np.ndarray]:
-        mdp = self.mdp
-        n = self.space.n_states
-        has = np.diff(mdp.edge_start) > 0
-        seg_e = mdp.edge_start[:-1][has]
-        levels: list[np.ndarray] = []
-        below = None
-        for _ in range(self.budget + 1):
-            w = np.zeros(n) if below is None else below.copy()
-            for _sweep in range(10 * n + 10):
-                new = np.zeros(n)
-                new[has] = np.minimum.reduceat(self._worst(w, below), seg_e)
-                if np.array_equal(new, w):
-                    break
-                w = new
-            levels.append(w)
-            below = w
-        return levels
+        return worst_case_q(self.mdp, self.out_cost, self.deviates, w, below)
 
     def reset(self) -> None:
         """A full budget of mistakes."""
