@@ -179,10 +179,10 @@ def _interaction(tally: _Tally, timeline, state, committed, performed, delays) -
     step = timeline.play(state, committed, performed, timeline.interaction.delay.sample(delays))
     tally.seconds += step.seconds
     tally.delay += step.delay
-    tally.commits += committed is not None
+    tally.commits += step.committed is not None  # none on a task the robot cannot plan
     tally.retargets += step.retargeted
     tally.swaps += step.swapped
-    if committed is None:
+    if step.committed is None:
         tally.wait += step.delay
     elif not (step.retargeted or step.swapped):
         tally.wait += step.seconds  # a right bet waits only for the rest of the delay

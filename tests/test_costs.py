@@ -18,12 +18,14 @@ from hrc_drake.tasks.costs import (
     task_edges,
 )
 from hrc_drake.tasks.decide import run_decisions
-from hrc_drake.tasks.graph import generate_states
+from hrc_drake.tasks.graph import StateKind, generate_states
 from hrc_drake.tasks.learn import FullSchedule, train
 from hrc_drake.tasks.mdp import MdpConfig, Rewards, build_mdp
 from hrc_drake.tasks.policy import policy_from_choices
 from hrc_drake.tasks.solve import exact_policy, timed_config
 from hrc_drake.tasks.spec import parse_spec
+
+TERMINAL = StateKind.TERMINAL
 
 # Robot time of every task edge of the flange case [s], home to home without a bolting hold:
 # benchmarks/reports/motion.md ("motion" column plus 1 s of gripper), by Table 1 state number.
@@ -91,6 +93,22 @@ def test_round_trip(tmp_path, flange_space, table):
     loaded = load_cost_table(path, flange_space, cell_hash="test-cell")
     assert loaded.entries == table.entries
     assert (loaded.spec_hash, loaded.cell_hash) == (table.spec_hash, table.cell_hash)
+
+
+def test_a_version_2_file_is_read_as_it_is(tmp_path, flange_space, toy_costs):
+    """Version 2 tables (no operator's edges; undo from terminal states planned too) still load:
+    the cache and the tables users made stay valid."""
+    from hrc_drake.tasks.datafile import with_checksum
+
+    path = tmp_path / "costs.json"
+    save_cost_table(toy_costs, path)
+    data = json.loads(path.read_text())
+    data.pop("checksum")
+    data["version"] = 2
+    path.write_text(json.dumps(with_checksum(data)))
+    loaded = load_cost_table(path, flange_space)
+    assert loaded.entries == toy_costs.entries and len(loaded) == 38  # terminal undo kept, unused
+    assert loaded.operator_edges() == [] and loaded.bets == toy_costs.bets
 
 
 def _edit(path: Path, change) -> None:
@@ -271,6 +289,139 @@ def test_planned_bets_and_carry_milestones(flange_space, planner):
     put_back = 2 * planner.options.gripper_time  # at least: closed, then opened again
     assert all(0.0 <= r < 2.0 for r in retargets)
     assert max(retargets) + put_back < swap < 8.0 and put_back < undo < 8.0
+
+
+class _Motion:
+    def __init__(self, name: str, start: float, duration: float):
+        self.name, self.start, self.duration = name, start, duration
+
+
+class _Plan:
+    """What `compute_cost_table` reads of a plan: its duration and its named motions (home to
+    the pre-grasp 0-1.5 s, the lift 2-2.5 s, the carry 2.5-4 s)."""
+
+    def __init__(self, duration: float):
+        from hrc_drake.motion.plan import LIFT
+
+        self.duration = duration
+        self.motions = (
+            _Motion("home to pre-grasp", 0.0, 1.5),
+            _Motion(LIFT, 2.0, 0.5),
+            _Motion("carry to pre-place", 2.5, 1.5),
+        )
+
+
+# Edges the stand-in planner cannot plan: a placement from the empty base and an undo from a
+# wrong state (not terminal: runs take it).
+NO_PLAN = {((), "F3"), (("F1", "S23", "F02"), "undo")}
+
+
+@pytest.fixture
+def unplannable(monkeypatch, flange_space):
+    """`compute_cost_table` of the flange case with a stand-in planner (6 s per task, no plan
+    for the `NO_PLAN` edges, none for the bet F1 -> F2 in the empty base), and the edges it
+    was asked to plan."""
+    from types import SimpleNamespace
+
+    import hrc_drake.cell.run.costs as cell_costs
+    from hrc_drake.motion import UnreachableError
+
+    asked = []
+
+    def plan_edge(planner, space, state, task):
+        asked.append((tuple(state), task))
+        if (tuple(state), task) in NO_PLAN:
+            raise UnreachableError(task, "place", "minimum distance", "injected")
+        return _Plan(6.0)
+
+    def bet(planner, space, state, committed, indicated):
+        if (state, committed, indicated) == ((), "F1", "F2"):
+            raise UnreachableError(indicated, "pre-place", "position", "injected")
+        return 0.7
+
+    monkeypatch.setattr(cell_costs, "_plan_edge", plan_edge)
+    monkeypatch.setattr(cell_costs, "bet_seconds", bet)
+    monkeypatch.setattr(cell_costs, "check_reach", lambda planner: None)
+    monkeypatch.setattr(cell_costs, "cell_hash", lambda planner: "stand-in")
+    planner = SimpleNamespace(options=cell_costs.timing_options())
+    return cell_costs.compute_cost_table(flange_space, planner), asked, planner
+
+
+def test_a_cost_table_leaves_out_the_edges_no_run_takes(flange_space, unplannable):
+    """Undo from a terminal state is in the state graph but in no run (a run ends there): the
+    table neither plans nor holds it; nor a bet on a placement the robot cannot plan."""
+    from hrc_drake.tasks.costs import bet_pairs, run_edges
+
+    table, asked, _ = unplannable
+    terminal = {s for s in range(flange_space.n_states) if flange_space.kind[s] == TERMINAL}
+    left_out = [(s, t) for s, t in task_edges(flange_space) if flange_space.index(s) in terminal]
+    assert len(left_out) == 4 and {t for _, t in left_out} == {"undo"}
+    assert set(table.entries) == set(run_edges(flange_space)) and len(table) == 38 - 4
+    assert not set(asked) & set(left_out) and table.missing(flange_space) == []
+    # 42 bets in the graph; the four on F3 in the empty base are left out: never started on.
+    assert set(table.bets) == set(bet_pairs(flange_space, NO_PLAN)) and len(table.bets) == 38
+    assert not any(key[:2] == ((), "F3") for key in table.bets)
+
+
+def test_an_edge_the_robot_cannot_plan_is_priced_as_the_operators(
+    tmp_path, flange_space, unplannable
+):
+    from hrc_drake.cell.run.costs import HANDOVER_TIME
+    from hrc_drake.tasks.bets import Bet
+
+    table, _, planner = unplannable
+    assert set(table.operator_edges()) == NO_PLAN
+    cost = table.cost((), "F3")
+    assert cost.by_operator and cost.robot is None and cost.carry_start is None
+    assert (cost.handover, cost.operator) == (HANDOVER_TIME, DEFAULT_BOLT_TIME)
+    assert cost.seconds == HANDOVER_TIME + DEFAULT_BOLT_TIME and "injected" in cost.reason
+    assert not table.cost((), "F1").by_operator and table.cost((), "F1").robot == 6.0
+    # F1 carried toward seat 1, the operator indicates F3: the part goes back (2.5 s to the
+    # lift's end, lowered, released, up: 2 x 0.5 s + the gripper), then F3 is handed over.
+    put_back = 2.5 + 2 * 0.5 + planner.options.gripper_time
+    assert table.bet_kind(flange_space, (), "F1", "F3") == Bet.SWAP
+    assert table.bets[(), "F1", "F3"] == pytest.approx(put_back)
+    # A re-target whose own move cannot be planned: carried back along the carry, put back.
+    assert table.bets[(), "F1", "F2"] == pytest.approx(put_back + 2 * 1.5)
+    assert table.bets[(), "F1", "S12"] == 0.7
+
+    path = tmp_path / "costs.json"
+    save_cost_table(table, path)
+    data = json.loads(path.read_text())
+    assert data["version"] == 3
+    entry = next(e for e in data["entries"] if e["state"] == [] and e["task"] == "F3")
+    assert entry["by"] == "operator" and entry["handover"] == HANDOVER_TIME
+    assert "robot" not in entry and "injected" in entry["reason"]
+    loaded = load_cost_table(path, flange_space, cell_hash="stand-in")
+    assert loaded.entries == table.entries and loaded.bets == table.bets
+    # A scenario whose operator takes 2 s by hand prices the operator's edges so.
+    quick = loaded.with_handover_time(2.0)
+    assert quick.seconds((), "F3") == 2.0 + DEFAULT_BOLT_TIME
+    assert quick.cost((), "F1") == loaded.cost((), "F1")
+
+
+def test_deciders_and_runs_never_need_what_a_table_leaves_out(flange_space, unplannable):
+    """The solver, every decider and task-level runs work with the table: they never ask for an
+    edge from a terminal state, and never start on a task the robot cannot plan (they wait)."""
+    from hrc_drake.evaluate import evaluate
+    from hrc_drake.evaluation_runs import Setup
+    from hrc_drake.tasks.deciders import DECIDERS, make_decider
+    from hrc_drake.tasks.interaction import Interaction, InteractionCosts, Step
+
+    table, _, _ = unplannable
+    mdp = build_mdp(flange_space, timed_config(table))
+    assert mdp.n_edges == len(table)  # one MDP action per edge the table holds
+    bets = InteractionCosts(flange_space, table, Interaction())
+    assert "F3" not in bets.bets(()) and {"F1", "F2", "S12", "S23"} <= set(bets.bets(()))
+    assert bets.best_bet((), {"F3": 1.0}, "F3") == (None, bets.wait_seconds)
+    assert bets.play((), "F3", "F3", 2.0) == Step(None, 2.0, 2.0)  # the robot waited
+    # By hand in no time, F3 is the fastest first task: proposed, never started on.
+    quick = table.with_handover_time(0.0)
+    time_decider = make_decider("time", flange_space, quick, interaction=Interaction())
+    assert time_decider.propose(()) == "F3" and time_decider.commit((), "F3") is None
+    for name in DECIDERS:
+        report = evaluate(Setup(flange_space, table, name, "random", {}, seed=1), runs=20)
+        assert report["completed"] == 20, name
 
 
 def test_cell_hash_names_the_options_and_frames(flange_space, planner):

@@ -1,5 +1,6 @@
-"""`hrc-drake costs`: plan every edge of an assembly's state space in the cell, save the cost
-table (`hrc_drake.cell.run.costs`) and rank its sequences."""
+"""`hrc-drake costs`: plan every edge a run of an assembly can take in the cell, save the cost
+table (`hrc_drake.cell.run.costs`) and rank its sequences; say which edges the robot cannot plan
+(the operator's, by hand)."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import json
 import sys
 import time
 
-from hrc_drake.cell.run.costs import CostPlanningError, compute_cost_table, timing_planner
+from hrc_drake.cell.run.costs import compute_cost_table, timing_planner
 from hrc_drake.cell_models import CellModelError
 from hrc_drake.cli.evaluate import interaction_from_flags
 from hrc_drake.paths import UsageError, check_output_path
@@ -21,7 +22,8 @@ from hrc_drake.tasks.spec import load_spec
 
 def costs_command(args) -> int:
     """`hrc-drake costs --out FILE [--json]`: plan every edge, save the table, rank sequences.
-    A layout the UR3 cannot reach, or an edge that cannot be planned, is a one-line UsageError."""
+    A layout the UR3 cannot reach is a one-line UsageError; an edge the robot cannot plan is
+    the operator's (counted and listed with its reason)."""
     check_output_path(args.out, "--out", kind=COST_TABLE_FILE, force=getattr(args, "force", False))
     interaction = interaction_from_flags(args)
     space = generate_states(load_spec(args.assembly))
@@ -30,7 +32,7 @@ def costs_command(args) -> int:
         planner = timing_planner(space)
         with ProgressLine("planning task edges and bets", "plan") as bar:
             table = compute_cost_table(space, planner, progress=bar.update)
-    except (CellModelError, CostPlanningError) as err:
+    except CellModelError as err:
         raise UsageError(str(err)) from None
     wall = time.perf_counter() - start
     save_cost_table(table, args.out)
@@ -40,6 +42,10 @@ def costs_command(args) -> int:
     summary = {
         "out": str(args.out),
         **cost_summary(space, table, config),
+        "by_operator": [
+            {"state": list(state), "task": task, "reason": table.cost(state, task).reason}
+            for state, task in table.operator_edges()
+        ],
         "interaction": bet_summary(space, table, interaction),
         "wall_time": round(wall, 2),
     }
@@ -48,12 +54,22 @@ def costs_command(args) -> int:
         sys.stdout.write("\n")
         return 0
     bets = len(table.bets or {})
+    by_operator = summary["by_operator"]
     print(
         f"{summary['edges']} task edges and {bets} bets of {space.spec.name!r} planned in "
-        f"{wall:.1f} s (cell {table.cell_hash}) -> {args.out}"
+        f"{wall:.1f} s (cell {table.cell_hash}), {len(by_operator)} of the edges the "
+        f"operator's (the robot cannot plan them) -> {args.out}"
     )
+    _print_by_operator(by_operator)
     _print_summary(summary)
     return 0
+
+
+def _print_by_operator(rows: list[dict]) -> None:
+    """The edges the robot cannot plan: handed over at run time, priced as the operator's."""
+    for r in rows:
+        state = " ".join(r["state"]) or "(empty base)"
+        print(f"  by the operator: {r['task']} from {state}: {r['reason']}")
 
 
 def _print_summary(summary: dict) -> None:

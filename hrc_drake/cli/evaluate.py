@@ -231,7 +231,15 @@ def _cell_options(args, space: StateSpace, operator):
     costs = "" if args.costs is None else str(Path(args.costs).resolve())
     cell = CellOptions(args.scenario or DEFAULT_BASE_SCENARIO, tuple(overrides), costs=costs)
     cell.check(operator, args.operator_model)
-    return cell, cell.prepare(space)
+    scenario = cell.prepare(space)
+    if scenario.policy:
+        # The decider proposes every task; a policy file would be silently ignored.
+        raise UsageError(
+            f"the scenario's policy: {scenario.policy} is not used by evaluate (--decider "
+            f"{args.decider} proposes every task); drop it from the scenario, or run the policy "
+            "with `hrc-drake simulate`"
+        )
+    return cell, scenario
 
 
 def cell_run_estimate(
@@ -275,20 +283,24 @@ def _check_cell_runs(runs: int, workers: int | None, seconds: float) -> None:
     print(f"evaluate --cell: {runs} run(s), {estimate}", file=sys.stderr)
 
 
-def _cost_table(args, space: StateSpace) -> CostTable:
+def _cost_table(args, space: StateSpace, scenario=None) -> CostTable:
     """`--costs FILE`, or the cell's table: computed (with a progress line) the first time for
-    a spec and layout, then read from the cache. CellModelError (the UR3 cannot reach the
-    layout) and CostPlanningError are one-line UsageErrors."""
+    a spec and layout, then read from the cache. With a cell's `scenario`, the edges the robot
+    cannot plan are priced at its ``run.handover_time``, as its simulated operator takes them.
+    CellModelError (the UR3 cannot reach the layout) is a one-line UsageError."""
+    from hrc_drake.cell.run.costs import HANDOVER_TIME
+
+    handover = HANDOVER_TIME if scenario is None else scenario.run.handover_time
     if args.costs is not None:
-        return load_cost_table(args.costs, space)
-    from hrc_drake.cell.run.costs import CostPlanningError, default_cost_table
+        return load_cost_table(args.costs, space).with_handover_time(handover)
+    from hrc_drake.cell.run.costs import default_cost_table
     from hrc_drake.cell_models import CellModelError
 
     label = f"cost table of {space.spec.name} (planned once, then cached)"
     try:
         with ProgressLine(label, "plan") as bar:
-            return default_cost_table(space, progress=bar.update)
-    except (CellModelError, CostPlanningError) as err:
+            return default_cost_table(space, progress=bar.update).with_handover_time(handover)
+    except CellModelError as err:
         raise UsageError(str(err)) from None
 
 
@@ -310,7 +322,7 @@ def cmd_evaluate(args) -> int:
     delay = interaction.delay.mean if cell is not None else 0.0
     if cell is not None and runs > MAX_CELL_RUNS:  # refused before the cost table is built
         _check_cell_runs(runs, workers, cell_run_estimate(space, None, scenario, delay))
-    costs = _cost_table(args, space)
+    costs = _cost_table(args, space, scenario)
     if cell is not None:
         _check_cell_runs(runs, workers, cell_run_estimate(space, costs, scenario, delay))
     try:

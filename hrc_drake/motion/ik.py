@@ -77,6 +77,36 @@ def _solve(
     return None
 
 
+# How far each joint of a seed is moved for its second chance [rad].
+_NUDGE = 1e-3
+
+
+def _second_chance(
+    scene: PlanningScene,
+    X_W_tcp: RigidTransform,
+    seeds: Sequence[np.ndarray],
+    q_nominal: np.ndarray,
+    min_distance: float,
+) -> np.ndarray | None:
+    """A clear posture from each seed alone, then from each seed nudged by `_NUDGE`, without the
+    distance constraint and then with it; None if none. Where the seeds together found nothing
+    clear, SNOPT may still from one of them: it stalls from a seed whose tcp turns exactly the
+    orientation tolerance off (the straight way down from a pre-place that the IK left there:
+    the constraint's gradient vanishes), and with the distance constraint it can fail from a
+    seed whose plain answer is already clear (a UR3 putting a part back in the tray from
+    slot 4 of a 4-slot cell at a 75 mm pitch: 16.9 mm clear, the constrained solve failed)."""
+    for seed in [*seeds, *(np.asarray(s, dtype=float) + _NUDGE for s in seeds)]:
+        q = _solve(scene, X_W_tcp, [seed], q_nominal, orientation=True, min_distance=None)
+        if q is None:
+            continue
+        if scene.min_distance(q)[0] >= min_distance:
+            return q
+        q = _solve(scene, X_W_tcp, [q], q_nominal, orientation=True, min_distance=min_distance)
+        if q is not None:
+            return q
+    return None
+
+
 def solve_ik(
     scene: PlanningScene,
     X_W_tcp: RigidTransform,
@@ -89,8 +119,10 @@ def solve_ik(
 ) -> np.ndarray:
     """A posture putting the tcp at X_W_tcp, clear of collisions, near `q_nominal`.
 
-    Tries each seed in turn with SNOPT. Raises UnreachableError naming the violated constraint,
-    found by re-solving without the distance constraint, then without orientation.
+    Tries each seed in turn with SNOPT. Where that finds nothing clear, each seed alone and
+    nudged (`_second_chance`) before the pose is called unreachable. Raises UnreachableError
+    naming the violated constraint, found by re-solving without the distance constraint, then
+    without orientation.
     """
     # Solving without the distance constraint first is fast, and its answer is usually clear.
     q_free = _solve(scene, X_W_tcp, seeds, q_nominal, orientation=True, min_distance=None)
@@ -108,6 +140,10 @@ def solve_ik(
         )
         if q is not None:
             return q
+    q = _second_chance(scene, X_W_tcp, seeds, q_nominal, min_distance)
+    if q is not None:
+        return q
+    if q_free is not None:
         detail = f"the arm reaches tcp at {where} only by coming closer than {min_distance} m"
         raise UnreachableError(task, waypoint, "minimum distance", detail)
     if _solve(scene, X_W_tcp, seeds, q_nominal, orientation=False, min_distance=None) is not None:

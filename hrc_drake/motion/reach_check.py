@@ -1,10 +1,13 @@
-"""Before any simulation: does the UR3 reach every grasp the spec asks for? Each part in its tray
-home and at every placement the spec allows, at the pre-grasp and the grasp, with the robot's
-limits and clearance. When it does not, the error names the slot or part, the layout value to
-change, and a nearby layout that passes (`hrc_drake.motion.reach_search`).
+"""Before any simulation: does the UR3 reach every grasp the spec asks for, with room among the
+parts already placed? First the occupancy rule (`hrc_drake.motion.occupancy`): every move the
+spec allows keeps the planner's clearance from every part that may be in place beside it. Then
+each part in its tray home and at every placement the spec allows, at the pre-grasp and the
+grasp, with the robot's limits and clearance. When either fails, the error names the slot or
+part, the layout value to change, and a nearby layout that passes both
+(`hrc_drake.motion.reach_search`).
 
-Apart from the planner because it plans nothing: it asks the IK of each target in the empty
-cell, once per cell, where the planner plans a task at a time.
+Apart from the planner because it plans nothing: it measures the cell's geometry and asks the
+IK of each target in the empty cell, once per cell, where the planner plans a task at a time.
 """
 
 from __future__ import annotations
@@ -14,21 +17,54 @@ from pydrake.math import RigidTransform
 
 from hrc_drake.cell_models import CellDesign, CellModelError
 from hrc_drake.motion.ik import UnreachableError, solve_ik
+from hrc_drake.motion.occupancy import CellGeometry, Crowded, check_occupancy
 from hrc_drake.motion.planner import MotionPlanner
 from hrc_drake.motion.poses import CellFrames, offset_along_approach, part_pose, tcp_pose
 from hrc_drake.motion.postures import toward
-from hrc_drake.motion.scene import GRIPPER, MAX_OPENING, PLATE, TRAY, Layout
+from hrc_drake.motion.scene import (
+    GRIPPER,
+    MAX_OPENING,
+    PLATE,
+    TRAY,
+    Layout,
+    SceneModel,
+    load_cell_frames,
+)
 from hrc_drake.tasks.assembly import AssemblySpec
 
 # A reach target: (part instance, what it is in the error, X_W_part, the layout value to change).
 _Target = tuple[str, str, RigidTransform, str]
 
 
+def cell_geometry(planner: MotionPlanner) -> CellGeometry:
+    """The occupancy rule's view of the planner's cell (`hrc_drake.motion.occupancy`)."""
+    return CellGeometry.of(planner.scene(Layout.of({}, None, MAX_OPENING)).model, planner.options)
+
+
+def check_room(planner: MotionPlanner, suggest: bool = True) -> None:
+    """The occupancy rule (`hrc_drake.motion.occupancy`) on the planner's cell: CellModelError
+    naming the nearest move without room, the layout value to change, and with `suggest` a
+    nearby layout that passes `check_reach`."""
+    breaches = check_occupancy(cell_geometry(planner))
+    if breaches:
+        hint = _layout_hint(planner) if suggest else ""
+        raise _crowded(planner, breaches, hint)
+
+
 def check_reach(planner: MotionPlanner, suggest: bool = True) -> None:
-    """Check, before any simulation, that the UR3 reaches every grasp: each part in its tray home
-    and at every placement the spec allows (pre-grasp and grasp, with the robot's limits and
+    """Check, before any simulation, that every move of the spec has room among the parts that
+    may be in place (`check_room`), and that the UR3 reaches every grasp (`check_grasps`).
+    CellModelError naming the slot or part and the layout value to change, and with `suggest`
+    a nearby layout that passed this check (`hrc_drake.motion.reach_search`)."""
+    check_room(planner, suggest)
+    check_grasps(planner, suggest)
+
+
+def check_grasps(planner: MotionPlanner, suggest: bool = True) -> None:
+    """Check that the UR3 reaches every grasp in the empty cell: each part in its tray home and
+    at every placement the spec allows (pre-grasp and grasp, with the robot's limits and
     clearance). CellModelError naming the slot or part and the layout value to change, and with
-    `suggest` a nearby layout that passed this check (`hrc_drake.motion.reach_search`)."""
+    `suggest` a nearby layout that passed `check_reach`."""
     frames, opts = planner.frames, planner.options
     empty = planner.scene(Layout.of({}, None, MAX_OPENING))
     targets = _reach_targets(frames)
@@ -119,6 +155,24 @@ def _unreachable(
     )
 
 
+def _crowded(planner: MotionPlanner, breaches: list[Crowded], hint: str) -> CellModelError:
+    """The occupancy rule's error: the nearest move without room (among the seats, if any is:
+    a larger pitch gives room there wherever the plate stands), how many more, and the layout
+    value to change (with its value now), then `hint`."""
+    frames = planner.frames
+    seats = [b for b in breaches if b.among_seats]
+    first = (seats or breaches)[0]
+    if seats:
+        knob = f"cell.slot_pitch (now {frames.design.layout.slot_pitch})"
+    else:
+        knob = f"cell.tray_position (now {[round(float(x), 3) for x in frames.tray.translation()]})"
+    more = f" (and {len(breaches) - 1} more such moves)" if len(breaches) > 1 else ""
+    return CellModelError(
+        f"the cell is too tight: {first.describe(frames.spec)}{more}. Give the parts room: "
+        f"change {knob}{hint}"
+    )
+
+
 def _layout_hint(planner: MotionPlanner) -> str:
     """A layout near the planner's that passed `check_reach`, as a hint; or say none did."""
     from hrc_drake.motion.reach_search import suggest_layout
@@ -130,7 +184,21 @@ def _layout_hint(planner: MotionPlanner) -> str:
             return False
         return True
 
-    found = suggest_layout(planner.frames.design, reaches)
+    def fits(design: CellDesign) -> str | None:
+        try:
+            model = SceneModel(load_cell_frames(design), None)
+        except CellModelError:
+            return "plate_position"
+        breaches = check_occupancy(CellGeometry.of(model, planner.options))
+        if any(b.among_seats for b in breaches):
+            return "slot_pitch"
+        return "tray_position" if breaches else None
+
+    found = suggest_layout(planner.frames.design, reaches, fits)
     if found is None:
-        return "; no layout near this one passed the reach check: move the plate or tray closer"
+        return (
+            "; no layout near this one passed the reach check (the plate moved up to 15 cm "
+            "along x, its slots up to 3 cm closer or further apart, the tray anywhere on the "
+            "table, turned or not): move the plate or tray closer, or split the assembly"
+        )
     return f"; the reach check passes with {found.as_yaml()} (the spec's cell: section)"

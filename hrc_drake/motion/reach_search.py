@@ -1,14 +1,18 @@
-"""A layout the UR3 reaches, to suggest when it cannot reach the one given.
+"""A layout the UR3 reaches with room for every move, to suggest when the one given fails.
 
-`check_reach` (`hrc_drake.motion.reach_check`) fails on a layout whose tray or plate is too far.
-Guessing the fix (a smaller `slot_pitch`, a tray position found by trial) is not a hint: here
-candidate layouts near the given one are generated, screened on plain geometry (every target
+`check_reach` (`hrc_drake.motion.reach_check`) fails on a layout whose tray or plate is too far,
+or whose parts stand too close for the gripper (the occupancy rule,
+`hrc_drake.motion.occupancy`). Guessing the fix (a smaller `slot_pitch`, a tray position found
+by trial) is not a hint: here candidate layouts near the given one are generated — the plate
+moved along the robot's x and its slots closer together or further apart, the tray anywhere on
+the table, turned as given or a quarter turn more — screened on plain geometry (every target
 within the UR3's reach of its base axis, the tray and the plate apart, on the table and clear of
-the robot's base) and then checked with the reach check itself, nearest first, until one passes.
-Only a layout that passed is suggested.
+the robot's base), then by the occupancy rule (`fits`), then checked with the reach check
+itself, nearest first, until one passes. Only a layout that passed is suggested.
 
-The caller passes `reaches(design) -> bool` (the reach check on a design), so this module does
-not import the planner.
+The caller passes `reaches(design) -> bool` (the reach check on a design) and
+`fits(design) -> str | None` (the occupancy rule: None, or the layout key whose change gives
+room), so this module does not import the planner.
 """
 
 from __future__ import annotations
@@ -35,8 +39,16 @@ GAP = 0.015  # between the tray and the plate (the default `tray_gap`)
 TABLE_HALF = 0.5  # the table is 1 m x 1 m (models/cell/table.sdf) centred at TABLE_POSITION
 # Reach checks tried at most (each builds a planner, about 0.4 s).
 BUDGET = 12
+# Occupancy screens tried at most (each reads a cell's geometry, about 0.35 s).
+FIT_BUDGET = 40
+# Plate moves and slot pitch changes tried, each way: 6 steps of 2.5 cm and of 5 mm.
+STEPS = 6
+X_STEP, PITCH_STEP = 0.025, 0.005
+# A tray turned a quarter turn from the given one ranks as if moved this far [m].
+TURN_COST = 0.1
 
 Reaches = Callable[[CellDesign], bool]
+Fits = Callable[[CellDesign], "str | None"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -126,27 +138,43 @@ def plausible(design: CellDesign, tray_position=None) -> bool:
     )
 
 
-def _tray_positions(design: CellDesign) -> list[list[float]]:
-    """Tray positions on a 2.5 cm grid over the table, nearest to the current one first."""
+def _tray_options(design: CellDesign) -> list[tuple[float, list[float]]]:
+    """(tray_yaw_deg, tray position) on a 2.5 cm grid over the table, the tray as given and
+    turned a quarter turn, nearest to the current one first, keeping only those whose homes
+    are all within reach (the rest of the screen is `plausible`'s)."""
     here = design.X_W_tray().translation()
     z = float(here[2])
     grid = np.arange(-0.5, 0.5001, 0.025)
-    points = [
-        [round(float(TABLE_POSITION[0] + x), 3), round(float(y), 3), z]
-        for x, y in itertools.product(grid, grid)
-    ]
-    return sorted(points, key=lambda p: (math.hypot(p[0] - here[0], p[1] - here[1]), p))
+    xy = np.array([[TABLE_POSITION[0] + x, y] for x, y in itertools.product(grid, grid)])
+    homes, _size = design.tray()
+    given = design.layout.tray_yaw_deg
+    options = []
+    for yaw in (given, given + 90.0 if given < 0 else given - 90.0):
+        turn = math.radians(design.layout.plate_yaw_deg + yaw)
+        c, s = math.cos(turn), math.sin(turn)
+        offsets = np.array([[c * h.x - s * h.y, s * h.x + c * h.y] for h in homes])
+        reach = np.linalg.norm(xy[:, None, :] + offsets[None], axis=2)
+        ok = np.all((reach >= NEAR) & (reach <= REACH), axis=1)
+        cost = np.hypot(xy[:, 0] - here[0], xy[:, 1] - here[1]) + (TURN_COST if yaw != given else 0)
+        for k in np.flatnonzero(ok):
+            position = [round(float(xy[k, 0]), 3), round(float(xy[k, 1]), 3), z]
+            options.append((float(cost[k]), round(yaw, 6), position))
+    return [(yaw, position) for _cost, yaw, position in sorted(options)]
 
 
 def _plate_candidates(layout: CellLayout) -> list[CellLayout]:
-    """The plate moved toward the robot (2.5 cm steps) and/or its slots closer (5 mm steps),
-    smallest change first."""
+    """The plate moved along the robot's x (2.5 cm steps) and/or its slots closer together or
+    further apart (5 mm steps), smallest change first."""
     x0, pitch0 = layout.plate_position[0], layout.slot_pitch
-    xs = [x0 - 0.025 * k for k in range(0, 7)]
-    pitches = [round(pitch0 - 0.005 * k, 3) for k in range(0, 7) if pitch0 - 0.005 * k >= 0.05]
+    xs = [x0 + X_STEP * k for k in range(-STEPS, STEPS + 1)]
+    pitches = [
+        round(pitch0 + PITCH_STEP * k, 3)
+        for k in range(-STEPS, STEPS + 1)
+        if 0.05 <= pitch0 + PITCH_STEP * k <= 0.3
+    ]
     pairs = sorted(
         itertools.product(xs, pitches),
-        key=lambda xp: (abs(xp[0] - x0) / 0.025 + abs(xp[1] - pitch0) / 0.005, -xp[1]),
+        key=lambda xp: (abs(xp[0] - x0) / X_STEP + abs(xp[1] - pitch0) / PITCH_STEP, -xp[1]),
     )
     out = []
     for x, pitch in pairs:
@@ -156,34 +184,58 @@ def _plate_candidates(layout: CellLayout) -> list[CellLayout]:
 
 
 def _with_tray(design: CellDesign) -> CellDesign | None:
-    """`design` as is if it passes the screen, else with the nearest tray position that does."""
+    """`design` as is if it passes the screen, else with the nearest tray position (and turn)
+    that does."""
     if plausible(design):
         return design
     _plate_corners, slots = _plate(design)
     if not _within(slots):
         return None  # no tray position helps a plate out of reach
-    for position in _tray_positions(design):
-        if plausible(design, position):
-            layout = dataclasses.replace(design.layout, tray_position=position)
-            return CellDesign.of(design.spec, layout)
+    for yaw, position in _tray_options(design):
+        layout = dataclasses.replace(design.layout, tray_yaw_deg=yaw, tray_position=position)
+        moved = CellDesign.of(design.spec, layout)
+        if plausible(moved):
+            return moved
     return None
 
 
 def _changes(before: CellLayout, after: CellLayout) -> dict:
-    keys = ("plate_position", "slot_pitch", "tray_position")
+    keys = ("plate_position", "slot_pitch", "tray_position", "tray_yaw_deg")
     return {k: getattr(after, k) for k in keys if getattr(after, k) != getattr(before, k)}
 
 
-def suggest_layout(design: CellDesign, reaches: Reaches, budget: int = BUDGET) -> Suggestion | None:
-    """The nearest layout to `design`'s that passes the screen and then `reaches`, trying the
-    tray alone first, then the plate moved closer and/or its slots closer together (with the
-    tray beside it where that fits, else moved); None if none of `budget` checks passed."""
+def suggest_layout(
+    design: CellDesign,
+    reaches: Reaches,
+    fits: Fits | None = None,
+    budget: int = BUDGET,
+) -> Suggestion | None:
+    """The nearest layout to `design`'s that passes the screen, then `fits` and then
+    `reaches`: the plate moved and/or its slots closer together or further apart (with the
+    tray beside it where that fits, else moved and perhaps turned); None if none of `budget`
+    reach checks (and `FIT_BUDGET` occupancy screens) passed.
+
+    A pitch whose parts crowd each other on the plate (`fits` answers `slot_pitch`) crowds
+    them at any plate position and at any smaller pitch (the slots part faster than the parts
+    grow): such pitches are not tried again."""
     layout = design.layout
-    tried = 0
+    tried = screened = 0
+    tight = 0.0  # pitches up to this one crowd the plate
     for candidate in _plate_candidates(layout):
+        if candidate.slot_pitch <= tight + 1e-9:
+            continue
         found = _with_tray(CellDesign.of(design.spec, candidate))
         if found is None or found.layout.key() == layout.key():
             continue
+        if fits is not None:
+            if screened >= FIT_BUDGET:
+                break
+            screened += 1
+            knob = fits(found)
+            if knob == "slot_pitch":
+                tight = max(tight, candidate.slot_pitch)
+            if knob is not None:
+                continue
         tried += 1
         if reaches(found):
             return Suggestion(found.layout, _changes(layout, found.layout))

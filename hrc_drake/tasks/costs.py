@@ -19,19 +19,35 @@ what it adds to the indicated task's time at most (planned by the motion layer):
 - another part, or undo, a *swap*: pick the committed part, put it back in its tray home and
   release it, then go to the indicated task's pre-grasp, against going there from home.
 
+A table covers the edges and bets a run can take, and leaves out the rest: `run_edges`, every
+task out of a state that is not terminal (a run ends at its terminal state, where the MDP has no
+action: undo from a terminal state is in the state graph, `task_edges`, never in a run), and
+`bet_pairs`, every bet in those states but those on a placement the robot cannot plan (it never
+starts on one). An edge the robot cannot plan (no IK, a collision, the solver fails) is the
+operator's: the Supervisor hands it over at run time (a ``HANDOVER`` prompt) and the operator
+does it by hand, `handover` seconds (the scenario's ``run.handover_time``, as the simulated
+operator takes) plus the bolting; the table prices it so, says ``by: operator`` and why, and
+never refuses the spec. A bet whose indicated task is the operator's is priced as a swap: the
+robot puts its part back, then hands the task over.
+
 A cost table file is JSON (written atomically)::
 
-    {"format": "hrc_drake.costs", "version": 2,
+    {"format": "hrc_drake.costs", "version": 3,
      "spec_name": "flange", "spec_hash": "...", "cell_hash": "...",
      "entries": [{"state": ["F1"], "task": "S23", "seconds": 12.04, "robot": 7.04,
-                  "operator": 5.0, "carry_start": 2.69, "carry_end": 4.4}, ...],  # every edge
+                  "operator": 5.0, "carry_start": 2.69, "carry_end": 4.4},
+                 {"state": ["S23", "F03", "F4"], "task": "undo", "seconds": 10.0,
+                  "by": "operator", "handover": 5.0, "operator": 5.0,
+                  "reason": "task undo: the pre-place pose is unreachable ..."}, ...],
      "bets": [{"state": [], "committed": "F1", "indicated": "F3", "seconds": 0.9}, ...],
      "checksum": sha256 of the canonical JSON of everything above}
 
 ``robot``, ``operator`` and the milestones are optional (``robot`` and ``operator`` add up to
-``seconds``); ``bets`` is optional as a whole, and when given covers every bet of the state graph
-(`bet_pairs`): a table without them serves the ``wait`` interaction only. Version 1 files (no
-milestones, no bets) are refused with the fix: plan a new table. The spec hash ties a table to
+``seconds``; for an operator's edge, ``handover`` and ``operator``); ``bets`` is optional as a
+whole, and when given covers every bet of `bet_pairs`: a table without them serves the
+``wait`` interaction only. Version 2 files (no operator's edges; they may hold undo from
+terminal states, which is ignored) are read as they are; version 1 files (no milestones, no
+bets) are refused with the fix: plan a new table. The spec hash ties a table to
 the assembly it was made for, the cell hash to the robot, cell frames and motion options it was
 planned with (see `hrc_drake.cell.run.costs.cell_hash`). This module imports no Drake: tables are
 computed by `hrc_drake.cell.run.costs` and used here by the MDP, the solver and `evaluate`.
@@ -41,8 +57,8 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterator, Mapping
-from dataclasses import dataclass
+from collections.abc import Collection, Iterator, Mapping
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -64,7 +80,9 @@ from hrc_drake.tasks.mdp import MdpConfig, build_mdp
 from hrc_drake.tasks.tokens import UNDO
 
 FORMAT = "hrc_drake.costs"
-VERSION = 2
+VERSION = 3
+READABLE = (2, 3)  # version 2: the same entries, no operator's edges
+ROBOT, OPERATOR = "robot", "operator"  # who does an edge (`EdgeCost.by`)
 
 Edge = tuple[tuple[str, ...], str]  # (state as its task sequence, task token)
 BetKey = tuple[tuple[str, ...], str, str]  # (state, committed placement, indicated task)
@@ -78,13 +96,39 @@ class CostTableError(ValueError):
 class EdgeCost:
     """Time of one task edge [s], its parts when known (robot motion, operator's work), and for a
     placement its carry milestones when known: seconds from the task's start until the part is
-    lifted out of the tray (`carry_start`) and until it is above its seat (`carry_end`)."""
+    lifted out of the tray (`carry_start`) and until it is above its seat (`carry_end`).
+
+    `by` is who does the task: the robot (`ROBOT`), or the operator by hand (`OPERATOR`) when
+    the robot cannot plan it (`reason` says why); then `seconds` is `handover` (fetching the part
+    and putting it in place, or taking it out) plus `operator` (the bolting), with no robot time
+    and no milestones (`operator_edge`)."""
 
     seconds: float
     robot: float | None = None
     operator: float | None = None
     carry_start: float | None = None
     carry_end: float | None = None
+    by: str = ROBOT
+    handover: float | None = None
+    reason: str = ""
+
+    @property
+    def by_operator(self) -> bool:
+        """Whether the operator does the task by hand (the robot cannot plan it)."""
+        return self.by == OPERATOR
+
+
+def operator_edge(handover: float, bolting: float, reason: str) -> EdgeCost:
+    """The cost of an edge the robot cannot plan (`reason`): the operator does it by hand,
+    `handover` seconds (the scenario's ``run.handover_time``) plus `bolting` (or unbolting)."""
+    handover, bolting = round(float(handover), 4), round(float(bolting), 4)
+    return EdgeCost(
+        round(handover + bolting, 4),
+        operator=bolting,
+        by=OPERATOR,
+        handover=handover,
+        reason=reason,
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -131,8 +175,40 @@ class CostTable:
         check_made_for("cost table", self.spec_name, self.spec_hash, spec, fix, CostTableError)
 
     def missing(self, space: StateSpace) -> list[Edge]:
-        """Task edges of `space` that the table lacks (every edge the MDP can take)."""
-        return [edge for edge in task_edges(space) if edge not in self.entries]
+        """Edges a run of `space` can take (`run_edges`) that the table lacks."""
+        return [edge for edge in run_edges(space) if edge not in self.entries]
+
+    def by_operator(self, state: tuple[str, ...] | list[str], task: str) -> bool:
+        """Whether the table gives `task` from `state` to the operator (the robot cannot plan
+        it); False for an edge it does not hold."""
+        cost = self.entries.get((tuple(state), task))
+        return cost is not None and cost.by_operator
+
+    def operator_edges(self) -> list[Edge]:
+        """The edges the operator does by hand (the robot cannot plan them), in table order."""
+        return [edge for edge, cost in self.entries.items() if cost.by_operator]
+
+    def with_handover_time(self, handover: float) -> CostTable:
+        """This table with its operator's edges priced at `handover` seconds by hand (plus
+        their bolting), as a scenario's ``run.handover_time`` says; itself when none differs."""
+        priced = {
+            edge: operator_edge(handover, cost.operator or 0.0, cost.reason)
+            for edge, cost in self.entries.items()
+            if cost.by_operator and cost.handover != round(float(handover), 4)
+        }
+        if not priced:
+            return self
+        return replace(self, entries={**self.entries, **priced})
+
+    def bet_kind(
+        self, space: StateSpace, state: tuple[str, ...] | list[str], committed: str, indicated: str
+    ) -> Bet:
+        """How a bet plays out (`hrc_drake.tasks.bets.bet_kind`), but that one whose indicated
+        task is the operator's is a swap: the robot puts its part back, whatever the seat."""
+        kind = bet_kind(space, committed, indicated)
+        if kind == Bet.RETARGET and self.by_operator(state, indicated):
+            return Bet.SWAP
+        return kind
 
     def bet_seconds(
         self, state: tuple[str, ...] | list[str], committed: str, indicated: str
@@ -154,6 +230,8 @@ class CostTable:
         if self.bets is None:
             return "this table has none (made by hand, or before they were planned)"
         for (state, task), cost in self.entries.items():
+            if cost.by_operator:
+                continue  # done by hand: the robot never starts on it
             if task != UNDO and (cost.carry_start is None or cost.carry_end is None):
                 return f"the placement {task!r} from {list(state)} has no carry milestones"
         return None
@@ -164,27 +242,45 @@ class CostTable:
         return sum(self.seconds(seq[:i], seq[i]) for i in range(len(seq)))
 
 
-def bet_pairs(space: StateSpace) -> list[BetKey]:
-    """Every bet of the state graph: in each state that offers a placement, each placement the
-    robot may commit to and each other feasible task the operator may indicate."""
+def bet_pairs(space: StateSpace, by_operator: Collection[Edge] = ()) -> list[BetKey]:
+    """Every bet a run can take: in each state that is not terminal, each placement the robot
+    may commit to and each other feasible task the operator may indicate; but no bet on a
+    placement of `by_operator` (edges the robot cannot plan: it never starts on one)."""
+    skip = set(by_operator)
     pairs = []
     for s in range(space.n_states):
         if space.kind[s] == StateKind.TERMINAL:
             continue
         tasks = [t for t, _ in space.tasks(s)]
         state = space.sequence(s)
-        pairs += [(state, c, t) for c in tasks if c != UNDO for t in tasks if t != c]
+        pairs += [
+            (state, c, t)
+            for c in tasks
+            if c != UNDO and (state, c) not in skip
+            for t in tasks
+            if t != c
+        ]
     return pairs
 
 
 def task_edges(space: StateSpace) -> list[Edge]:
     """Every (state, task) edge of the state graph, in state order: placements, then undo.
 
-    Includes undo from terminal states (the graph has a reverse for every edge, and the cell
-    may be asked to take a finished part back), so that a table covers what the motion layer
-    can be asked to do.
+    Includes undo from terminal states (the graph has a reverse for every edge); a run never
+    takes those, and a cost table leaves them out (`run_edges`).
     """
     return [(space.sequence(s), task) for s in range(space.n_states) for task, _ in space.tasks(s)]
+
+
+def run_edges(space: StateSpace) -> list[Edge]:
+    """The edges a run can take, in state order: every task out of a state that is not terminal
+    (a run ends at its terminal state, where the MDP has no action). What a cost table covers."""
+    return [
+        (space.sequence(s), task)
+        for s in range(space.n_states)
+        if space.kind[s] != StateKind.TERMINAL
+        for task, _ in space.tasks(s)
+    ]
 
 
 def operator_seconds(spec: AssemblySpec, state: tuple[str, ...], task: str) -> float:
@@ -250,6 +346,8 @@ def _payload(table: CostTable) -> dict[str, Any]:
             entry["operator"] = cost.operator
         if cost.carry_start is not None and cost.carry_end is not None:
             entry["carry_start"], entry["carry_end"] = cost.carry_start, cost.carry_end
+        if cost.by_operator:
+            entry.update(by=OPERATOR, handover=cost.handover, reason=cost.reason)
         entries.append(entry)
     payload = {
         "format": FORMAT,
@@ -301,7 +399,8 @@ def load_cost_table(path: str | Path, space: StateSpace, cell_hash: str | None =
 
     CostTableError with the fix if the file is missing, corrupted (not JSON, checksum, bad
     entry), of another version or another spec or cell, names a task that is not feasible, or
-    lacks an edge the MDP can take.
+    lacks an edge a run can take (`run_edges`). Entries for other edges of the state graph (undo
+    from a terminal state, in version 2 files) are kept and never used.
     """
     path = Path(path)
     # Never advise writing over a file that is not a cost table: a fresh name instead.
@@ -315,6 +414,7 @@ def load_cost_table(path: str | Path, space: StateSpace, cell_hash: str | None =
         fix=fix,
         error=CostTableError,
         older={1: "without the re-target and swap times"},
+        readable=READABLE,
     )
     try:
         table = CostTable(
@@ -338,11 +438,7 @@ def load_cost_table(path: str | Path, space: StateSpace, cell_hash: str | None =
     problem = first_infeasible(space, table.entries)
     if problem is not None:
         raise CostTableError(f"cost table {path} {problem}; {fix}")
-    missing = [
-        (s, t)
-        for s, t in table.missing(space)
-        if space.state_kind(space.index(s)) != StateKind.TERMINAL
-    ]
+    missing = table.missing(space)
     if missing:
         state, task = missing[0]
         raise CostTableError(
@@ -370,6 +466,14 @@ def _entries(raw: list) -> dict[Edge, EdgeCost]:
         )
         if cost.carry_start is not None and not (cost.carry_end or 0.0) >= cost.carry_start:
             raise ValueError(f"entry {i}: carry_end must follow carry_start")
+        by = e.get("by", ROBOT)
+        if by == OPERATOR:
+            if cost.robot is not None or cost.carry_start is not None:
+                raise ValueError(f"entry {i}: an operator's edge has no robot time or milestones")
+            handover = _number(e.get("handover"), f"entry {i} handover")
+            cost = replace(cost, by=OPERATOR, handover=handover, reason=str(e.get("reason", "")))
+        elif by != ROBOT:
+            raise ValueError(f"entry {i}: by must be {ROBOT!r} or {OPERATOR!r}, got {by!r}")
         entries[key] = cost
     return entries
 
@@ -387,7 +491,7 @@ def _bets(raw: list) -> dict[BetKey, float]:
 def _check_bets(path: Path, space: StateSpace, table: CostTable, fix: str) -> None:
     """CostTableError unless the bets are exactly the state graph's, with carry milestones."""
     assert table.bets is not None
-    wanted = set(bet_pairs(space))
+    wanted = set(bet_pairs(space, table.operator_edges()))
     for state, committed, indicated in table.bets:
         if (state, committed, indicated) not in wanted:
             raise CostTableError(

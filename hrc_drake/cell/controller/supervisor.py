@@ -19,9 +19,10 @@ waits for them there), stop the task with the reason, and the run. A protective 
 `run.indication_timeout` is asked again, and after `run.indication_give_up` the run stops. A
 task with no path while the configuration sensor sees an obstacle waits for it to move or go,
 planning again each time it does, for up to `run.path_timeout`. A task the robot cannot do
-while it is itself sound (a part it dropped and cannot pick again, a path that stays blocked)
-is handed over: the arm holds still, the interface prompts `HANDOVER`, the operator does the
-task by hand and says so, and the robot reads the cell and goes on. Each is recorded as a
+while it is itself sound (a part it dropped and cannot pick again, a path that stays blocked,
+a task it finds no plan for: no IK, a collision, the solver failed) is handed over: the arm
+holds still, the interface prompts `HANDOVER`, the operator does the task by hand and says so,
+and the robot reads the cell and goes on. Each is recorded as a
 `Detection` (what the run reports of the scenario's faults, `hrc_drake.cell.run.fault_report`).
 
 In `anticipate` mode it does not wait at step 3: it starts on the placement its policy commits
@@ -442,7 +443,7 @@ class Supervisor(LeafSystem):
                 hand_over=True,
             )
         if isinstance(result, PlanFailure):
-            raise SupervisorError(f"step {step}: {result}", cause=Cause.PLAN)
+            return self._no_plan(s, result, now)
         plan: Plan = result
         s = resolve(s, Cause.PLAN, now, Recovery.RETRY)  # a path once the obstacle moved
         placement = config.placement(plan.instance)
@@ -482,6 +483,35 @@ class Supervisor(LeafSystem):
         if started.turn.awaiting and plan.task == started.turn.committed:
             return self._anticipation.plan_retargets(started, config)
         return started
+
+    def _no_plan(self, s: SupervisorStatus, failure: PlanFailure, now: float):
+        """No plan for the task (no IK, a collision, the solver failed), no obstacle to wait
+        out: the robot is sound, the task is not its own. Committed before the indication, it
+        drops the commitment and waits for the indication (as in `wait` mode); carrying a
+        part to another seat, it puts the part back in its tray first (then plans the
+        indicated task from there, and hands it over if that fails too); else the task is
+        handed over (`FaultRecovery.hand_over`) and the assembly goes on. A part it cannot put
+        back stops the run."""
+        request = s.ask.request
+        if s.turn.awaiting and not request.held:
+            event = f"{now:.2f}: step {s.step}: cannot start on {request.task} ({failure.reason})"
+            prompt = replace(s.question.prompt, committed="")  # no longer on its way
+            return s.noted(
+                f"{event}; waits for the indication",
+                mode=Mode.ASK,
+                task=None,
+                question=replace(s.question, prompt=prompt),
+                turn=replace(s.turn, committed=None, awaiting=False),
+            )
+        if request.held and request.task != UNDO:
+            event = f"{now:.2f}: {failure}: puts {request.instance} back first"
+            s = s.noted(event, turn=replace(s.turn, returning=True))
+            return self._planning.ask(s, replace(request, task=UNDO), now)
+        if request.held:  # the way back to the tray: the part is in the gripper
+            raise SupervisorError(f"step {s.step}: {failure}", cause=Cause.PLAN)
+        raise SupervisorError(
+            f"step {s.step}: {failure}; the task is handed over", cause=Cause.PLAN, hand_over=True
+        )
 
     def _execute(self, s: SupervisorStatus, cell: Readings, now: float):
         """Follow the plan: check the grasp, prompt for the bolts and wait for them, plan the

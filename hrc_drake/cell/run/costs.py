@@ -13,6 +13,12 @@ backwards, the gripper opened, up again) and a free path from its pre-grasp to t
 task's. `cell_hash(planner)` names the cell a table was planned in, and
 `default_cost_table(space)` computes the table once per (spec, cell) and caches it under the
 user's cache folder. `hrc-drake costs --out FILE` is `hrc_drake.cli.costs`.
+
+Only what a run can take is planned (`run_edges`, `bet_pairs`). An edge the motion layer cannot
+plan is the operator's (`operator_edge`: the scenario's ``run.handover_time`` plus the bolting,
+and the planner's reason), as the Supervisor hands it over at run time; a bet whose indicated
+task is the operator's, or whose own motion cannot be planned, is priced without that motion
+(`unplanned_bet_seconds`). Nothing the robot cannot plan refuses a spec.
 """
 
 from __future__ import annotations
@@ -33,6 +39,7 @@ from hrc_drake.motion.scene import Layout
 from hrc_drake.motion.task_move import resolve_task
 from hrc_drake.motion.trajectory import free_path, retime
 from hrc_drake.resources import models_dir
+from hrc_drake.scenario.schema import RunConfig
 from hrc_drake.tasks.bets import Bet, bet_kind
 from hrc_drake.tasks.costs import (
     BetKey,
@@ -42,9 +49,10 @@ from hrc_drake.tasks.costs import (
     EdgeCost,
     bet_pairs,
     load_cost_table,
+    operator_edge,
     operator_seconds,
+    run_edges,
     save_cost_table,
-    task_edges,
 )
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.tokens import UNDO
@@ -53,10 +61,10 @@ from hrc_drake.tasks.tokens import UNDO
 # generated from the spec's layout and enter the hash through the frames and the layout).
 ROBOT_FILES = ("ur3/ur3.urdf", "rg2/rg2.sdf", "cell/robot.dmd.yaml")
 Progress = Callable[[int, int, float], None]  # (edges done, edges, last plan's seconds)
-
-
-class CostPlanningError(RuntimeError):
-    """A task edge the motion layer could not plan, so no complete cost table."""
+# The seconds a task handed over takes by hand before its bolting: the scenario's default.
+HANDOVER_TIME = RunConfig().handover_time
+# What the motion layer raises for a task it cannot plan (no IK, a collision, the solver).
+NO_PLAN = (PlanningError, UnreachableError, RuntimeError, ValueError)
 
 
 def timing_options(options: MotionOptions | None = None) -> MotionOptions:
@@ -164,25 +172,40 @@ def bet_seconds(
     at_b = pregrasp_b.start + pregrasp_b.duration
     empty = Layout.of(move.before, None, opening)
     between = _free_seconds(planner, empty, a.positions(at_a), b.positions(at_b))
-    # Lowered back (the lift run backwards), released, up again: at the committed pre-grasp.
-    put_back = 2.0 * _motion(a, LIFT).duration + planner.options.gripper_time
-    return round(max(0.0, carry_milestones(a)[0] + put_back + between - at_b), 4)
+    return round(max(0.0, carry_milestones(a)[0] + _put_back(planner, a) + between - at_b), 4)
 
 
-def _planning_error(what: str, err: Exception) -> CostPlanningError:
-    return CostPlanningError(
-        f"cannot plan {what}: {err}; a cost table needs every task edge and bet (check the cell "
-        "layout or the motion options)"
-    )
+def _put_back(planner: MotionPlanner, plan: Plan) -> float:
+    """Seconds to put a lifted part back where it was picked: lowered (the lift run backwards),
+    released, up again."""
+    return 2.0 * _motion(plan, LIFT).duration + planner.options.gripper_time
 
 
-def _edge_cost(planner: MotionPlanner, space: StateSpace, state, task: str) -> EdgeCost:
+def unplanned_bet_seconds(
+    planner: MotionPlanner, space: StateSpace, state: tuple[str, ...], committed: str, kind: Bet
+) -> float:
+    """The seconds of a bet priced without a motion the robot cannot plan (its indicated task,
+    or the move between the two): the committed part is put back in its tray home, from its
+    lift (a swap: `kind` SWAP; the interaction model adds the way back along the carry) or from
+    above the committed seat (a re-target: the carry back and the put-back), and the indicated
+    task then starts as from home (or is handed over)."""
+    a = _plan_edge(planner, space, state, committed)
+    start, end = carry_milestones(a)
+    back = start + _put_back(planner, a)
+    return round(back if kind == Bet.SWAP else back + 2.0 * (end - start), 4)
+
+
+def _edge_cost(
+    planner: MotionPlanner, space: StateSpace, state, task: str, handover: float
+) -> EdgeCost:
+    """The cost of an edge: the robot's plan plus the bolting, or, when the robot cannot plan
+    it, the operator's by hand (`operator_edge`, with the planner's reason)."""
+    operator = operator_seconds(space.spec, tuple(state), task)
     try:
         plan = _plan_edge(planner, space, tuple(state), task)
-    except (PlanningError, UnreachableError, RuntimeError, ValueError) as err:
-        raise _planning_error(f"task {task!r} from state {list(state)}", err) from err
+    except NO_PLAN as err:
+        return operator_edge(handover, operator, str(err))
     robot = round(_robot_seconds(planner, plan, task), 4)
-    operator = operator_seconds(space.spec, tuple(state), task)
     start, end = (None, None) if task == UNDO else carry_milestones(plan)
     return EdgeCost(round(robot + operator, 4), robot, operator, start, end)
 
@@ -192,32 +215,41 @@ def compute_cost_table(
     planner: MotionPlanner | None = None,
     progress: Progress | None = None,
     edges: Iterable[Edge] | None = None,
+    handover_time: float = HANDOVER_TIME,
 ) -> CostTable:
-    """Plan every task edge of `space` and every bet (`bet_pairs`), and return the cost table;
-    with `edges`, only those edges and no bets.
+    """Plan every edge a run of `space` can take (`run_edges`) and every bet (`bet_pairs`), and
+    return the cost table; with `edges`, only those edges and no bets.
 
     Seconds = robot time (the plan's duration without bolting holds) + the operator's
-    (un)bolting time from the spec. First the reach check (`check_reach`): CellModelError naming
-    the part or slot the UR3 cannot reach and a layout that it can, the same error `simulate`
-    gives. CostPlanningError naming the edge or bet if one cannot be planned.
+    (un)bolting time from the spec. An edge the robot cannot plan is the operator's:
+    `handover_time` seconds by hand (the scenario's ``run.handover_time``) plus the bolting,
+    with the planner's reason. A bet on it is left out (the robot never starts on it); a bet
+    whose indicated task is the operator's, or whose own motion fails, is priced as
+    `unplanned_bet_seconds`. First the reach check (`check_reach`): CellModelError naming the
+    part or slot the UR3 cannot reach and a layout that it can, the same error `simulate` gives.
     """
     planner = planner or timing_planner(space)
     check_reach(planner)
-    todo = list(task_edges(space) if edges is None else edges)
+    todo = list(run_edges(space) if edges is None else edges)
     pairs: list[BetKey] = bet_pairs(space) if edges is None else []
     total = len(todo) + len(pairs)
     entries: dict[Edge, EdgeCost] = {}
     for i, (state, task) in enumerate(todo):
-        entries[tuple(state), task] = cost = _edge_cost(planner, space, state, task)
+        entries[tuple(state), task] = cost = _edge_cost(planner, space, state, task, handover_time)
         if progress:
             progress(i + 1, total, cost.seconds)
     bets: dict[BetKey, float] = {}
     for i, (state, committed, indicated) in enumerate(pairs):
-        try:
-            seconds = bet_seconds(planner, space, state, committed, indicated)
-        except (PlanningError, UnreachableError, RuntimeError, ValueError) as err:
-            what = f"the bet on {committed!r} when {indicated!r} is indicated in {list(state)}"
-            raise _planning_error(what, err) from err
+        if entries[state, committed].by_operator:
+            continue  # the robot never starts on a task it cannot plan (`bet_pairs`)
+        kind = bet_kind(space, committed, indicated)
+        if entries[state, indicated].by_operator:
+            seconds = unplanned_bet_seconds(planner, space, state, committed, Bet.SWAP)
+        else:
+            try:
+                seconds = bet_seconds(planner, space, state, committed, indicated)
+            except NO_PLAN:
+                seconds = unplanned_bet_seconds(planner, space, state, committed, kind)
         bets[state, committed, indicated] = seconds
         if progress:
             progress(len(todo) + i + 1, total, seconds)
@@ -242,7 +274,8 @@ def default_cost_table(
     progress: Progress | None = None,
     folder: Path | None = None,
 ) -> CostTable:
-    """The cost table of `space` in its cell, computed once and cached.
+    """The cost table of `space` in its cell, computed once and cached; its operator's edges
+    are priced at the default `HANDOVER_TIME` (a scenario's own: `CostTable.with_handover_time`).
 
     The file is ``costs-<spechash>-<cellhash>.json`` under `folder` (default `cache_dir()`),
     written atomically; an unreadable cached file is recomputed and replaced.
@@ -260,11 +293,12 @@ def default_cost_table(
 
 
 __all__ = [
-    "CostPlanningError",
+    "HANDOVER_TIME",
     "cache_dir",
     "cell_hash",
     "compute_cost_table",
     "default_cost_table",
     "timing_options",
     "timing_planner",
+    "unplanned_bet_seconds",
 ]

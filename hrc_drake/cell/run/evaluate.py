@@ -260,6 +260,7 @@ def decider_policy(scenario, space: StateSpace, progress=None) -> DeciderPolicy:
         from hrc_drake.cell.run.costs import default_cost_table
 
         costs = default_cost_table(space, progress=progress)
+    costs = costs.with_handover_time(scenario.run.handover_time)  # as its operator takes it
     interaction = scenario.interaction_model()
     decider = make_decider(config.name, space, costs, config.seed, interaction)
     return DeciderPolicy(decider, space)

@@ -35,7 +35,8 @@ from hrc_drake.motion.service import (
 from hrc_drake.scenario.schema import Scenario
 from hrc_drake.tasks.decide import Operator
 from hrc_drake.tasks.graph import StateSpace, generate_states
-from hrc_drake.tasks.policy import Policy, load_policy
+from hrc_drake.tasks.policy import Policy
+from hrc_drake.tasks.policy_check import load_runnable_policy
 from hrc_drake.tasks.solve import exact_policy
 from hrc_drake.tasks.spec import load_spec
 
@@ -55,9 +56,10 @@ def shared_planner(options: MotionOptions, design: CellDesign | None = None) -> 
 
 
 def scenario_policy(scenario: Scenario, space) -> Policy:
-    """The scenario's policy file, or the exact minimum-effort policy."""
+    """The scenario's policy file (refused if it never finishes from some state:
+    `load_runnable_policy`), or the exact minimum-effort policy."""
     if scenario.policy:
-        return load_policy(scenario.policy, space)
+        return load_runnable_policy(scenario.policy, space)
     return exact_policy(space)
 
 
