@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
+from hrc_drake.cli import build_parser, main
 from hrc_drake.cli import evaluate as evaluate_command
-from hrc_drake.cli import main
 from hrc_drake.paths import check_output_path, fresh_name
 from hrc_drake.resources import models_dir
 from hrc_drake.scenario.load import load_scenario
@@ -55,6 +55,11 @@ def assert_one_line(code, out, err, *words):
         ("{safety: {slow_band: -1}}", "safety.slow_band"),
         ("{station: {rg2: {grip_tolerance: 0}}}", "station.rg2.grip_tolerance"),
         ("{station: {camera: {fov_y: 180}}}", "station.camera.fov_y"),
+        # Issue 51: speeds the UR3 cannot reach ran (50 m/s for 0.5).
+        ("{motion: {tcp_speed_limit: 50}}", "motion.tcp_speed_limit"),
+        ("{safety: {contact_speed: 9}}", "safety.contact_speed"),
+        ("{safety: {moving_speed: 7}}", "safety.moving_speed"),
+        ("{assembly: four-slott}", "assembly"),
     ],
 )
 def test_bad_scenario_numbers_are_one_line_naming_scenario_text(capsys, tmp_path, text, key):
@@ -299,3 +304,82 @@ def test_scenario_text_given_twice_merges_both_in_order(capsys):
     # A mistake in either text is still one line naming the flag and the key.
     bad = [*argv, "--scenario-text", "{run: {max_steps: 0}}", "--lean"]
     assert_one_line(*refused(capsys, *bad), "--scenario-text", "run.max_steps")
+
+
+# --- Issue 51: what the second new user found ---------------------------------------------------
+
+
+def test_a_tcp_speed_beyond_the_ur3_names_key_value_range_and_fix(capsys):
+    """Before: `motion: {tcp_speed_limit: 50}` (50 m/s) ran."""
+    argv = ["simulate", "--scenario-text", "{motion: {tcp_speed_limit: 50}}", "--lean"]
+    code, out, err = refused(capsys, *argv)
+    assert_one_line(code, out, err, "motion.tcp_speed_limit", "50.0 m/s", "(0, 7.5] m/s", "0.25")
+    # The bound itself runs, and 0 still means "separation alone" for the contact speed.
+    both = "{motion: {tcp_speed_limit: 7.5}, safety: {contact_speed: 0}}"
+    assert load_scenario("row1-optimal", both).motion.tcp_speed_limit == 7.5
+
+
+def test_the_tcp_speed_bound_is_what_the_ur3_joints_reach():
+    """`UR3_TCP_SPEED_MAX` recomputed from the published figures it cites: UR's DH parameters,
+    the joints' speed limits and the RG2's TCP 0.216 m past the flange. With every joint at
+    its limit, the TCP at the fastest configuration moves 7.49 m/s: the bound is above it (no
+    speed the arm reaches is refused) and within 1 % of it (50 m/s is refused)."""
+    import itertools
+
+    import numpy as np
+
+    from hrc_drake.robot_names import UR3_VELOCITY_LIMITS
+    from hrc_drake.scenario.check import UR3_TCP_SPEED_MAX
+
+    d = [0.1519, 0, 0, 0.11235, 0.08535, 0.0819]
+    a = [0, -0.24365, -0.21325, 0, 0, 0]
+    alpha = [np.pi / 2, 0, 0, np.pi / 2, -np.pi / 2, 0]
+
+    def tcp_speed(q):
+        frames, t = [np.eye(4)], np.eye(4)
+        for i in range(6):
+            ct, st, ca, sa = np.cos(q[i]), np.sin(q[i]), np.cos(alpha[i]), np.sin(alpha[i])
+            t = t @ np.array(
+                [[ct, -st * ca, st * sa, a[i] * ct], [st, ct * ca, -ct * sa, a[i] * st],
+                 [0, sa, ca, d[i]], [0, 0, 0, 1]]
+            )  # fmt: skip
+            frames.append(t)
+        tcp = (frames[-1] @ [0, 0, 0.216, 1])[:3]
+        jac = np.array([np.cross(f[:3, 2], tcp - f[:3, 3]) for f in frames[:6]]).T
+        corners = np.array(list(itertools.product([-1, 1], repeat=6))) * UR3_VELOCITY_LIMITS
+        return np.linalg.norm(corners @ jac.T, axis=1).max()
+
+    fastest = [-0.3257, 0.2978, 6.3567, -0.3256, 1.3362, -1.8935]  # found by optimisation
+    assert 0.99 * UR3_TCP_SPEED_MAX < tcp_speed(fastest) <= UR3_TCP_SPEED_MAX
+    rng = np.random.default_rng(0)
+    assert max(tcp_speed(q) for q in rng.uniform(-np.pi, np.pi, (300, 6))) <= UR3_TCP_SPEED_MAX
+
+
+def test_an_assembly_name_works_wherever_a_scenario_name_does(capsys):
+    """Before: `--assembly four-slot` was "file not found" where `assembly: four-slot` works."""
+    from hrc_drake.cli.app import assembly_argument
+    from hrc_drake.scenario.schema import Scenario
+
+    named = Scenario(assembly="four-slot").assembly_path
+    assert assembly_argument("four-slot") == named == Path(FOUR_SLOT)
+    assert assembly_argument(FOUR_SLOT) == Path(FOUR_SLOT)  # a path stays a path
+    code, out, _ = refused(capsys, "states", "--assembly", "four-slot", "--json")
+    assert code == 0 and len(json.loads(out)) == 44
+    # Every command that takes --assembly resolves it the same way.
+    (commands,) = [a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)]
+    for name, sub in commands.choices.items():
+        flags = {o: a for a in sub._actions for o in a.option_strings}
+        if "--assembly" in flags:
+            assert flags["--assembly"].type is assembly_argument, name
+
+
+def test_an_unknown_assembly_name_lists_the_known_ones(capsys):
+    code, out, err = refused(capsys, "states", "--assembly", "four-slott")
+    assert_one_line(code, out, err, "--assembly", "'four-slott' not found", "four-slot, ")
+    code, out, err = refused(capsys, "simulate", "--scenario-text", "{assembly: four-slott}")
+    assert_one_line(code, out, err, "assembly: 'four-slott' not found", "flange, four-slot")
+
+
+def test_a_param_that_is_not_a_finite_number_is_refused(capsys):
+    argv = ["evaluate", "--decider", "exact", "--operator-model", "slow", "--param", "growth=nan"]
+    assert_one_line(*refused(capsys, *argv), "--param growth=nan", "finite number")

@@ -198,7 +198,7 @@ def test_a_failing_cell_run_is_listed_and_replays_alone(tmp_path, toy_costs, cap
     assert [f["run"] for f in report["failures"]] == [0, 1]
     failure = report["failures"][1]
     assert failure["seed"] == run_seed(SEED, 1)
-    assert failure["operator_model"] == "mistake-prone" and failure["params"] == {"p": "0.5"}
+    assert failure["operator_model"] == "mistake-prone" and failure["params"] == {"p": 0.5}
     assert failure["stop"] == "no terminal state within 10.0 s of simulated time"
     assert len(failure["states"]) >= 2 and failure["collisions"] == 0
     command = shlex.split(failure["replay"])

@@ -22,4 +22,12 @@ if [ ! -x .venv/bin/hrc-drake ] || [ ! -f "$stamp" ] || [ pyproject.toml -nt "$s
   touch "$stamp"
 fi
 mkdir -p out
-.venv/bin/hrc-drake simulate --scenario "$scenario" --record "out/$scenario.html" "$@"
+# A lean run (0.5 s holds) gets its own recording, so that it does not replace the full run's.
+record="out/$scenario.html"
+for arg in "$@"; do
+  if [ "$arg" = "--lean" ]; then
+    record="out/$scenario-lean.html"
+  fi
+done
+echo "demo: recording to $record" >&2
+.venv/bin/hrc-drake simulate --scenario "$scenario" --record "$record" "$@"

@@ -1,7 +1,8 @@
 """`hrc-drake`: the parser and `main` (the commands are in the modules beside this one).
 
-Every command takes ``--assembly PATH`` (default: the flange case) and ``--seed``; the ones that
-print data take ``--json``.
+Every command takes ``--assembly PATH`` or ``--assembly NAME`` (a spec under models/assemblies/,
+as a scenario's ``assembly:``; default: the flange case) and ``--seed``; the ones that print data
+take ``--json``; ``hrc-drake --version`` prints the package's version.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from hrc_drake.cli.tasks import (
 )
 from hrc_drake.hri.operator import OperatorScriptError
 from hrc_drake.paths import UsageError
-from hrc_drake.scenario.schema import ScenarioError
+from hrc_drake.scenario.schema import ScenarioError, assembly_file
 from hrc_drake.tasks.assembly import SpecError
 from hrc_drake.tasks.costs import CostTableError
 from hrc_drake.tasks.decide import (
@@ -48,6 +49,25 @@ EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130  # the shell's status for a command ended by SIGINT (128 + 2)
 
 DESCRIPTION = "`hrc-drake`: the command line of the task layer and the cell."
+
+
+def package_version() -> str:
+    """The installed version of the `hrc_drake` distribution (pyproject.toml's `version`)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("hrc_drake")
+    except PackageNotFoundError:  # run from a checkout that was never installed
+        return "unknown (not installed: pip install -e .)"
+
+
+def assembly_argument(text: str) -> Path:
+    """`--assembly`: a path to a spec, or the name of one under models/assemblies/, resolved as
+    a scenario's `assembly:` is (`assembly_file`); an unknown name lists the known ones."""
+    try:
+        return assembly_file(text)
+    except SpecError as err:
+        raise argparse.ArgumentTypeError(str(err).removeprefix("assembly ")) from None
 
 
 def _number(text: str) -> float:
@@ -188,6 +208,7 @@ def cmd_drivers(args) -> int:
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of `hrc-drake`."""
     parser = argparse.ArgumentParser(prog="hrc-drake", description=DESCRIPTION)
+    parser.add_argument("--version", action="version", version=f"hrc-drake {package_version()}")
     common = _common_flags()
     sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
 
@@ -211,9 +232,10 @@ def _common_flags() -> argparse.ArgumentParser:
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument(
         "--assembly",
-        type=Path,
+        type=assembly_argument,
         default=None,
-        help="assembly spec (default: models/assemblies/flange.yaml)",
+        help="assembly spec: a path, or a name under models/assemblies/ such as four-slot "
+        "(default: flange)",
     )
     common.add_argument("--seed", type=seed, default=0, help="random seed, a whole number >= 0")
     common.add_argument("--json", action="store_true", help="print data as JSON")

@@ -11,6 +11,7 @@ which do not import each other the other way.
 from __future__ import annotations
 
 import json
+import math
 import os
 import sys
 from pathlib import Path
@@ -83,15 +84,33 @@ def local_workers(workers: int | None, runs: int) -> int | None:
     return capped
 
 
-def parse_params(items: list[str] | None) -> dict[str, str]:
-    """``["p=0.3", "order=S23"]`` -> ``{"p": "0.3", "order": "S23"}``; UsageError otherwise."""
+def parse_params(items: list[str] | None) -> dict[str, int | float | bool | str]:
+    """``["p=0.3", "n=2", "order=S23"]`` -> ``{"p": 0.3, "n": 2, "order": "S23"}``: each value
+    typed as a scenario's `operator.params` holds it (the report, its JSON and the replay
+    commands show numbers as numbers); UsageError for an item that is not KEY=VALUE."""
     params = {}
     for item in items or []:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
             raise UsageError(f"--param {item!r}: write KEY=VALUE, e.g. --param p=0.3")
-        params[key.strip()] = value.strip()
+        params[key.strip()] = param_value(key.strip(), value.strip())
     return params
+
+
+def param_value(key: str, text: str) -> int | float | bool | str:
+    """One `--param` value: a whole number, a number, `true`/`false`, else the text (a task
+    token such as `S23`). UsageError for NaN or infinity, which no model parameter can use."""
+    if text.lower() in ("true", "false"):
+        return text.lower() == "true"
+    for kind in (int, float):
+        try:
+            number = kind(text)
+        except ValueError:
+            continue
+        if not math.isfinite(number):
+            raise UsageError(f"--param {key}={text}: give a finite number")
+        return number
+    return text
 
 
 def interaction_from_flags(args) -> Interaction:
@@ -368,6 +387,9 @@ def _report(args, report: dict, plot: Path | None) -> int:
     if plot is not None and report["completed"]:
         plot_times(report, plot)
     report.pop("times")
+    if plot is not None and not report["completed"]:
+        # The histogram is of completed runs' times: an empty one would look like a result.
+        print(_nothing_to_plot(report, plot), file=sys.stderr)
     if args.json:
         json.dump(report, sys.stdout, indent=1)
         sys.stdout.write("\n")
@@ -389,16 +411,81 @@ def _report(args, report: dict, plot: Path | None) -> int:
     return 0
 
 
+# The unit of each figure of the text report (the JSON's keys carry none: docs/evaluation.md,
+# "The report"); a key not listed (a name, a mode, a flag, a count of workers) is printed as it
+# is.
+REPORT_UNITS = {
+    "runs": "runs",
+    "completed": "runs",
+    "completion_rate": "(fraction of the runs)",
+    "capped": "runs (ended by the task cap)",
+    "mean_time": "s per completed run",
+    "p95_time": "s",
+    "worst_time": "s",
+    "mean_tasks": "tasks per run",
+    "mean_undos": "undos per run",
+    "mean_deviations": "deviations per run",
+    "mean_idle": "s per task boundary",
+    "p95_idle": "s",
+    "plan_ready_rate": "(fraction of the task boundaries)",
+    "commit_rate": "(fraction of the task boundaries)",
+    "mean_retargets": "re-targets per run",
+    "mean_swaps": "swaps per run",
+    "mean_indication_delay": "s per run",
+    "mean_indication_wait": "s per run",
+    "collisions": "robot collisions",
+    "handovers": "tasks done by the operator",
+    "runs_with_handovers": "runs",
+    "wall_mean_idle": "s of wall time per task boundary",
+    "runs_requested": "runs",
+    "wall_seconds": "s of wall time",
+    "wall_runs_per_second": "runs per s of wall time",
+}
+
+
+def report_line(key: str, value) -> str:
+    """One `key value unit` line of the text report: the parameters as `p=0.3`, the delay as
+    its distribution, a figure with its unit (`REPORT_UNITS`), none for a figure no run gave."""
+    if key == "params":
+        text = " ".join(f"{k}={v}" for k, v in value.items()) or "none"
+    elif key == "indication_delay" and isinstance(value, dict):
+        text = ", ".join(
+            f"{k} {v}{' s' if k in ('median', 'mean') else ''}" for k, v in value.items()
+        )
+    elif value is None:
+        text = "n/a"
+    elif key in REPORT_UNITS and not isinstance(value, bool):
+        text = f"{value} {REPORT_UNITS[key]}"
+    else:
+        text = str(value)
+    return f"{key:22} {text}"
+
+
+def _nothing_to_plot(report: dict, plot: Path) -> str:
+    """The one line that says `--plot` wrote nothing: why, and what to do."""
+    kept = " (the file there is an earlier one, left as it was)" if plot.exists() else ""
+    fix = (
+        "see the failures and their replay commands; a larger run.max_sim_time or fewer "
+        "mistakes let runs finish"
+        if report.get("failures")
+        else "run more runs"
+    )
+    return (
+        f"hrc-drake evaluate: --plot {plot}: nothing to plot, not written{kept}: none of the "
+        f"{report['runs']} run(s) completed (the histogram shows completed runs' times); {fix}"
+    )
+
+
 def print_report(report: dict) -> None:
-    """The report as `key value` lines; the failing cell runs (`failures`) one by one, each
-    with why it stopped and the command that replays it."""
+    """The report as `key value unit` lines (`report_line`); the failing cell runs
+    (`failures`) one by one, each with why it stopped and the command that replays it."""
     for key, value in report.items():
         if key != "failures":
-            print(f"{key:22} {value}")
+            print(report_line(key, value))
     failing = report.get("failures")
     if failing is None:
         return
-    print(f"{'failures':22} {len(failing)}")
+    print(f"{'failures':22} {len(failing)} runs")
     for f in failing:
         params = " ".join(f"{k}={v}" for k, v in f["params"].items())
         who = f"{f['operator_model']}{' ' + params if params else ''}, seed {f['seed']}"

@@ -10,7 +10,7 @@ from pathlib import Path
 from hrc_drake.cell.scenario import DEFAULT_SCENARIO, LEAN, load_cell_scenario
 from hrc_drake.cli.evaluate import interaction_from_flags, separation_from_flags
 from hrc_drake.scenario.load import with_operator_script
-from hrc_drake.scenario.schema import Scenario
+from hrc_drake.scenario.schema import OperatorConfig, Scenario
 
 
 def scenario_from_args(args) -> Scenario:
@@ -20,23 +20,50 @@ def scenario_from_args(args) -> Scenario:
     (`--interaction`, `--interface`, `--separation`)."""
     overrides = [t for t in (LEAN if args.lean else None, *(args.scenario_text or ())) if t]
     scenario = load_cell_scenario(_scenario_name(args), overrides)
+    if args.scenario_text and scenario.operator != _file_operator(args):
+        # The file's description told of its own operator (a replayed evaluation run's is the
+        # population's): say who will run instead.
+        scenario.description = f"{describe_operator(scenario.operator)} (--scenario-text)"
     if args.assembly is not None:
         # A missing file is refused by `load_spec`, before anything is built.
         scenario = dataclasses.replace(scenario, assembly=str(args.assembly))
         if args.scenario is None:
             scenario.name = Path(args.assembly).stem
-            scenario.description = f"assembly {args.assembly}, operator follows the robot"
+            who = describe_operator(scenario.operator).removeprefix("the ")
+            scenario.description = f"assembly {args.assembly}, {who}"
     if args.operator is not None:
         scenario = with_operator_script(scenario, args.operator)
         # The file's description told of its own operator; say what will run instead.
-        steps = ", ".join(f"{d.task} at step {d.step}" for d in scenario.operator.deviations)
-        scenario.description = (
-            f"the operator performs {steps} instead of the robot's proposal, and otherwise "
-            "follows the robot (--operator)"
-        )
+        scenario.description = f"{describe_operator(scenario.operator)} (--operator)"
     if args.policy is not None:
         scenario = dataclasses.replace(scenario, policy=str(args.policy))
     return _with_interaction(args, scenario)
+
+
+def _file_operator(args) -> OperatorConfig:
+    """The operator of the scenario file (`--lean` alone over it), before `--scenario-text`."""
+    lean = [LEAN] if args.lean else []
+    return load_cell_scenario(_scenario_name(args), lean).operator
+
+
+def describe_operator(op: OperatorConfig) -> str:
+    """What the operator `op` does, in a phrase: a population model with its parameters and
+    seed, a stochastic operator's probabilities, a script's steps, or following the robot."""
+    if op.model:
+        params = ", ".join(f"{k}={v}" for k, v in op.params.items())
+        return f"a {op.model} operator ({params + ', ' if params else ''}seed {op.seed})"
+    if op.override_prob > 0 or op.mistake_prob > 0:
+        return (
+            f"a stochastic operator (overrides with probability {op.override_prob:g}, "
+            f"misplaces with {op.mistake_prob:g}, seed {op.seed})"
+        )
+    if op.deviations:
+        steps = ", ".join(f"{d.task} at step {d.step}" for d in op.deviations)
+        return (
+            f"the operator performs {steps} instead of the robot's proposal, and otherwise "
+            "follows the robot"
+        )
+    return "the operator follows the robot"
 
 
 def _with_interaction(args, scenario: Scenario) -> Scenario:
@@ -95,4 +122,10 @@ def _scenario_name(args) -> str | None:
     return args.scenario
 
 
-__all__ = ["scenario_argv", "scenario_from_args", "scenario_options", "scenario_text_options"]
+__all__ = [
+    "describe_operator",
+    "scenario_argv",
+    "scenario_from_args",
+    "scenario_options",
+    "scenario_text_options",
+]

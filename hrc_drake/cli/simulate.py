@@ -313,6 +313,18 @@ def _simulate(args) -> int:
     return 0 if result.done else 1
 
 
+def operator_summary(tasks) -> str:
+    """What the operator did in a run's tasks (`TaskRecord`s): followed every proposal, or the
+    steps where it performed another task (a deviation, or a part misplaced on another seat)."""
+    if not tasks:
+        return "no task was done"
+    other = [t for t in tasks if t.indicated != t.proposed]
+    if not other:
+        return f"followed the robot's proposal at every step ({len(tasks)})"
+    steps = ", ".join(f"step {t.step} {t.indicated} instead of {t.proposed}" for t in other)
+    return f"performed another task than proposed at {len(other)} of {len(tasks)} steps: {steps}"
+
+
 def _print_summary(result, scenario) -> None:
     print(f"scenario {result.scenario}: {scenario.description}")
     for t in result.tasks:
@@ -321,6 +333,7 @@ def _print_summary(result, scenario) -> None:
             f"  step {t.step}: robot proposes {t.proposed}{who}; cell shows {t.observed}; "
             f"{t.end_time - t.start_time:.1f} s simulated"
         )
+    print(f"  operator: {operator_summary(result.tasks)}")
     print("  states:", " ".join(result.names), f"({result.final_kind})")
     print(
         f"  {result.sim_time:.1f} s simulated in {result.wall_time:.1f} s "

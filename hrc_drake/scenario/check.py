@@ -6,7 +6,7 @@ import dataclasses
 import math
 
 from hrc_drake.hri.faults import FaultError, check_faults
-from hrc_drake.robot_names import UR3_JOINTS
+from hrc_drake.robot_names import UR3_JOINTS, UR3_VELOCITY_LIMITS
 from hrc_drake.scenario.safety import (
     HumanSpeed,
     SafetyConfig,
@@ -22,14 +22,28 @@ from hrc_drake.scenario.schema import (
     InteractionConfig,
     Scenario,
     ScenarioError,
+    assembly_file,
 )
 from hrc_drake.scenario.sensors import sensor_models
+from hrc_drake.tasks.assembly import SpecError
 from hrc_drake.tasks.interaction import (
     INTERFACES,
     MODES,
     IndicationDelay,
     InteractionError,
 )
+
+# The fastest the UR3 can move the RG2's TCP [m/s]: every joint at its published speed limit
+# (UR3/CB3 user manual v3.13 via ros-industrial `ur_description/config/ur3/joint_limits.yaml`:
+# 180 deg/s base, shoulder, elbow; 360 deg/s wrists; `robot_names.UR3_VELOCITY_LIMITS`), through
+# UR's published DH parameters, with the TCP 0.216 m past the flange (OnRobot's RG2 URDF),
+# maximised over the configurations: 7.49 m/s (4.46 m/s at the flange). Universal Robots
+# publishes no TCP maximum for the arm itself (its safety system's TCP limit is a setting), so a
+# `tcp_speed_limit` above this limits nothing the joints do not already: it is a typo (50 for
+# 0.5) or a unit slip (mm/s for m/s). tests/test_careless_inputs.py recomputes it.
+UR3_TCP_SPEED_MAX = 7.5
+# ISO 10218-1's reduced speed [m/s], the default TCP limit: named in the errors as the fix.
+REDUCED_SPEED = 0.25
 
 
 def _check_finite(value, key: str, fail) -> None:
@@ -59,6 +73,15 @@ def _check_limits(scenario, fail) -> None:
     for key in ("robot_uncertainty", "slow_band", "moving_speed"):
         if getattr(scenario.safety, key) < 0:
             raise fail(f"safety.{key}", f"must be >= 0, got {getattr(scenario.safety, key)}")
+    fastest = max(UR3_VELOCITY_LIMITS)
+    if scenario.safety.moving_speed >= fastest:
+        # Above the fastest joint's published limit no joint would ever count as moving.
+        raise fail(
+            "safety.moving_speed",
+            f"{scenario.safety.moving_speed} rad/s is beyond the UR3's fastest joint "
+            f"({fastest:.2f} rad/s, 360 deg/s), so no joint would ever count as moving; give "
+            f"rad/s in [0, {fastest:.2f}) (0.01)",
+        )
     arm, rg2, camera = scenario.station.ur3, scenario.station.rg2, scenario.station.camera
     if arm.tracking_tolerance <= 0:
         raise fail("station.ur3.tracking_tolerance", "give an angle > 0 rad (0.05)")
@@ -91,6 +114,10 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
         return ScenarioError(f"{where}: {key}: {problem}")
 
     _check_finite(scenario, "", fail)
+    try:  # a name not under models/assemblies/: one line, with the known ones
+        assembly_file(scenario.assembly)
+    except SpecError as err:
+        raise fail("assembly", str(err).removeprefix("assembly ")) from None
     _check_limits(scenario, fail)
     _check_operator(scenario, fail)
     _check_decider(scenario.decider, fail)
@@ -147,12 +174,7 @@ def _check_motion_and_physics(scenario: Scenario, fail) -> None:
     for key in ("hold_time", "approach_distance"):
         if getattr(scenario.motion, key) < 0:
             raise fail(f"motion.{key}", "must be >= 0")
-    if scenario.motion.tcp_speed_limit <= 0:
-        raise fail(
-            "motion.tcp_speed_limit",
-            f"the robot cannot move at {scenario.motion.tcp_speed_limit} m/s; give a speed > 0 "
-            "(0.25: ISO 10218-1's reduced speed)",
-        )
+    _check_tcp_speed(scenario.motion.tcp_speed_limit, "motion.tcp_speed_limit", fail)
     contact = scenario.physics.contact
     for key in ("hydroelastic_modulus", "resolution_hint"):
         if getattr(contact, key) <= 0:
@@ -164,6 +186,25 @@ def _check_motion_and_physics(scenario: Scenario, fail) -> None:
         raise fail("physics.contact.static_friction", "must be >= dynamic_friction")
     if scenario.physics.time_step <= 0:
         raise fail("physics.time_step", "the cell is a discrete plant: give a step > 0 (1e-2)")
+
+
+def _check_tcp_speed(speed: float, key: str, fail, zero: str = "") -> None:
+    """A TCP speed [m/s] the UR3 can reach: in (0, UR3_TCP_SPEED_MAX], or [0, ...] when `zero`
+    says what 0 means."""
+    low = "[0" if zero else "(0"
+    if (speed < 0 if zero else speed <= 0) or speed > UR3_TCP_SPEED_MAX:
+        beyond = speed > UR3_TCP_SPEED_MAX
+        why = (
+            f"beyond the UR3 (its joints' published speed limits move the TCP at most "
+            f"{UR3_TCP_SPEED_MAX} m/s)"
+            if beyond
+            else "not a speed the robot can move at"
+        )
+        raise fail(
+            key,
+            f"{speed} m/s is {why}; give a speed in {low}, {UR3_TCP_SPEED_MAX}] m/s "
+            f"({REDUCED_SPEED}: ISO 10218-1's reduced speed{zero})",
+        )
 
 
 def _check_run(scenario: Scenario, fail) -> None:
@@ -186,8 +227,10 @@ def _check_run(scenario: Scenario, fail) -> None:
 
 def _check_safety_body_and_station(scenario: Scenario, fail) -> None:
     """The separation formula's terms, the body's coordinates and the gripper's force."""
+    _check_tcp_speed(
+        scenario.safety.contact_speed, "safety.contact_speed", fail, "; 0: separation alone"
+    )
     for key in (
-        "contact_speed",
         "reaction_time",
         "intrusion",
         "human_uncertainty",

@@ -68,13 +68,15 @@ class SafetyConfig:
             `benchmarks/reports/safety_check.md`).
         contact_speed: m/s; closer than S_p the robot may still move toward the person this
             fast, as power and force limiting permits a contact (ISO/TS 15066 §5.5.5, Annex A);
-            0.25 m/s is ISO 10218-1's reduced speed; 0: separation alone.
+            0.25 m/s is ISO 10218-1's reduced speed; 0: separation alone; at most 7.5 m/s,
+            the fastest the UR3's joints move its TCP.
         reaction_time: T_r [s], the robot's reaction time (0.1 s is a common assumption).
         intrusion: C [m]; 0 when the distance is taken to the body itself.
         human_uncertainty: Z_d [m], the body's position uncertainty (a tracked hand).
         robot_uncertainty: Z_r [m]; 0 for the simulated robot.
         slow_band: m above S_p within which the robot already slows down.
-        moving_speed: rad/s; a robot joint faster than this counts as moving (violations).
+        moving_speed: rad/s; a robot joint faster than this counts as moving (violations);
+            below 2π, the UR3's fastest joint speed.
         separation: `predictive` (the robot times its moves around where it forecasts the
             operator's body, monitoring underneath) or `reactive` (monitoring alone).
         departure: m; the observed hand this far from the forecast makes the robot forecast

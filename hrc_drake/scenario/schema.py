@@ -39,6 +39,7 @@ from hrc_drake.scenario.safety import (
     SafetyConfig,
 )
 from hrc_drake.scenario.sensors import Preset, SensorsConfig
+from hrc_drake.tasks.assembly import SpecError
 from hrc_drake.tasks.graph import StateSpace
 from hrc_drake.tasks.interaction import (
     DEFAULT_DELAYS,
@@ -54,6 +55,31 @@ from hrc_drake.tasks.interaction import (
 
 class ScenarioError(ValueError):
     """A scenario that cannot be used; the message names the file and the key."""
+
+
+def known_assemblies() -> list[str]:
+    """The names of the assembly specs under models/assemblies/, sorted."""
+    return sorted(p.stem for p in (models_dir() / "assemblies").glob("*.yaml"))
+
+
+def assembly_file(name_or_path: str | Path) -> Path:
+    """The assembly spec file of a scenario's `assembly:` and of every command's `--assembly`
+    (one rule for both): a path (one with a suffix, or with a folder that exists) as given,
+    else the name of a spec under models/assemblies/ (`four-slot`). SpecError for a name that
+    is none of those, listing the known names; a missing path is `load_spec`'s to report."""
+    text = str(name_or_path)
+    path = Path(text)
+    # A path to something that exists is that path, suffix or not (`--assembly /dev/null`
+    # is then reported as the device it is, not as a missing /dev/null.yaml).
+    if path.suffix or (os.sep in text and path.exists()):
+        return path
+    named = models_dir() / "assemblies" / f"{text}.yaml"
+    if os.sep not in text and not named.is_file():
+        raise SpecError(
+            f"assembly {text!r} not found; known assemblies: {', '.join(known_assemblies())} "
+            "(models/assemblies/), or give the path to a spec .yaml"
+        )
+    return named
 
 
 # The source `check_scenario` names when a value came from the command line's YAML overrides.
@@ -126,7 +152,8 @@ class MotionConfig:
 
     Attributes:
         hold_time: seconds the robot holds a placed part while the operator bolts it.
-        tcp_speed_limit: m/s; 0.25 is ISO 10218-1's reduced speed.
+        tcp_speed_limit: m/s; 0.25 is ISO 10218-1's reduced speed; at most 7.5, the fastest
+            the UR3's joints move its TCP (`hrc_drake.scenario.check.UR3_TCP_SPEED_MAX`).
         approach_distance: m; pre-grasp / pre-place offset along the tool's approach axis.
         seed: seed of the random IK starts.
     """
@@ -479,13 +506,9 @@ class Scenario:
 
     @property
     def assembly_path(self) -> Path:
-        """The assembly spec file: `assembly` as a path, or a name under models/assemblies/."""
-        path = Path(self.assembly)
-        # A path to something that exists is that path, suffix or not (`--assembly /dev/null`
-        # is then reported as the device it is, not as a missing /dev/null.yaml).
-        if path.suffix or (os.sep in self.assembly and path.exists()):
-            return path
-        return models_dir() / "assemblies" / f"{self.assembly}.yaml"
+        """The assembly spec file: `assembly` as a path, or a name under models/assemblies/
+        (`assembly_file`, as `--assembly` resolves it)."""
+        return assembly_file(self.assembly)
 
     @property
     def script(self) -> dict[int, str]:
@@ -557,4 +580,6 @@ __all__ = [
     "ScenarioError",
     "SensorsConfig",
     "StationConfig",
+    "assembly_file",
+    "known_assemblies",
 ]
