@@ -33,7 +33,6 @@ from generated import generated_spec
 
 from hrc_drake.atomic import atomic_write_text
 from hrc_drake.evaluate import evaluate, simulate_run
-from hrc_drake.evaluation_report import plot_decider_means
 from hrc_drake.evaluation_runs import Setup
 from hrc_drake.hri.populations import make_operator_model
 from hrc_drake.resources import models_dir
@@ -57,15 +56,54 @@ PLOT = Path(__file__).parent.parent / "docs" / "evaluation.png"
 
 def plot_means(table: dict, path: Path) -> None:
     """Mean and p95 simulated seconds per population, every decider (the paper's agent, the
-    exact unit-cost policy and ours), on linear axes fitted to each population
-    (`hrc_drake.evaluation_report.plot_decider_means`)."""
-    plot_decider_means(
-        table,
-        list(DECIDERS),
-        MODELS,
-        path,
-        "flange case, task level, 10,000 runs per pair: the paper's Q-learning agent against ours",
+    exact unit-cost policy and ours), one panel per operator model (columns) and figure (rows:
+    mean, p95), on linear axes fitted to each panel: the deciders differ by fractions of a
+    second within a population and by tens of seconds across populations, so a shared axis (or
+    a log one) would hide the differences that matter. Every value is printed beside its dot.
+    `table[decider, model]` is a `summarise` report."""
+    from matplotlib.ticker import MaxNLocator
+
+    from hrc_drake.tasks.plots import plt, save_figure
+
+    deciders, models = list(DECIDERS), MODELS
+    rows = (("mean_time", "mean [s]"), ("p95_time", "p95 [s]"))
+    fig, axes = plt.subplots(
+        len(rows), len(models), figsize=(2.3 * len(models), 1.2 + 0.5 * len(deciders) * 2)
     )
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    y = np.arange(len(deciders))[::-1]
+    for r, (key, label) in enumerate(rows):
+        for c, model in enumerate(models):
+            ax = axes[r][c]
+            values = [table[d, model][key] for d in deciders]
+            ax.scatter(values, y, c=[colours[k % len(colours)] for k in range(len(deciders))])
+            low, high = min(values), max(values)
+            pad = max(0.15 * (high - low), 0.02 * high, 0.05)
+            ax.set_xlim(low - pad, high + 3 * pad)
+            for value, yy in zip(values, y, strict=True):
+                ax.annotate(
+                    f"{value:.2f}",
+                    (value, yy),
+                    xytext=(4, 0),
+                    textcoords="offset points",
+                    va="center",
+                    fontsize=7,
+                )
+            ax.set_ylim(-0.6, len(deciders) - 0.4)
+            ax.set_yticks(y, deciders if c == 0 else [""] * len(deciders))
+            ax.xaxis.set_major_locator(MaxNLocator(4))
+            ax.tick_params(axis="x", labelsize=7)
+            ax.grid(axis="x", alpha=0.3)
+            if r == 0:
+                ax.set_title(model, fontsize=9)
+            if c == 0:
+                ax.set_ylabel(label)
+    fig.suptitle(
+        "flange case, task level, 10,000 runs per pair: the paper's Q-learning agent against ours",
+        fontsize=10,
+    )
+    fig.tight_layout()
+    save_figure(fig, path, dpi=110)
 
 
 def synthetic_costs(space):

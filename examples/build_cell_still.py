@@ -14,8 +14,8 @@ from pathlib import Path
 import matplotlib.image
 import numpy as np
 
+from hrc_drake import load_scenario
 from hrc_drake.cell.station import make_cell_station, simulate_station, station_scenario
-from hrc_drake.scenario.schema import BodyConfig, Scenario
 
 
 def main() -> None:
@@ -27,7 +27,7 @@ def main() -> None:
     args = parser.parse_args()
 
     # The cell alone: the operator's body would stand in front of the camera.
-    scenario = Scenario(body=BodyConfig(enabled=False))
+    scenario = load_scenario(None, "{body: {enabled: false}}")
     if args.assembly is not None:
         scenario = dataclasses.replace(scenario, assembly=str(args.assembly))
     placements = dict(item.split("=") for item in args.placements.split(",") if item)

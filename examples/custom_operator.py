@@ -9,10 +9,7 @@ the square flange first, on the highest slots it can, and follows the robot othe
 import argparse
 from pathlib import Path
 
-from hrc_drake.cell.run.run import run_scenario
-from hrc_drake.cell.scenario import LEAN, load_cell_scenario
-from hrc_drake.tasks.graph import generate_states
-from hrc_drake.tasks.spec import load_spec
+from hrc_drake import LEAN, generate_states, load_scenario, load_spec, run_scenario
 
 
 class SquareFirstOperator:
@@ -36,7 +33,7 @@ def main() -> None:
     parser.add_argument("--lean", action="store_true", help="0.5 s bolting holds")
     args = parser.parse_args()
 
-    scenario = load_cell_scenario(None, LEAN if args.lean else None)
+    scenario = load_scenario(None, LEAN if args.lean else None)
     if args.assembly is not None:
         scenario.assembly = str(args.assembly)
     scenario.name = "square-first"

@@ -9,9 +9,9 @@ Prints the plan's stages and moves, then the validation report.
 import argparse
 from pathlib import Path
 
+from hrc_drake import load_spec
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.motion import MotionPlanner, check_plan
-from hrc_drake.tasks.spec import load_spec
 
 
 def main() -> None:

@@ -1,6 +1,6 @@
 """The report of an evaluation's runs: the JSON summary (`summarise`: completion, times, idle
 time, the interaction, and at cell level collisions, hand-overs and the failing runs with what
-replays each alone), and the plots of reports.
+replays each alone), and the histogram of its times (`plot_times`).
 
 Apart from the run loop (`hrc_drake.evaluate`), which calls `summarise` once the runs are
 played: a report is read from the runs' results alone.
@@ -172,56 +172,3 @@ def plot_times(report: dict[str, Any], path: Path) -> None:
         f"{report['runs']} completed"
     )
     save_figure(fig, path)
-
-
-def plot_decider_means(
-    reports: dict[tuple[str, str], dict[str, Any]],
-    deciders: list[str],
-    models: list[str],
-    path: Path,
-    title: str,
-) -> None:
-    """Mean and p95 assembly time of each decider, one panel per operator model (columns) and
-    figure (rows: mean, p95), on linear axes fitted to each panel: the deciders differ by
-    fractions of a second within a population and by tens of seconds across populations, so a
-    shared axis (or a log one) would hide the differences that matter. Every value is printed
-    beside its dot. `reports[decider, model]` is a `summarise` report."""
-    from matplotlib.ticker import MaxNLocator
-
-    from hrc_drake.tasks.plots import plt, save_figure
-
-    rows = (("mean_time", "mean [s]"), ("p95_time", "p95 [s]"))
-    fig, axes = plt.subplots(
-        len(rows), len(models), figsize=(2.3 * len(models), 1.2 + 0.5 * len(deciders) * 2)
-    )
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    y = np.arange(len(deciders))[::-1]
-    for r, (key, label) in enumerate(rows):
-        for c, model in enumerate(models):
-            ax = axes[r][c]
-            values = [reports[d, model][key] for d in deciders]
-            ax.scatter(values, y, c=[colours[k % len(colours)] for k in range(len(deciders))])
-            low, high = min(values), max(values)
-            pad = max(0.15 * (high - low), 0.02 * high, 0.05)
-            ax.set_xlim(low - pad, high + 3 * pad)
-            for value, yy in zip(values, y, strict=True):
-                ax.annotate(
-                    f"{value:.2f}",
-                    (value, yy),
-                    xytext=(4, 0),
-                    textcoords="offset points",
-                    va="center",
-                    fontsize=7,
-                )
-            ax.set_ylim(-0.6, len(deciders) - 0.4)
-            ax.set_yticks(y, deciders if c == 0 else [""] * len(deciders))
-            ax.xaxis.set_major_locator(MaxNLocator(4))
-            ax.tick_params(axis="x", labelsize=7)
-            ax.grid(axis="x", alpha=0.3)
-            if r == 0:
-                ax.set_title(model, fontsize=9)
-            if c == 0:
-                ax.set_ylabel(label)
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    save_figure(fig, path, dpi=110)

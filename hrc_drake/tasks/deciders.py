@@ -38,7 +38,6 @@ commit or wait, whichever is cheaper, and include that price in choosing what to
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Protocol
 
 import numpy as np
 
@@ -54,32 +53,6 @@ from hrc_drake.tasks.operator_model import OnlineOperatorModel
 from hrc_drake.tasks.policy import Policy, policy_from_choices
 from hrc_drake.tasks.solve import exact_policy, solve_exact
 from hrc_drake.tasks.tokens import UNDO
-
-
-class Decider(Protocol):
-    """Proposes a task at each boundary; observes what the operator performed."""
-
-    name: str
-
-    def propose(self, state: tuple[str, ...]) -> str:
-        """The task to propose in `state` (not terminal)."""
-        ...
-
-    def commit(self, state: tuple[str, ...], proposal: str) -> str | None:
-        """The placement the robot starts on before the indication; None: it waits."""
-        ...
-
-    def observe(self, state: tuple[str, ...], proposed: str, performed: str) -> None:
-        """What happened after proposing `proposed` in `state`."""
-        ...
-
-    def reset(self) -> None:
-        """Forget what the current run taught."""
-        ...
-
-    def start_run(self) -> None:
-        """A new assembly by the same operator: forget the run, keep the operator model."""
-        ...
 
 
 def commit_to_proposal(interaction: Interaction | None, proposal: str) -> str | None:

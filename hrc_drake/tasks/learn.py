@@ -163,12 +163,15 @@ def _greedy_edge(q: list[float], lo: int, hi: int, rng: random.Random) -> int:
 
 def train(
     mdp: SequenceMDP,
-    schedule: Schedule,
+    schedule: Schedule | None = None,
     seed: int = 0,
     progress: Progress | None = None,
 ) -> LearningResult:
-    """Learn a Q-table for `mdp` with `schedule`; seeded, so the same seed gives the same table."""
+    """Learn a Q-table for `mdp` with `schedule` (default: `CoverageSchedule()`, as `hrc-drake
+    train`); seeded, so the same seed gives the same table."""
     start = time.perf_counter()
+    if schedule is None:
+        schedule = SCHEDULES[DEFAULT_SCHEDULE]()
     if isinstance(schedule, CoverageSchedule):
         # Free pages back first (building the MDP leaves many), then its batches' pages.
         give_back_free_memory()

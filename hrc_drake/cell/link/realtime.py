@@ -63,7 +63,6 @@ most of the time; the run's `realtime` figures say so).
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -138,14 +137,6 @@ class LinkClock:
     def now(self) -> int:
         """The wall clock now [us]."""
         return self._wall()
-
-
-def check_pace(pace: float, flag: str = "--realtime") -> float:
-    """`pace` if it is a real-time rate > 0 (1: the wall clock's pace); ValueError naming `flag`
-    otherwise."""
-    if not (math.isfinite(pace) and pace > 0):
-        raise ValueError(f"{flag} {pace}: give a real-time rate > 0 (1 is the wall clock's pace)")
-    return pace
 
 
 def _channel_models(scenario: Scenario) -> dict[str, SensorModel]:
@@ -393,7 +384,6 @@ __all__ = [
     "age",
     "channel_latencies",
     "channel_rates",
-    "check_pace",
     "judge",
     "silent",
     "stale_after",
