@@ -154,7 +154,7 @@ def test_another_part_indicated_as_the_arm_reaches_the_pre_place_pose_stops_it_t
         mode=Mode.EXECUTE, clock=PlanClock(plan=f1, tau=above - 0.01, tau_time=10.0), turn=committed
     )
     held = f1.grip_width  # the fingers on the part carried (they let go only after the seat)
-    turning = supervisor._advance(
+    turning = supervisor._follower.advance(
         replace(moving, turn=replace(committed, change=UNDO)), 1.0, 10.02, held
     )
     assert turning.clock.tau == pytest.approx(above) and turning.clock.speed == 0.0
@@ -163,7 +163,7 @@ def test_another_part_indicated_as_the_arm_reaches_the_pre_place_pose_stops_it_t
     # Still waiting for the indication: it waits there at speed; with none to wait for and no
     # turn, it goes on down to the seat.
     awaiting = replace(moving, turn=replace(committed, awaiting=True))
-    waiting = supervisor._advance(awaiting, 1.0, 10.02, held)
+    waiting = supervisor._follower.advance(awaiting, 1.0, 10.02, held)
     assert waiting.clock.tau == pytest.approx(above) and waiting.clock.speed == 1.0
-    placing = supervisor._advance(moving, 1.0, 10.02, held)
+    placing = supervisor._follower.advance(moving, 1.0, 10.02, held)
     assert placing.plan_time(10.02) > above

@@ -20,6 +20,9 @@ the indication names another task:
 
 A robot that reaches the pre-place pose before the indication waits there, holding the part
 above the predicted seat; an indication that comes then turns from there.
+
+This module is the one writer of anticipation's record in the status, `TurnState`: the other
+parts change it only through the functions at its end.
 """
 
 from __future__ import annotations
@@ -27,7 +30,9 @@ from __future__ import annotations
 import enum
 from dataclasses import replace
 
+from hrc_drake.cell.controller.follower import Stand, hold
 from hrc_drake.cell.controller.planning import PlanAsker
+from hrc_drake.cell.controller.question import answered
 from hrc_drake.cell.controller.supervisor_state import Mode, SupervisorError, SupervisorStatus
 from hrc_drake.cell.ports import CellConfiguration
 from hrc_drake.motion.plan import HOME_LEG, LIFT, Plan, Stage
@@ -126,20 +131,29 @@ class Anticipation:
         """Moving on its commitment, the indication came: another task than the committed one
         is turned to (`turn`) once the robot can."""
         event = f"{now:.2f}: step {s.step}: operator indicates {indicated}"
-        s = s.noted(
-            event,
-            turn=replace(s.turn, awaiting=False),
-            question=replace(s.question, indicated_at=now),
-        )
+        s = answered(s.noted(event), now)
+        s = replace(s, turn=replace(s.turn, awaiting=False))
         committed = s.turn.committed
         if indicated == committed:
             return s
         same = same_part(self._space.spec, committed, indicated)
-        return replace(
-            s,
-            task=replace(s.task, indicated=indicated),
-            turn=replace(s.turn, change=indicated, retargeted=same, swapped=not same),
-        )
+        return replace(s, turn=replace(s.turn, change=indicated, retargeted=same, swapped=not same))
+
+    def pause_at(self, s: SupervisorStatus, tau: float, limit: float) -> Stand | None:
+        """Where the arm at plan time `tau` stands as it reaches the pre-place pose: with no
+        indication yet it waits there above the seat (at `limit`); with another part indicated
+        it stops there to turn, at rest (slowing down along the path took it on down to the
+        seat, too late to turn: the run stopped; population sweep). None: it goes on."""
+        plan = s.plan
+        above = wait_point(plan)
+        if not (tau >= above and s.clock.tau <= above + TAU_EPS):
+            return None
+        if s.turn.awaiting:
+            return Stand(above, limit)
+        change = s.turn.change
+        if change is not None and not same_part(self._space.spec, plan.task, change):
+            return Stand(above, 0.0)
+        return None
 
     def stopping_to_turn(self, s: SupervisorStatus, now: float) -> bool:
         """Whether the robot decelerates to turn to another task (not while its fingers
@@ -187,13 +201,8 @@ class Anticipation:
             s.tokens_before, task, last, layout, obstacle=config.obstacle, **keywords
         )
         event = f"{now:.2f}: turns to {indicated} ({turn.value}) at {tau:.2f} s into its plan"
-        s = s.noted(
-            event,
-            clock=replace(s.clock, plan=None),
-            q_hold=q,
-            opening_hold=opening,
-            turn=replace(s.turn, change=None, returning=turn == Turn.RETURN),
-        )
+        s = hold(s.noted(event), q, opening)
+        s = replace(s, turn=replace(s.turn, change=None, returning=turn == Turn.RETURN))
         return self._asker.ask(s, request, now)
 
     def _retarget_request(
@@ -259,28 +268,79 @@ class Anticipation:
                 f"{now:.2f}: re-targets to {turning.change} at {where} ({turn:.2f} s into its "
                 "plan), without slowing down"
             )
-            return s.noted(event, turn=replace(turning, turn_tau=turn, turn_request=request))
+            return replace(
+                s.noted(event), turn=replace(turning, turn_tau=turn, turn_request=request)
+            )
         if tau < turning.turn_tau - TAU_EPS:
             return s
         q = tuple(float(x) for x in plan.trajectory.value(turning.turn_tau).ravel())
-        s = replace(
-            s,
-            clock=replace(s.clock, plan=None),
-            q_hold=q,
-            opening_hold=plan.gripper_opening(turning.turn_tau),
-            turn=replace(turning, change=None, turn_tau=None, turn_request=None),
-        )
+        s = hold(s, q, plan.gripper_opening(turning.turn_tau))
+        s = replace(s, turn=replace(turning, change=None, turn_tau=None, turn_request=None))
         ready = turning.turn_request.key() in turning.retargets_ahead
         return self._asker.ask(s, turning.turn_request, now, plan_ready=ready)
+
+
+def committed_to(s: SupervisorStatus, committed: str | None) -> SupervisorStatus:
+    """`s` at a task boundary: on its way to `committed` (None: waiting for the indication)."""
+    turn = replace(
+        s.turn,
+        committed=committed,
+        awaiting=committed is not None,
+        change=None,
+        retargeted=False,
+        swapped=False,
+        returning=False,
+    )
+    return replace(s, turn=turn)
+
+
+def plan_started(s: SupervisorStatus, plan: Plan) -> SupervisorStatus:
+    """`s` starting on `plan`: putting a part back, the arm stops above it, where the indicated
+    task starts (`back_above`)."""
+    turn_tau = back_above(plan) if s.turn.returning else None
+    return replace(s, turn=replace(s.turn, turn_tau=turn_tau))
+
+
+def dropped(s: SupervisorStatus) -> SupervisorStatus:
+    """`s` with its commitment dropped (no plan for it): it waits for the indication."""
+    return replace(s, turn=replace(s.turn, committed=None, awaiting=False))
+
+
+def putting_back(s: SupervisorStatus) -> SupervisorStatus:
+    """`s` carrying the part it holds back to its tray first."""
+    return replace(s, turn=replace(s.turn, returning=True))
+
+
+def put_back(s: SupervisorStatus) -> SupervisorStatus:
+    """`s` with the part it carried back in its tray: the indicated task is next."""
+    return replace(s, turn=replace(s.turn, returning=False, turn_tau=None))
+
+
+def turn_to(s: SupervisorStatus, task: str) -> SupervisorStatus:
+    """`s` turning to `task` once it can (`Anticipation.turn`; the same task: planned again
+    from where the arm stops, as after an obstacle appeared)."""
+    return replace(s, turn=replace(s.turn, change=task))
+
+
+def cancelled(s: SupervisorStatus) -> SupervisorStatus:
+    """`s` with no turn ahead and nothing awaited (the task is handed over)."""
+    return replace(s, turn=replace(s.turn, change=None, awaiting=False))
 
 
 __all__ = [
     "Anticipation",
     "Turn",
     "back_above",
+    "cancelled",
+    "committed_to",
+    "dropped",
     "lift_end",
+    "plan_started",
+    "put_back",
+    "putting_back",
     "same_part",
     "turn_at",
     "turn_point",
+    "turn_to",
     "wait_point",
 ]

@@ -44,6 +44,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from hrc_drake.cell.controller.follower import timed
 from hrc_drake.cell.controller.forecast import Anchor, OperatorForecast
 from hrc_drake.cell.controller.supervisor_state import Mode, SupervisorStatus
 from hrc_drake.cell.person import ARM_SPHERES
@@ -86,7 +87,7 @@ class KeepClearSettings:
 class KeepClear:
     """The Supervisor's predictive separation (see the module docstring); a part of
     `hrc_drake.cell.controller.supervisor.Supervisor` that keeps its own record,
-    `KeepClearState`, and the plan clock's waits in the status."""
+    `KeepClearState` (its one writer), and gives the plan follower the plan's waits."""
 
     def __init__(self, settings: KeepClearSettings):
         self._forecast, self._scale = settings.forecast, settings.scale
@@ -193,7 +194,9 @@ class KeepClear:
         unexplained = body if left > self._departure else None
         return self._retime(s, key, now, unexplained)
 
-    def _retime(self, s, key: tuple, now: float, unexplained: BodySpheres | None):
+    def _retime(
+        self, s: SupervisorStatus, key: tuple, now: float, unexplained: BodySpheres | None
+    ) -> SupervisorStatus:
         """The plan's waits from the forecast at `now` (with an observed body that the forecast
         does not explain, taken to stay `STAY` seconds)."""
         anchor = self._anchor(s)
@@ -210,7 +213,7 @@ class KeepClear:
         timeline = self._forecast.timeline(anchor)
         view = tuple(tuple(float(x) for x in timeline.at(now + d)) for d in VIEW_TIMES)
         clear = replace(s.clear, clear_key=key, timed_at=now, checked_at=now, forecast_view=view)
-        return replace(s, clock=replace(s.clock, holds=holds, caps=caps), clear=clear)
+        return timed(replace(s, clear=clear), holds, caps)  # the follower's clock takes them
 
     def _timed(self, s, now: float, tau: float, end_tau: float, occupancy: Occupancy):
         """(holds, speed caps) of the plan from plan time `tau` at `now` to `end_tau`: waits

@@ -1,13 +1,14 @@
 """The Supervisor's side of the planner: asking for a task's plan (the arm holds still until the
 planner answers) and planning ahead what the policy will propose next. The planner itself runs
-beside the controller, behind a `PlanService` (`hrc_drake.motion.service`)."""
+beside the controller, behind a `PlanService` (`hrc_drake.motion.service`). This module is the
+one writer of the planner's record in the status, `PlanAsk`."""
 
 from __future__ import annotations
 
 import time
 from dataclasses import replace
 
-from hrc_drake.cell.controller.supervisor_state import Mode, SupervisorStatus
+from hrc_drake.cell.controller.supervisor_state import Event, SupervisorStatus
 from hrc_drake.cell.ports import CellConfiguration
 from hrc_drake.motion.plan_request import PlanRequest
 from hrc_drake.motion.service import PlanService
@@ -39,7 +40,7 @@ class PlanAsker:
         ask = replace(s.ask, request=request, requested_at=now, requested_wall=time.perf_counter())
         if plan_ready is not None:
             ask = replace(ask, plan_ready=plan_ready)
-        return replace(s, mode=Mode.PLAN, ask=ask)
+        return replace(s, ask=ask).enter(Event.PLAN_ASKED)
 
     def ask_task(
         self,
@@ -103,4 +104,16 @@ class PlanAsker:
                 continue  # a prediction the layout cannot serve: the boundary will tell
 
 
-__all__ = ["PlanAsker"]
+def plan_taken(s: SupervisorStatus, now: float) -> SupervisorStatus:
+    """`s` with the wait for the plan that came at `now` counted against its task."""
+    ask = s.ask
+    idle, wall_idle = now - ask.requested_at, time.perf_counter() - ask.requested_wall
+    return replace(s, ask=replace(ask, idle=idle, wall_idle=wall_idle))
+
+
+def task_closed(s: SupervisorStatus) -> SupervisorStatus:
+    """`s` with no request in flight (the task is read: the next one asks afresh)."""
+    return replace(s, ask=replace(s.ask, request=None))
+
+
+__all__ = ["PlanAsker", "plan_taken", "task_closed"]

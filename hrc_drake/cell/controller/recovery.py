@@ -6,14 +6,18 @@ which the assembly goes on.
 
 `FaultRecovery` is a part of `hrc_drake.cell.controller.supervisor.Supervisor`: it takes the
 status and the update's `Readings` and returns the next status; it asks the planner through the
-`PlanAsker` it is given, and keeps its own record, `RecoveryState`, in the status.
+`PlanAsker` it is given, and keeps its own record, `RecoveryState`, in the status. This module
+is the one writer of that record, of the `Detection`s and of how a run ended (`error`,
+`capped`); the arm, the question and the turn it changes through their owners' functions.
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
 
-from hrc_drake.cell.controller.anticipation import Turn, turn_at
+from hrc_drake.cell.controller import question
+from hrc_drake.cell.controller.anticipation import Turn, cancelled, turn_at, turn_to
+from hrc_drake.cell.controller.follower import back_off, hold
 from hrc_drake.cell.controller.guard import GuardTrip, Retreat, tau_at_height
 from hrc_drake.cell.controller.planning import PlanAsker
 from hrc_drake.cell.controller.readings import Readings
@@ -23,13 +27,13 @@ from hrc_drake.cell.controller.supervisor_state import (
     TASK_CAP,
     Cause,
     Detection,
+    Event,
     Mode,
     Recovery,
     SupervisorError,
     SupervisorLimits,
     SupervisorStatus,
     obstacle_moved,
-    resolve,
 )
 from hrc_drake.cell.ports import CellConfiguration, PartStatus, SafetyMode
 from hrc_drake.hri.messages import Prompt, PromptKind
@@ -137,23 +141,10 @@ class FaultRecovery:
             f"above its place ({trip.rise:.0f} N against the approach): stops pressing, backs "
             "off and lets it go"
         )
-        prompt = s.question.prompt
-        return s.noted(
-            event,
-            mode=Mode.SETTLE,
-            settle_until=end + limits.settle_time,
-            q_hold=tuple(float(x) for x in plan.positions(place.start)),
-            retreat=retreat,
-            opening_hold=plan.gripper_opening(plan.segment(Stage.RELEASE).end),
-            clock=replace(s.clock, plan=None),
-            question=replace(
-                s.question,
-                prompt=prompt
-                if prompt.kind == PromptKind.CHOOSE
-                else replace(prompt, kind=PromptKind.NONE),
-            ),
-            recovery=replace(s.recovery, guarded=True, away=True, grip_lost_at=None),
-        )
+        q = tuple(float(x) for x in plan.positions(place.start))
+        s = back_off(s, retreat, q, plan.gripper_opening(plan.segment(Stage.RELEASE).end))
+        s = question.withdrawn(s.noted(event).enter(Event.GUARD_TRIPPED, end + limits.settle_time))
+        return replace(s, recovery=replace(s.recovery, guarded=True, away=True, grip_lost_at=None))
 
     @staticmethod
     def _grip_lost_at(s: SupervisorStatus, at: float | None) -> SupervisorStatus:
@@ -172,30 +163,16 @@ class FaultRecovery:
         wait = PART_FALL_TIME if cause == Cause.GRIP else 0.0
         what = "is not in the gripper" if cause == Cause.GRIP else "does not sit in its seat"
         event = f"{now:.2f}: {part} {what}: {recovery} once it rests"
-        prompt = s.question.prompt
-        return s.noted(
-            event,
-            mode=Mode.RECOVER,
-            clock=replace(s.clock, plan=None),
-            q_hold=tuple(float(x) for x in q),
-            opening_hold=cell.opening() + 0.02,
-            settle_until=now + max(wait, self._limits.settle_time),
-            recovery=replace(
-                s.recovery,
-                recovering=recovery,
-                recoveries=s.recovery.recoveries + 1,
-                grip_lost_at=None,
-            ),
-            # A question still open (anticipating, the indication not in yet) stays up:
-            # withdrawn, it could never be answered and the robot would wait for it forever.
-            question=replace(
-                s.question,
-                prompt=prompt
-                if prompt.kind == PromptKind.CHOOSE
-                else replace(prompt, kind=PromptKind.NONE),
-            ),
-            detections=(*s.detections, Detection(cause, s.step, now)),
+        s = s.noted(event).enter(Event.PART_LOST, now + max(wait, self._limits.settle_time))
+        s = question.withdrawn(hold(s, tuple(float(x) for x in q), cell.opening() + 0.02))
+        record = replace(
+            s.recovery,
+            recovering=recovery,
+            recoveries=s.recovery.recoveries + 1,
+            grip_lost_at=None,
         )
+        found = Detection(cause, s.step, now)
+        return replace(s, recovery=record, detections=(*s.detections, found))
 
     def pick_again(
         self, s: SupervisorStatus, config: CellConfiguration, now: float
@@ -231,11 +208,10 @@ class FaultRecovery:
     def blocked(self, s: SupervisorStatus, failure: PlanFailure, now: float) -> SupervisorStatus:
         """No path while an obstacle is in the cell: hold still and wait for it to move."""
         if s.open_detection(Cause.PLAN):
-            return replace(s, mode=Mode.BLOCKED)  # planned again, still blocked
+            return s.enter(Event.PATH_BLOCKED)  # planned again, still blocked
         event = f"{now:.2f}: step {s.step}: an obstacle blocks the path ({failure.reason}); waits"
-        return s.noted(
-            event,
-            mode=Mode.BLOCKED,
+        return replace(
+            s.noted(event).enter(Event.PATH_BLOCKED),
             recovery=replace(s.recovery, blocked_at=now),
             detections=(*s.detections, Detection(Cause.PLAN, s.step, now)),
         )
@@ -270,7 +246,7 @@ class FaultRecovery:
         if turn_at(s.plan, tau, self._spec, task) == Turn.TOO_LATE:
             return s  # placing: the part is where it goes
         event = f"{now:.2f}: an obstacle appears: stops to plan {task} again"
-        return s.noted(event, turn=replace(s.turn, change=task))
+        return turn_to(s.noted(event), task)
 
     def note_stop(
         self, s: SupervisorStatus, stop: bool, now: float, mode: SafetyMode
@@ -284,18 +260,17 @@ class FaultRecovery:
             return s
         if stop and mode == SafetyMode.SAFEGUARD_STOP:
             event = f"{now:.2f}: safeguard stop: the robot stops on its path until it clears"
-            return s.noted(event, recovery=replace(s.recovery, stopped=True))
+            return replace(s.noted(event), recovery=replace(s.recovery, stopped=True))
         if stop:
             event = f"{now:.2f}: protective stop: the robot stops on its path"
             found = Detection(Cause.STOP, s.step, now)
-            return s.noted(
-                event,
+            return replace(
+                s.noted(event),
                 recovery=replace(s.recovery, stopped=True),
                 detections=(*s.detections, found),
             )
-        s = s.noted(
-            f"{now:.2f}: stop cleared: resumes", recovery=replace(s.recovery, stopped=False)
-        )
+        s = s.noted(f"{now:.2f}: stop cleared: resumes")
+        s = replace(s, recovery=replace(s.recovery, stopped=False))
         return resolve(s, Cause.STOP, now, Recovery.RESUME)
 
     def note_silence(self, s: SupervisorStatus, now: float) -> SupervisorStatus:
@@ -305,10 +280,10 @@ class FaultRecovery:
         asked: SupervisorError, the run stops (a question nobody answers, or whose answer was
         lost, never leaves a run looping)."""
         give_up = self._limits.indication_give_up
-        question = s.question
-        what = "confirmation" if question.prompt.kind == PromptKind.HANDOVER else "indication"
-        if now - question.prompted_at >= give_up:
-            asked = question.prompt.asked + 1
+        up = s.question
+        what = "confirmation" if up.prompt.kind == PromptKind.HANDOVER else "indication"
+        if now - up.prompted_at >= give_up:
+            asked = up.prompt.asked + 1
             raise SupervisorError(
                 f"step {s.step}: no {what} from the operator in {give_up:g} s of simulated "
                 f"time (asked {asked} time{'s' if asked > 1 else ''}; run.indication_give_up): "
@@ -316,17 +291,12 @@ class FaultRecovery:
                 cause=Cause.SILENCE,
             )
         timeout = self._limits.indication_timeout
-        if now - question.asked_at < timeout:
+        if now - up.asked_at < timeout:
             return s
         event = f"{now:.2f}: no {what} for step {s.step} in {timeout:g} s: asks again"
         found = Detection(Cause.SILENCE, s.step, now)
         detections = s.detections if s.open_detection(Cause.SILENCE) else (*s.detections, found)
-        prompt = replace(question.prompt, asked=question.prompt.asked + 1)
-        return s.noted(
-            event,
-            question=replace(question, asked_at=now, prompt=prompt),
-            detections=detections,
-        )
+        return replace(question.asked_again(s.noted(event), now), detections=detections)
 
     def stop(
         self, s: SupervisorStatus, cell: Readings, now: float, err: SupervisorError
@@ -340,14 +310,8 @@ class FaultRecovery:
         elif not s.open_detection():
             s = replace(s, detections=(*s.detections, Detection(err.cause, s.step, now)))
         s = resolve(s, None, now, Recovery.OPERATOR)
-        return s.noted(
-            f"{now:.2f}: stopped: {err}",
-            mode=Mode.FAILED,
-            error=str(err),
-            clock=replace(s.clock, plan=None),
-            q_hold=tuple(float(x) for x in q),
-            opening_hold=float(opening),
-        )
+        s = replace(s.noted(f"{now:.2f}: stopped: {err}").enter(Event.STOPPED), error=str(err))
+        return hold(s, tuple(float(x) for x in q), float(opening))
 
     def hand_over(
         self, s: SupervisorStatus, cell: Readings, now: float, err: SupervisorError
@@ -361,22 +325,17 @@ class FaultRecovery:
             return self.stop(s, cell, now, err)
         indicated, part = s.task.indicated, s.task.part
         q = cell.arm_q()
+        opening = float(s.command(now).opening)
         if not s.open_detection():
             s = replace(s, detections=(*s.detections, Detection(err.cause, s.step, now)))
         reason = str(err)
         prompt = Prompt(s.step, PromptKind.HANDOVER, s.state, indicated, part, reason=reason)
         event = f"{now:.2f}: hands {indicated} over to the operator: {reason}"
         home = max(abs(a - b) for a, b in zip(q, self._home, strict=True)) < 1e-3
-        return s.noted(
-            event,
-            mode=Mode.HANDOVER,
-            clock=replace(s.clock, plan=None),
-            turn=replace(s.turn, change=None, awaiting=False),
-            q_hold=tuple(float(x) for x in q),
-            opening_hold=float(s.command(now).opening),
-            question=replace(s.question, prompt=prompt, asked_at=now, prompted_at=now),
-            recovery=replace(s.recovery, handover=reason, away=not home, grip_lost_at=None),
-        )
+        s = cancelled(s.noted(event).enter(Event.HANDED_OVER))
+        s = question.handed_over(hold(s, tuple(float(x) for x in q), opening), prompt, now)
+        record = replace(s.recovery, handover=reason, away=not home, grip_lost_at=None)
+        return replace(s, recovery=record)
 
     def wait_for_operator(
         self, s: SupervisorStatus, cell: Readings, now: float
@@ -388,13 +347,36 @@ class FaultRecovery:
             return self.note_silence(s, now)
         s = resolve(s, None, now, Recovery.OPERATOR)
         event = f"{now:.2f}: the operator has done {s.task.indicated} by hand"
-        return s.noted(
-            event,
-            mode=Mode.SETTLE,
-            settle_until=now + self._limits.settle_time,
-            question=replace(s.question, prompt=replace(s.question.prompt, kind=PromptKind.NONE)),
-            recovery=replace(s.recovery, recovering=None),
-        )
+        s = s.noted(event).enter(Event.DONE_BY_HAND, now + self._limits.settle_time)
+        return replace(question.cleared(s), recovery=replace(s.recovery, recovering=None))
 
 
-__all__ = ["FaultRecovery"]
+def resolve(s: SupervisorStatus, cause: Cause | None, now: float, recovery: Recovery):
+    """`s` with its open detections of `cause` (None: every cause) marked recovered by
+    `recovery` at `now`."""
+    detections = tuple(
+        replace(d, resolved_at=now, recovery=recovery)
+        if cause in (None, d.cause) and d.resolved_at is None
+        else d
+        for d in s.detections
+    )
+    return replace(s, detections=detections)
+
+
+def plan_started(s: SupervisorStatus) -> SupervisorStatus:
+    """`s` starting on a plan: every plan ends at home, so the arm is no longer away."""
+    return replace(s, recovery=replace(s.recovery, away=False))
+
+
+def settled(s: SupervisorStatus) -> SupervisorStatus:
+    """`s` with the parts settled after a guarded stop (the cell is read as after any task)."""
+    return replace(s, recovery=replace(s.recovery, guarded=False))
+
+
+def task_closed(s: SupervisorStatus) -> SupervisorStatus:
+    """`s` with its task read from the cell: nothing picked again or handed over any more."""
+    record = replace(s.recovery, recovering=None, recoveries=0, handover="")
+    return replace(s, recovery=record)
+
+
+__all__ = ["FaultRecovery", "plan_started", "resolve", "settled", "task_closed"]

@@ -30,11 +30,16 @@ to and turns when the indication names another task. With predictive separation 
 plan's moves around its forecast of the operator.
 
 The Supervisor is composed of parts, each with its own narrow inputs (the status, the update's
-`Readings`, the time) and its own record in the status: `FaultRecovery`
-(`hrc_drake.cell.controller.recovery`), `Anticipation` (`hrc_drake.cell.controller.anticipation`),
-`KeepClear` (`hrc_drake.cell.controller.keep_clear`), and the `PlanAsker` they share
-(`hrc_drake.cell.controller.planning`). Its values (mode, status records, limits) are in
-`supervisor_state`; what the cell shows after a task, in `observe`.
+`Readings`, the time) and its own record in the status, of which it is the one writer:
+`FaultRecovery` (`recovery`: `RecoveryState`, the detections), `Anticipation` (`anticipation`:
+`TurnState`), `KeepClear` (`keep_clear`: `KeepClearState`), the `PlanAsker` they share
+(`planning`: `PlanAsk`), the operator's interface (`question`: `Question`) and the
+`PlanFollower` (`follower`: the plan clock and the arm's command). A part changes another's
+record only through that owner's functions; the mode changes only through the table
+`supervisor_state.TRANSITIONS` (`SupervisorStatus.enter`); this module writes the task's own
+fields (state, step, task, history). Its values (mode, status records, limits) are in
+`supervisor_state`; what the cell shows after a task, in `observe`
+(`tests/test_record_owners.py` holds each record to its one writer).
 
 The robot follows its plan in plan time `tau`, advancing at the speed scale s ∈ [0, 1] the
 separation monitor allows (`speed_limit`): it slows by scaling its trajectory's time, stops at
@@ -45,7 +50,6 @@ release's end until the fingers have let go.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from dataclasses import replace
 
@@ -53,40 +57,33 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem, ValueProducer
 
-from hrc_drake.cell.controller.anticipation import (
-    TAU_EPS,
-    Anticipation,
-    back_above,
-    same_part,
-    wait_point,
-)
+from hrc_drake.cell.controller import anticipation, follower, planning, question, recovery
+from hrc_drake.cell.controller.anticipation import Anticipation, back_above
+from hrc_drake.cell.controller.follower import PlanFollower
 from hrc_drake.cell.controller.guard import DescentGuard
 from hrc_drake.cell.controller.intent import MotionIntent, plan_velocities
 from hrc_drake.cell.controller.keep_clear import KeepClear, KeepClearSettings
 from hrc_drake.cell.controller.observe import cell_shows, task_record
 from hrc_drake.cell.controller.planning import PlanAsker
 from hrc_drake.cell.controller.readings import Readings, SupervisorInputs
-from hrc_drake.cell.controller.recovery import FaultRecovery
+from hrc_drake.cell.controller.recovery import FaultRecovery, resolve
 from hrc_drake.cell.controller.supervisor_state import (
     N_JOINTS,
     TASK_CAP,
     ArmCommand,
     Cause,
     Detection,
-    HeldWait,
+    Event,
     Mode,
-    Question,
     Recovery,
     SupervisorError,
     SupervisorLimits,
     SupervisorStatus,
     TaskInFlight,
     TaskRecord,
-    resolve,
 )
 from hrc_drake.cell.ports import CellConfiguration, PartStatus
 from hrc_drake.hri.messages import Prompt, PromptKind
-from hrc_drake.motion.path_time import speed_cap
 from hrc_drake.motion.plan import Plan
 from hrc_drake.motion.plan_request import PlanFailure
 from hrc_drake.motion.service import PlanService
@@ -140,8 +137,11 @@ class Supervisor(LeafSystem):
         self._anticipation = Anticipation(space, policy, self._planning)
         self._keep_clear = KeepClear(keep_clear if keep_clear is not None else KeepClearSettings())
         self._guard = DescentGuard(self._limits.guard)
+        self._follower = PlanFollower(
+            self._limits, self._anticipation.pause_at, self._recovery.release_wait
+        )
         self._inputs = SupervisorInputs.declare(self)
-        initial = SupervisorStatus(q_hold=home, opening_hold=float(home_opening))
+        initial = follower.hold(SupervisorStatus(), home, float(home_opening))
         self._status_index = self.DeclareAbstractState(AbstractValue.Make(initial))
         self._declare_outputs()
         self.DeclarePeriodicUnrestrictedUpdateEvent(self._limits.period, 0.0, self._update)
@@ -233,7 +233,8 @@ class Supervisor(LeafSystem):
         try:
             if not stale:  # a stale reading says nothing of where the arm is now
                 self._check_tracking(status, cell, now)
-            status = self._advance(status, float(np.clip(limit, 0.0, 1.0)), now, cell.opening())
+            speed = float(np.clip(limit, 0.0, 1.0))
+            status = self._follower.advance(status, speed, now, cell.opening())
             status = self._step(status, cell, now)
             status = self._keep_clear.update(status, cell.body, now)
         except SupervisorError as err:
@@ -247,7 +248,10 @@ class Supervisor(LeafSystem):
         if status.turn.awaiting and status.mode in (Mode.PLAN, Mode.BLOCKED, Mode.EXECUTE):
             status, indicated = self._indicated(status, cell, now)
             if indicated is not None:
+                committed = status.turn.committed
                 status = self._anticipation.on_indication(status, indicated, now)
+                if indicated != committed:  # turning to it: the task in flight is it
+                    status = replace(status, task=replace(status.task, indicated=indicated))
         if status.mode == Mode.EXECUTE and status.turn.change is None:
             status = self._recovery.watch_obstacle(status, cell.configuration(), now)
         if status.turn.change is not None:
@@ -302,49 +306,6 @@ class Supervisor(LeafSystem):
                 cause=Cause.TRACKING,
             )
 
-    def _advance(
-        self, s: SupervisorStatus, limit: float, now: float, opening: float
-    ) -> SupervisorStatus:
-        """Move the plan time to `now`, then ramp the speed scale toward `limit` (no faster
-        than the joint acceleration limit allows at the plan's speed) and set the rate on. It
-        stands still for bolting, and after a release until the fingers (`opening`) let go."""
-        clock = s.clock
-        if s.mode != Mode.EXECUTE or clock.plan is None:
-            return replace(s, clock=replace(clock, speed=limit))
-        plan = clock.plan
-        tau = s.plan_time(now)
-        above = wait_point(plan)
-        if tau >= above and clock.tau <= above + TAU_EPS:  # reaching the pre-place pose
-            if s.turn.awaiting:  # no indication yet: wait above the seat
-                return self._clocked(s, tau=above, tau_time=now, speed=limit, rate=0.0)
-            change = s.turn.change
-            if change is not None and not same_part(self._space.spec, plan.task, change):
-                # Another part indicated as the arm reaches the pre-place pose, where it is at
-                # rest: it stops there to turn. Slowing down along the path took it on down
-                # to the seat, too late to turn (the run stopped; population sweep).
-                return self._clocked(s, tau=above, tau_time=now, speed=0.0, rate=0.0)
-        bolting = s.holding_for_bolts(tau)
-        stand = plan.t_in_place if bolting else self._recovery.release_wait(s, tau, opening)
-        if stand is not None:
-            return self._clocked(s, tau=stand, tau_time=now, speed=limit, rate=0.0)
-        limit = min(limit, speed_cap(clock.caps, now, tau))  # the motion's path timing
-        qdot = np.abs(plan.trajectory.EvalDerivative(min(tau, plan.duration), 1)).max()
-        step = self._limits.joint_acceleration * self._limits.period / max(qdot, 1e-9)
-        speed = float(np.clip(limit, clock.speed - step, clock.speed + step))
-        hold = clock.hold_at(now) if s.held(now) else None  # the planned wait the arm stands in
-        since = clock.held_since
-        if hold is not None and (since is None or since.tau != hold.tau):
-            since = HeldWait(hold.tau, now)
-        waited = clock.waited + (now - clock.tau_time if hold is not None else 0.0)
-        return self._clocked(
-            s, tau=tau, tau_time=now, speed=speed, rate=speed, waited=waited, held_since=since
-        )
-
-    @staticmethod
-    def _clocked(s: SupervisorStatus, **changes) -> SupervisorStatus:
-        """`s` with its plan clock changed."""
-        return replace(s, clock=replace(s.clock, **changes))
-
     def _decide(self, s: SupervisorStatus, config: CellConfiguration, now: float):
         """At a task boundary: the MDP state from the cell, then the policy's proposal on the
         operator's interface."""
@@ -357,7 +318,7 @@ class Supervisor(LeafSystem):
                 f"{sorted(space.configuration(index))}"
             )
         if space.kind[index] == StateKind.TERMINAL:
-            return s.noted(f"{now:.2f}: done", mode=Mode.DONE)
+            return s.noted(f"{now:.2f}: done").enter(Event.FINISHED)
         if s.step >= self._limits.max_steps:
             raise SupervisorError(
                 f"no terminal state after {s.step} tasks (the run's cap, run.max_steps)",
@@ -369,26 +330,12 @@ class Supervisor(LeafSystem):
         anticipate = self._limits.anticipate
         committed = self._anticipation.commit(s.state, proposal) if anticipate else None
         prompt = Prompt(s.step + 1, PromptKind.CHOOSE, s.state, proposal, committed=committed or "")
-        s = replace(
-            s,
-            mode=Mode.ASK,
-            step=s.step + 1,
-            question=Question(prompt=prompt, asked_at=now, prompted_at=now),
-            tokens_before=tokens,
-            turn=replace(
-                s.turn,
-                committed=committed,
-                awaiting=committed is not None,
-                change=None,
-                retargeted=False,
-                swapped=False,
-                returning=False,
-            ),
-        )
+        s = question.asked(s.enter(Event.PROPOSED), prompt, now)
+        s = anticipation.committed_to(replace(s, step=s.step + 1, tokens_before=tokens), committed)
         if committed is None:
             return s
         event = f"{now:.2f}: step {s.step} proposes {proposal}, starts on {committed}"
-        s = s.noted(event, task=TaskInFlight(proposal, committed))
+        s = replace(s.noted(event), task=TaskInFlight(proposal, committed))
         return self._planning.ask_task(s, committed, config, now)
 
     def _indicated(self, s: SupervisorStatus, cell: Readings, now: float):
@@ -407,11 +354,8 @@ class Supervisor(LeafSystem):
             return s
         proposal = s.question.prompt.proposal
         event = f"{now:.2f}: step {s.step} proposes {proposal}, operator indicates "
-        s = s.noted(
-            event + indicated,
-            question=replace(s.question, indicated_at=now),
-            task=TaskInFlight(proposal, indicated),
-        )
+        s = question.answered(s.noted(event + indicated), now)
+        s = replace(s, task=TaskInFlight(proposal, indicated))
         return self._planning.ask_task(s, indicated, cell.configuration(), now)
 
     def _feasible(self, s: SupervisorStatus, indicated: str) -> str:
@@ -453,33 +397,14 @@ class Supervisor(LeafSystem):
                 f"step {step}: {plan.instance} should be {expected.value} for {indicated}, the "
                 f"cell shows it {placement.status.value}"
             )
-        returning = s.turn.returning
         started = replace(
-            s,
-            mode=Mode.EXECUTE,
-            clock=replace(
-                s.clock,
-                plan=plan,
-                plan_start=now,
-                tau=0.0,
-                tau_time=now,
-                rate=s.clock.speed,
-                holds=(),
-                caps=(),
-                held_since=None,
-            ),
+            follower.start(s.enter(Event.PLAN_STARTED), plan, now),
             task=replace(s.task, part=plan.instance),
             bolted=False,
-            planned_ahead=returning,  # a part put back: nothing to plan ahead for yet
-            # Putting a part back, the arm stops above it, where the indicated task starts.
-            turn=replace(s.turn, turn_tau=back_above(plan) if returning else None),
-            recovery=replace(s.recovery, away=False),  # every plan ends at home
-            ask=replace(
-                s.ask,
-                idle=now - s.ask.requested_at,
-                wall_idle=time.perf_counter() - s.ask.requested_wall,
-            ),
+            planned_ahead=s.turn.returning,  # a part put back: nothing to plan ahead for yet
         )
+        started = anticipation.plan_started(recovery.plan_started(started), plan)
+        started = planning.plan_taken(started, now)
         if started.turn.awaiting and plan.task == started.turn.committed:
             return self._anticipation.plan_retargets(started, config)
         return started
@@ -495,17 +420,12 @@ class Supervisor(LeafSystem):
         request = s.ask.request
         if s.turn.awaiting and not request.held:
             event = f"{now:.2f}: step {s.step}: cannot start on {request.task} ({failure.reason})"
-            prompt = replace(s.question.prompt, committed="")  # no longer on its way
-            return s.noted(
-                f"{event}; waits for the indication",
-                mode=Mode.ASK,
-                task=None,
-                question=replace(s.question, prompt=prompt),
-                turn=replace(s.turn, committed=None, awaiting=False),
-            )
+            s = s.noted(f"{event}; waits for the indication").enter(Event.NO_START)
+            # No longer on its way to the task it committed to.
+            return anticipation.dropped(question.uncommitted(replace(s, task=None)))
         if request.held and request.task != UNDO:
             event = f"{now:.2f}: {failure}: puts {request.instance} back first"
-            s = s.noted(event, turn=replace(s.turn, returning=True))
+            s = anticipation.putting_back(s.noted(event))
             return self._planning.ask(s, replace(request, task=UNDO), now)
         if request.held:  # the way back to the tray: the part is in the gripper
             raise SupervisorError(f"step {s.step}: {failure}", cause=Cause.PLAN)
@@ -536,27 +456,13 @@ class Supervisor(LeafSystem):
         above = back_above(plan) if s.turn.returning else None
         if above is not None and tau >= above:  # the part is back: the indicated task
             q = tuple(float(x) for x in plan.trajectory.value(above).ravel())
-            s = replace(
-                s,
-                clock=replace(s.clock, plan=None),
-                q_hold=q,
-                opening_hold=plan.gripper_opening(above),
-                turn=replace(s.turn, returning=False, turn_tau=None),
-            )
+            s = anticipation.put_back(follower.hold(s, q, plan.gripper_opening(above)))
             config = cell.configuration()
             return self._planning.ask_task(s, s.task.indicated, config, now, start=q)
         if tau >= plan.duration:
             q_end = tuple(float(x) for x in plan.trajectory.value(plan.duration).ravel())
-            prompt = replace(s.question.prompt, kind=PromptKind.NONE)
-            return replace(
-                s,
-                mode=Mode.SETTLE,
-                settle_until=now + self._limits.settle_time,
-                q_hold=q_end,
-                opening_hold=plan.gripper_opening(plan.duration),
-                clock=replace(s.clock, plan=None),
-                question=replace(s.question, prompt=prompt),
-            )
+            s = s.enter(Event.PLAN_DONE, now + self._limits.settle_time)
+            return question.cleared(follower.hold(s, q_end, plan.gripper_opening(plan.duration)))
         return s
 
     def _hold_for_bolts(self, s: SupervisorStatus, cell: Readings, now: float):
@@ -564,12 +470,11 @@ class Supervisor(LeafSystem):
         indicated, part = s.task.indicated, s.task.part
         if s.question.prompt.kind != PromptKind.BOLT:
             prompt = Prompt(s.step, PromptKind.BOLT, s.state, indicated, part)
-            question = replace(s.question, prompt=prompt, held_at=now)
-            return s.noted(f"{now:.2f}: holds {part}", question=question)
+            return question.holding(s.noted(f"{now:.2f}: holds {part}"), prompt, now)
         if not cell.indication().answers(s.question.prompt):
             return s
-        s = s.noted(f"{now:.2f}: operator has bolted {part}", bolted=True)
-        return self._clocked(s, tau=s.plan.t_release, tau_time=now)
+        s = s.noted(f"{now:.2f}: operator has bolted {part}")
+        return follower.to_release(replace(s, bolted=True), now)
 
     def _observe(self, s: SupervisorStatus, cell: Readings, now: float):
         """After the task: what the cell shows was done moves the MDP state on. A part let go
@@ -579,7 +484,7 @@ class Supervisor(LeafSystem):
         indicated, part = s.task.indicated, s.task.part
         config: CellConfiguration = cell.configuration()
         handover, guarded = s.recovery.handover, s.recovery.guarded
-        s = replace(s, recovery=replace(s.recovery, guarded=False), retreat=None)
+        s = follower.backed_off(recovery.settled(s))
         # A part the guarded descent let go early is placed again even if it fell into its
         # seat: it was never held there for the bolts.
         unseated = (
@@ -599,20 +504,12 @@ class Supervisor(LeafSystem):
         if recovering:
             for cause in (Cause.GRIP, Cause.SEAT):
                 s = resolve(s, cause, now, recovering)
-        s = replace(s, recovery=replace(s.recovery, recovering=None, recoveries=0))
         record = task_record(s, observed, next_state, part, now)
         if self._on_task is not None:
             self._on_task(record)
         event = f"{now:.2f}: cell shows {observed}; state {' '.join(next_state) or '(start)'}"
-        return s.noted(
-            event,
-            mode=Mode.DECIDE,
-            state=next_state,
-            task=None,
-            ask=replace(s.ask, request=None),
-            recovery=replace(s.recovery, handover=""),
-            history=(*s.history, record),
-        )
+        s = planning.task_closed(recovery.task_closed(s.noted(event).enter(Event.TASK_READ)))
+        return replace(s, state=next_state, task=None, history=(*s.history, record))
 
 
 __all__ = [

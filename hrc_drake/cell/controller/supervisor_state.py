@@ -42,6 +42,64 @@ class Mode(enum.Enum):
     FAILED = "failed"  # cannot go on (the reason is in `error`)
 
 
+class Event(enum.StrEnum):
+    """What moves the Supervisor from one mode to the next (`TRANSITIONS`)."""
+
+    PROPOSED = "proposed"  # the policy's proposal is on the interface
+    FINISHED = "finished"  # the cell shows a terminal state
+    PLAN_ASKED = "plan-asked"  # a plan is asked for; the arm holds still until it comes
+    NO_START = "no-start"  # no plan for the commitment: the indication is waited for
+    PLAN_STARTED = "plan-started"  # the plan came: the arm follows it
+    PATH_BLOCKED = "path-blocked"  # no path past an obstacle
+    PLAN_DONE = "plan-done"  # the plan's end: the parts settle
+    GUARD_TRIPPED = "guard-tripped"  # the guarded descent let the part go early
+    PART_LOST = "part-lost"  # a part out of the gripper or its seat
+    HANDED_OVER = "handed-over"  # the operator is asked to do the task by hand
+    DONE_BY_HAND = "done-by-hand"  # the operator did the handed-over task
+    TASK_READ = "task-read"  # the cell was read after the task: the next boundary
+    STOPPED = "stopped"  # the run stops
+
+
+_WORKING = (Mode.ASK, Mode.PLAN, Mode.BLOCKED, Mode.EXECUTE, Mode.SETTLE, Mode.RECOVER)
+# Every mode change of the Supervisor: {(mode, event): next mode}. A pair not listed is a bug
+# (`transition` refuses it); a run may stop (`Event.STOPPED`) in any mode.
+TRANSITIONS: dict[tuple[Mode, Event], Mode] = {
+    (Mode.DECIDE, Event.PROPOSED): Mode.ASK,
+    (Mode.DECIDE, Event.FINISHED): Mode.DONE,
+    **{
+        (mode, Event.PLAN_ASKED): Mode.PLAN
+        for mode in (Mode.DECIDE, Mode.ASK, Mode.PLAN, Mode.BLOCKED, Mode.EXECUTE, Mode.RECOVER)
+    },
+    (Mode.PLAN, Event.NO_START): Mode.ASK,
+    (Mode.PLAN, Event.PLAN_STARTED): Mode.EXECUTE,
+    (Mode.PLAN, Event.PATH_BLOCKED): Mode.BLOCKED,
+    (Mode.EXECUTE, Event.PLAN_DONE): Mode.SETTLE,
+    (Mode.EXECUTE, Event.GUARD_TRIPPED): Mode.SETTLE,
+    (Mode.EXECUTE, Event.PART_LOST): Mode.RECOVER,
+    (Mode.SETTLE, Event.PART_LOST): Mode.RECOVER,
+    **{(mode, Event.HANDED_OVER): Mode.HANDOVER for mode in _WORKING},
+    (Mode.HANDOVER, Event.DONE_BY_HAND): Mode.SETTLE,
+    (Mode.SETTLE, Event.TASK_READ): Mode.DECIDE,
+    **{(mode, Event.STOPPED): Mode.FAILED for mode in Mode},
+}
+
+
+class TransitionError(RuntimeError):
+    """A mode change that `TRANSITIONS` does not list (a bug in the Supervisor, never a fault
+    of the cell: it is not caught as a `SupervisorError` is)."""
+
+
+def transition(mode: Mode, event: Event) -> Mode:
+    """The mode after `event` in `mode`; TransitionError if `TRANSITIONS` does not list it."""
+    try:
+        return TRANSITIONS[(mode, event)]
+    except KeyError:
+        raise TransitionError(
+            f"no transition from mode {mode.value!r} on event {event.value!r}: list it in "
+            "supervisor_state.TRANSITIONS if it is meant"
+        ) from None
+
+
 @dataclass(frozen=True)
 class TaskRecord:
     """One task as it happened."""
@@ -321,9 +379,15 @@ class SupervisorStatus:
         """Whether a detection of `cause` (None: of any cause) is not resolved yet."""
         return any(d.resolved_at is None and cause in (None, d.cause) for d in self.detections)
 
-    def noted(self, event: str, **changes) -> SupervisorStatus:
-        """This status with `event` appended to its events (and `changes` made)."""
-        return replace(self, events=(*self.events, event), **changes)
+    def noted(self, event: str) -> SupervisorStatus:
+        """This status with `event` appended to its events."""
+        return replace(self, events=(*self.events, event))
+
+    def enter(self, event: Event, settle_until: float | None = None) -> SupervisorStatus:
+        """This status in the mode `event` leads to (`transition`: the only place the mode
+        changes), settling until `settle_until` if given."""
+        until = self.settle_until if settle_until is None else settle_until
+        return replace(self, mode=transition(self.mode, event), settle_until=until)
 
 
 @dataclass(frozen=True, eq=False)  # arrays inside: compared by identity, never by value
@@ -334,18 +398,6 @@ class ArmCommand:
     q: np.ndarray
     v: np.ndarray
     opening: float
-
-
-def resolve(s: SupervisorStatus, cause: Cause | None, now: float, recovery: Recovery):
-    """`s` with its open detections of `cause` (None: every cause) marked recovered by
-    `recovery` at `now`."""
-    detections = tuple(
-        replace(d, resolved_at=now, recovery=recovery)
-        if cause in (None, d.cause) and d.resolved_at is None
-        else d
-        for d in s.detections
-    )
-    return replace(s, detections=detections)
 
 
 # An obstacle counts as moved (worth planning again) past this distance [m].
@@ -411,9 +463,11 @@ __all__ = [
     "OBSTACLE_MOVED",
     "PART_FALL_TIME",
     "TASK_CAP",
+    "TRANSITIONS",
     "ArmCommand",
     "Cause",
     "Detection",
+    "Event",
     "HeldWait",
     "KeepClearState",
     "Mode",
@@ -427,7 +481,8 @@ __all__ = [
     "SupervisorStatus",
     "TaskInFlight",
     "TaskRecord",
+    "TransitionError",
     "TurnState",
     "obstacle_moved",
-    "resolve",
+    "transition",
 ]
