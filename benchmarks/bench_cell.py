@@ -9,7 +9,6 @@ held by its PD actuators. Writes benchmarks/reports/cell.md (or `--out`).
 """
 
 import argparse
-import dataclasses
 import importlib.metadata
 import os
 import platform
@@ -24,6 +23,7 @@ from pydrake.geometry import Meshcat
 from pydrake.math import RigidTransform
 
 from hrc_drake.atomic import atomic_write_text
+from hrc_drake.cell.scenario import load_cell_scenario
 from hrc_drake.cell.station import make_cell_station, simulate_station, station_scenario
 from hrc_drake.scenario.schema import Scenario
 
@@ -51,15 +51,11 @@ SETTINGS = (
 
 
 def _scenario(setting: Setting) -> Scenario:
-    scenario = Scenario()
-    physics = dataclasses.replace(
-        scenario.physics,
-        time_step=setting.time_step,
-        contact_model="hydroelastic_with_fallback",
-        discrete_contact_approximation=setting.approximation,
-        contact_surface_representation="polygon",
+    plant = (
+        f"{{plant_config: {{time_step: {setting.time_step}, "
+        f"discrete_contact_approximation: {setting.approximation}}}}}"
     )
-    scenario = dataclasses.replace(scenario, physics=physics)
+    scenario = load_cell_scenario(None, plant)
     return station_scenario(scenario, robot=setting.include_robot)
 
 

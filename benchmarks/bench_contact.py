@@ -88,18 +88,32 @@ class Setting:
 SETTINGS = (
     Setting(
         "before: 5 ms, E 2e7 Pa, τ 0.1 s, no margin",
-        "{physics: {time_step: 0.005, contact: {hydroelastic_modulus: 2.0e7, "
-        "relaxation_time: 0.1, margin: 0.0}}}",
+        "{plant_config: {time_step: 0.005}, scene_graph_config: {default_proximity_properties: "
+        "{hydroelastic_modulus: 2.0e7, relaxation_time: 0.1, margin: 0.0}}}",
     ),
-    Setting("5 ms, E 5e6 Pa, τ 1 ms, margin 0.1 mm", "{physics: {time_step: 0.005}}"),
+    Setting("5 ms, E 5e6 Pa, τ 1 ms, margin 0.1 mm", "{plant_config: {time_step: 0.005}}"),
     Setting("default: 10 ms, E 5e6 Pa, τ 1 ms, margin 0.1 mm"),
-    Setting("10 ms, E 1e7 Pa", "{physics: {contact: {hydroelastic_modulus: 1.0e7}}}"),
-    Setting("10 ms, τ 10 ms", "{physics: {contact: {relaxation_time: 0.01}}}"),
-    Setting("10 ms, τ 0.1 s", "{physics: {contact: {relaxation_time: 0.1}}}"),
-    Setting("10 ms, no margin", "{physics: {contact: {margin: 0.0}}}"),
-    Setting("10 ms, E 1e6 Pa", "{physics: {contact: {hydroelastic_modulus: 1.0e6}}}"),
+    Setting(
+        "10 ms, E 1e7 Pa",
+        "{scene_graph_config: {default_proximity_properties: {hydroelastic_modulus: 1.0e7}}}",
+    ),
+    Setting(
+        "10 ms, τ 10 ms",
+        "{scene_graph_config: {default_proximity_properties: {relaxation_time: 0.01}}}",
+    ),
+    Setting(
+        "10 ms, τ 0.1 s",
+        "{scene_graph_config: {default_proximity_properties: {relaxation_time: 0.1}}}",
+    ),
+    Setting(
+        "10 ms, no margin", "{scene_graph_config: {default_proximity_properties: {margin: 0.0}}}"
+    ),
+    Setting(
+        "10 ms, E 1e6 Pa",
+        "{scene_graph_config: {default_proximity_properties: {hydroelastic_modulus: 1.0e6}}}",
+    ),
     Setting("10 ms, rigid plate and tray", rigid=True),
-    Setting("5 ms, rigid plate and tray", "{physics: {time_step: 0.005}}", rigid=True),
+    Setting("5 ms, rigid plate and tray", "{plant_config: {time_step: 0.005}}", rigid=True),
 )
 
 
@@ -383,7 +397,7 @@ def rim_pinch(modulus: float) -> list[dict]:
         texts = [
             "{assembly: four-slot, name: four-slot}",
             f"{{faults: [!NoSeat {{task: 2, offset: {offset}}}]}}",
-            f"{{physics: {{contact: {{hydroelastic_modulus: {modulus:g}}}}}}}",
+            _modulus_text(modulus),
         ]
         loop = build_closed_loop(load_cell_scenario(None, texts))
         owners = geometry_owners(loop.station.plant)
@@ -445,11 +459,17 @@ DROPS_ACROSS = 24  # drops per modulus
 WEDGED = 5.0  # a part at rest under contact forces past this many times its weight is wedged
 
 
+def _modulus_text(modulus: float) -> str:
+    """A scenario text setting the default contact material's hydroelastic modulus [Pa]."""
+    material = f"{{hydroelastic_modulus: {modulus:g}}}"
+    return f"{{scene_graph_config: {{default_proximity_properties: {material}}}}}"
+
+
 def drops_across_a_pocket(modulus: float) -> tuple[float, list[dict]]:
     """Experiment 5 at hydroelastic `modulus`: the part's weight [N], and per drop its yaw off
     the pocket [rad], its speed [m/s], the part's underside at rest above where it is when
     seated [m] and the largest contact force on the part then [N]."""
-    text = f"{{physics: {{contact: {{hydroelastic_modulus: {modulus:g}}}}}}}"
+    text = _modulus_text(modulus)
     station = make_cell_station(station_scenario(load_cell_scenario(None, [text]), robot=False))
     plant, body = station.plant, station.part_body("oval_flange_1")
     X_W_slot = plant.GetFrameByName("slot_1").CalcPoseInWorld(plant.CreateDefaultContext())

@@ -175,7 +175,8 @@ def creep(time_step: float, modulus: float, hold: float) -> dict:
     from hrc_drake.tasks.spec import load_spec
 
     text = (
-        f"{{physics: {{time_step: {time_step}, contact: {{hydroelastic_modulus: {modulus:g}}}}}, "
+        f"{{plant_config: {{time_step: {time_step}}}, scene_graph_config: "
+        f"{{default_proximity_properties: {{hydroelastic_modulus: {modulus:g}}}}}, "
         "body: {enabled: false}}"
     )
     scenario = load_cell_scenario(None, text)

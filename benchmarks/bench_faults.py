@@ -110,7 +110,10 @@ def run_tasks(cell: str, lean: bool) -> int:
 
 def modulus_text(modulus: float) -> str:
     """The scenario text that sets the parts' hydroelastic modulus [Pa]."""
-    return f"{{physics: {{contact: {{hydroelastic_modulus: {modulus:g}}}}}}}"
+    return (
+        "{scene_graph_config: {default_proximity_properties: "
+        f"{{hydroelastic_modulus: {modulus:g}}}}}}}"
+    )
 
 
 def one_run(job: tuple) -> dict:

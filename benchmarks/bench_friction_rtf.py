@@ -36,8 +36,8 @@ ROOT = HERE.parent
 REPORT = HERE / "reports" / "friction_rtf.md"
 NO_DELAY = "{interaction: {delay: {distribution: fixed, median: 0.0}}}"
 BEFORE = (
-    "{physics: {time_step: 0.005, contact: {hydroelastic_modulus: 2.0e7, relaxation_time: 0.1, "
-    "margin: 0.0}}}"
+    "{plant_config: {time_step: 0.005}, scene_graph_config: {default_proximity_properties: "
+    "{hydroelastic_modulus: 2.0e7, relaxation_time: 0.1, margin: 0.0}}}"
 )
 
 
@@ -56,7 +56,7 @@ def _worker(tree: str, scenario: str, texts: list[str], repeats: int) -> dict:
     from pydrake.systems.analysis import Simulator
 
     from hrc_drake.cell.run.run import build_closed_loop, run_scenario
-    from hrc_drake.cell.scenario import load_cell_scenario
+    from hrc_drake.cell.scenario import load_cell_scenario, plant_step
     from hrc_drake.cell.station.build import make_cell_station
     from hrc_drake.scenario.schema import Scenario
 
@@ -87,7 +87,7 @@ def _worker(tree: str, scenario: str, texts: list[str], repeats: int) -> dict:
     simulator.AdvanceTo(5.2)
     at_rest = {"wall": 5.0 / (time.perf_counter() - wall), "cpu": 5.0 / (time.process_time() - cpu)}
     return {
-        "time_step": loaded.physics.time_step,
+        "time_step": plant_step(loaded),
         "first": {"names": first.names, "done": first.done, "error": first.error},
         "runs": runs,
         "at_rest": at_rest,
@@ -238,7 +238,7 @@ def main(argv: list[str] | None = None) -> int:
     configurations = [
         Configuration("friction grasps (defaults)", ROOT, (NO_DELAY,)),
         Configuration(
-            "friction grasps, 5 ms step", ROOT, (NO_DELAY, "{physics: {time_step: 0.005}}")
+            "friction grasps, 5 ms step", ROOT, (NO_DELAY, "{plant_config: {time_step: 0.005}}")
         ),
         Configuration("friction grasps, contact settings before", ROOT, (NO_DELAY, BEFORE)),
         Configuration(f"grasp welds ({args.weld_commit})", args.weld_tree.resolve()),

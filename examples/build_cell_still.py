@@ -31,9 +31,8 @@ def main() -> None:
     if args.assembly is not None:
         scenario = dataclasses.replace(scenario, assembly=str(args.assembly))
     placements = dict(item.split("=") for item in args.placements.split(",") if item)
-    camera = dataclasses.replace(scenario.station.camera, enabled=True)
-    scenario = station_scenario(scenario, initial_placements=placements, camera=camera)
-    station = make_cell_station(scenario)
+    scenario = station_scenario(scenario, initial_placements=placements)
+    station = make_cell_station(scenario, camera=True)  # the scenario's camera, or the default
     design = station.design
     print(f"{design.spec.name}: {design.slots} slots, parts {', '.join(design.instance_names)}")
 

@@ -284,7 +284,8 @@ def _merge(data: Any, schema: type, where: str, base: Any = None) -> Any:
     if not isinstance(data, dict):
         raise TypedYamlError(f"{where or '<top>'}: expected a mapping, got {_short(data)}")
     hints = typing.get_type_hints(schema)
-    fields = {f.name: f for f in dataclasses.fields(schema)}
+    # A field marked `metadata={"yaml": False}` is filled by the loader, never by the YAML.
+    fields = {f.name: f for f in dataclasses.fields(schema) if f.metadata.get("yaml", True)}
     unknown = sorted(set(data) - set(fields))
     if unknown:
         raise TypedYamlError(

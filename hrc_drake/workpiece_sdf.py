@@ -28,7 +28,7 @@ Geometry (metres):
   and floors reaching down through the plate also kept them from wedging, but would make the
   plate press softer: not kept.)
 - Every collision geometry is compliant hydroelastic (its material is the scenario's
-  `physics.contact`, applied by the station), the plate and the tray too, although they never
+  `scene_graph_config`, applied by the station), the plate and the tray too, although they never
   move: rigid ones would be cheaper, but a part let go a few mm above a rigid seat moves more
   than the hydroelastic margin in one 5 ms step, falls through the rigid floor's surface before
   the contact pushes back, and is thrown out of its pocket (a 3 mm drop: 9 of 12 settling runs
@@ -111,7 +111,7 @@ def _v(values) -> str:
 
 def _proximity(compliant: bool) -> str:
     # A compliant geometry states nothing: compliance and the whole material (modulus, mesh
-    # size, dissipation, friction) are the scenario's `physics.contact`, which the station hands
+    # size, dissipation, friction) are the scenario's `scene_graph_config`, which the station hands
     # to Drake as SceneGraphConfig defaults. Only a rigid geometry says so.
     if compliant:
         return ""

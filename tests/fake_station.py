@@ -31,10 +31,11 @@ from hrc_drake.cell.ports import (
     PartStatus,
     pose_tuple,
 )
+from hrc_drake.cell.scenario import plant_step
 from hrc_drake.hri.messages import Indication, Prompt, PromptKind
 from hrc_drake.scenario.schema import Scenario
 
-STEP = Scenario().physics.time_step  # the plant's time step: the lockstep's exchange period
+STEP = plant_step(Scenario())  # the plant's time step: the lockstep's exchange period
 CONTROL_PERIOD = 0.02  # the default scenario's run.period
 # Measured poses carry every bit of a double (a pose read from a plant); the tray part has none,
 # as the operator's confirmation would send.

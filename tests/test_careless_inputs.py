@@ -49,12 +49,11 @@ def assert_one_line(code, out, err, *words):
         ("{motion: {hold_time: .nan}}", "motion.hold_time"),
         ("{motion: {hold_time: .inf}}", "motion.hold_time"),
         ("{run: {max_sim_time: .inf}}", "run.max_sim_time"),
-        ("{physics: {time_step: .nan}}", "physics.time_step"),
+        ("{plant_config: {time_step: .nan}}", "plant_config.time_step"),
         ("{station: {ur3: {kp: [.nan, 1, 1, 1, 1, 1]}}}", "station.ur3.kp[0]"),
         ("{run: {max_steps: 0}}", "run.max_steps"),
         ("{safety: {slow_band: -1}}", "safety.slow_band"),
         ("{station: {rg2: {grip_tolerance: 0}}}", "station.rg2.grip_tolerance"),
-        ("{station: {camera: {fov_y: 180}}}", "station.camera.fov_y"),
         # Issue 51: speeds the UR3 cannot reach ran (50 m/s for 0.5).
         ("{motion: {tcp_speed_limit: 50}}", "motion.tcp_speed_limit"),
         ("{safety: {contact_speed: 9}}", "safety.contact_speed"),

@@ -258,7 +258,8 @@ def test_a_flange_dropped_across_a_pocket_rests_on_its_rims_at_either_modulus(mo
     its boss sank between the rims and stayed wedged there by kilonewtons of balanced contact
     force, which no grasp lifts (the first and the sixth of these drops, at 1e7 Pa; the first
     at 5e6 Pa)."""
-    text = f"{{physics: {{contact: {{hydroelastic_modulus: {modulus:g}}}}}}}"
+    material = f"{{hydroelastic_modulus: {modulus:g}}}"
+    text = f"{{scene_graph_config: {{default_proximity_properties: {material}}}}}"
     station = make_cell_station(station_scenario(load_cell_scenario(None, [text]), robot=False))
     plant, body = station.plant, station.part_body("oval_flange_1")
     X_W_slot = plant.GetFrameByName("slot_1").CalcPoseInWorld(plant.CreateDefaultContext())
@@ -472,20 +473,21 @@ def test_the_fingers_squeeze_with_the_commanded_force(cell, force):
 
 
 def test_scenario_yaml_is_typed_and_checked():
-    scenario = load_cell_scenario(None, "physics: {time_step: 0.002}")
+    scenario = load_cell_scenario(None, "plant_config: {time_step: 0.002}")
     assert plant_config(scenario).time_step == 0.002
     assert plant_config(scenario).discrete_contact_approximation == "sap"
     with pytest.raises(ScenarioError, match="time_stp"):
-        load_cell_scenario(None, "physics: {time_stp: 0.002}")
+        load_cell_scenario(None, "plant_config: {time_stp: 0.002}")
     # The contact material is the scenario's, handed to SceneGraph as its defaults.
-    soft = load_cell_scenario(None, "physics: {contact: {hydroelastic_modulus: 1.0e6}}")
+    soft = load_cell_scenario(
+        None, "scene_graph_config: {default_proximity_properties: {hydroelastic_modulus: 1.0e6}}"
+    )
     defaults = scene_graph_config(soft).default_proximity_properties
     assert defaults.hydroelastic_modulus == 1.0e6 and defaults.compliance_type == "compliant"
     with pytest.raises(ScenarioError, match="robt"):
         load_cell_scenario(None, "station: {robt: false}")
-    tamsi = load_cell_scenario(None, "physics: {discrete_contact_approximation: tamsi}")
-    with pytest.raises(ValueError, match="SAP-family"):
-        make_cell_station(station_scenario(tamsi, robot=False))
+    with pytest.raises(ScenarioError, match="SAP-family"):
+        load_cell_scenario(None, "plant_config: {discrete_contact_approximation: tamsi}")
     placed = load_cell_scenario(None, "station: {robot: false, initial_placements: {flange_9: F1}}")
     with pytest.raises(ValueError, match=r"station\.initial_placements\.flange_9: not a part"):
         make_cell_station(placed)

@@ -29,11 +29,12 @@ from pathlib import Path
 import pytest
 import yaml
 
-from hrc_drake.scenario.schema import Scenario
+from hrc_drake.scenario.schema import DRAKE_SECTIONS, Scenario
 from hrc_drake.scenario.sensors import CAMERA, REALISTIC, SensorSettings
 
 REPO = Path(__file__).resolve().parents[1]
 DOCS = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
+DRAKE_SECTION = object()  # the default of a Drake section's own row: its rows state theirs
 KEY_DOC = "scenario.md"  # the page of the scenario's keys (README links to it)
 MAX_LINES = 10
 OPENING_LINES = 15
@@ -158,7 +159,8 @@ def scenario_keys(cls: type = Scenario, prefix: str = "") -> dict[str, object]:
     the member: `faults[!GripLost].force`; a dataclass shared by sibling fields is listed once
     under its placeholder (`sensors.<port>.rate`)."""
     hints = typing.get_type_hints(cls)
-    fields = dataclasses.fields(cls)
+    # A field the loader fills (`metadata={"yaml": False}`) is no key of the file.
+    fields = [f for f in dataclasses.fields(cls) if f.metadata.get("yaml", True)]
     types = [tuple(_dataclasses_in(hints[f.name])) for f in fields]
     keys: dict[str, object] = {}
     done: set[type] = set()
@@ -174,6 +176,31 @@ def scenario_keys(cls: type = Scenario, prefix: str = "") -> dict[str, object]:
             name = prefix + PLACEHOLDERS[member] if shared else key
             tag = f"[!{member.__name__}]" if len(with_fields) > 1 else ""
             keys.update(scenario_keys(member, f"{name}{tag}."))
+    return keys
+
+
+def drake_keys() -> dict[str, object]:
+    """The scenario's Drake sections (`DRAKE_SECTIONS`, read as Drake's own config types), and
+    within them every key whose cell default differs from Drake's own, with that default."""
+    from pydrake.geometry import SceneGraphConfig
+    from pydrake.multibody.plant import MultibodyPlantConfig
+
+    from hrc_drake.cell.scenario import CellConfigs
+
+    cell = CellConfigs()
+    keys: dict[str, object] = dict.fromkeys(DRAKE_SECTIONS, DRAKE_SECTION)
+
+    def differing(ours, theirs, prefix: str) -> None:
+        for name in (f.name for f in type(ours).__fields__):
+            mine, drakes = getattr(ours, name), getattr(theirs, name)
+            if hasattr(type(mine), "__fields__"):
+                differing(mine, drakes, f"{prefix}{name}.")
+            elif mine != drakes:
+                keys[prefix + name] = mine
+
+    differing(cell.plant_config, MultibodyPlantConfig(), "plant_config.")
+    differing(cell.scene_graph_config, SceneGraphConfig(), "scene_graph_config.")
+    keys["lcm_buses.default.lcm_url"] = cell.lcm_buses["default"].lcm_url
     return keys
 
 
@@ -207,7 +234,7 @@ def _same(stated, actual) -> bool:
 
 
 def test_every_scenario_key_is_listed_with_its_meaning_and_default():
-    keys = scenario_keys()
+    keys = scenario_keys() | drake_keys()
     rows = _key_rows()
     missing = [key for key in keys if key not in rows]
     assert missing == [], f"scenario keys missing from the docs' key tables: {missing}"
@@ -219,7 +246,7 @@ def test_every_scenario_key_is_listed_with_its_meaning_and_default():
         doc, stated, meaning = rows[key]
         if len(meaning.split()) < 2:
             wrong.append(f"{doc} {key}: no meaning")
-        if dataclasses.is_dataclass(default):
+        if dataclasses.is_dataclass(default) or default is DRAKE_SECTION:
             continue  # a section: its rows below state its defaults
         text = stated.strip("`")
         try:

@@ -22,7 +22,10 @@ from hrc_drake.motion.plan import Stage
 from hrc_drake.robot_names import UR3, UR3_JOINTS
 
 ROW1_STATES = [(), ("F1",), ("F1", "S23"), ("F1", "S23", "F03")]
-SLIPPERY = "physics: {contact: {static_friction: 0.15, dynamic_friction: 0.15}}"
+SLIPPERY = (
+    "scene_graph_config: {default_proximity_properties: "
+    "{static_friction: 0.15, dynamic_friction: 0.15}}"
+)
 
 
 def _run(text: str, scenario: str = "row1-optimal", until: float = 120.0):
@@ -239,7 +242,7 @@ def test_a_part_lowered_onto_a_rim_at_1e7_pa_is_let_go_by_the_guard_and_replaced
     texts = [
         "{assembly: four-slot, name: four-slot}",
         LEAN,
-        "{physics: {contact: {hydroelastic_modulus: 1.0e7}}}",
+        "{scene_graph_config: {default_proximity_properties: {hydroelastic_modulus: 1.0e7}}}",
         "{faults: [!NoSeat {task: 2, offset: 0.0083}]}",
     ]
     loop = build_closed_loop(load_cell_scenario(None, texts))

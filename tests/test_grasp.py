@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform
 
-from hrc_drake.cell.scenario import load_cell_scenario
+from hrc_drake.cell.scenario import contact_material, load_cell_scenario
 from hrc_drake.cell.station.build import make_cell_station
 from hrc_drake.cell.station.gripper import RG2_MIN_FORCE
 from hrc_drake.motion.poses import part_pose, tcp_pose
@@ -84,7 +84,7 @@ def test_the_linkage_lets_the_rg2s_weakest_grip_carry_the_square_flange(station)
     """Hanging from the pads, the square flange (90 mm) pulls them away from the flange, which
     the RG2's linkage turns into squeeze (0.61 of its weight): its weakest grip holds it on the
     cell's friction (a lean row 1 run carries and seats it at 3 N), not on a slippery one."""
-    friction = Scenario().physics.contact.dynamic_friction
+    friction = contact_material(Scenario()).dynamic_friction
     assert _force_to_hold(station, "square_flange", friction) < RG2_MIN_FORCE
     assert _force_to_hold(station, "square_flange", 0.15) > 2 * RG2_MIN_FORCE
 
@@ -101,7 +101,7 @@ def test_on_slippery_parts_the_rg2s_weakest_grip_cannot_hold_the_square_flange_a
     default = Scenario().station.rg2.grip_force
     needed = _force_to_hold(station, "square_flange", 0.15)
     assert RG2_MIN_FORCE < needed < default / 2
-    friction = Scenario().physics.contact.dynamic_friction
+    friction = contact_material(Scenario()).dynamic_friction
     assert _force_to_hold(station, "square_flange", friction) < default / 2
 
 

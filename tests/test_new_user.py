@@ -140,11 +140,11 @@ def test_a_scenario_value_of_the_wrong_type_is_one_line_before_any_work(
 
 
 def test_exponent_numbers_are_numbers_in_both_loaders():
-    from hrc_drake.cell.scenario import load_cell_scenario
+    from hrc_drake.cell.scenario import load_cell_scenario, plant_step
 
-    text = "{physics: {time_step: 1e-3}}"
-    assert load_scenario(None, text).physics.time_step == 1e-3
-    assert load_cell_scenario(None, text).physics.time_step == 1e-3
+    assert load_scenario(None, "{run: {period: 2e-2}}").run.period == 2e-2
+    text = "{plant_config: {time_step: 1e-3}}"
+    assert plant_step(load_cell_scenario(None, text)) == 1e-3
 
 
 # --- 3. An assembly the UR3 cannot reach -------------------------------------------------------

@@ -12,7 +12,7 @@ from pydrake.geometry import Cylinder, Role
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
 
-from hrc_drake.cell.scenario import load_cell_scenario
+from hrc_drake.cell.scenario import contact_material, load_cell_scenario
 from hrc_drake.cell.station.build import make_cell_station
 from hrc_drake.resources import package_uri
 from hrc_drake.rg2_kinematics import (
@@ -311,8 +311,8 @@ def test_one_motor_moves_both_fingers_together_and_the_pads_along_the_approach()
 
 # Contact values no other scenario uses, so that they can only come from this one.
 CONTACT = (
-    "{physics: {contact: {static_friction: 0.7, dynamic_friction: 0.4, "
-    "hydroelastic_modulus: 3.0e7}}}"
+    "{scene_graph_config: {default_proximity_properties: {static_friction: 0.7, "
+    "dynamic_friction: 0.4, hydroelastic_modulus: 3.0e7}}}"
 )
 
 
@@ -329,7 +329,7 @@ def test_every_collision_geometry_has_the_scenarios_friction_but_the_fingers() -
     inspector = query.inspector()
     ids = inspector.GetAllGeometryIds(Role.kProximity)
     assert len(ids) >= 14
-    contact = scenario.physics.contact
+    contact = contact_material(scenario)
     fingers, others, bosses = [], [], 0
     for geometry in ids:
         props = inspector.GetProximityProperties(geometry)

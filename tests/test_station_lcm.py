@@ -50,7 +50,7 @@ from hrc_drake.cell.ports import (
 )
 from hrc_drake.cell.run.loop import ClosedLoop
 from hrc_drake.cell.run.run import build_closed_loop, controller_of, run_scenario
-from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+from hrc_drake.cell.scenario import LEAN, load_cell_scenario, plant_step
 from hrc_drake.cell.station.contacts import Owner, geometry_owners, owner_pairs
 from hrc_drake.cell.station.faults import Injection
 from hrc_drake.cell.station.safety_function import SafetyFunctionLog
@@ -287,7 +287,7 @@ def test_definitions_are_lcm_syntax_of_the_classes():
 
 
 def test_exchange_period_needs_whole_plant_steps():
-    assert exchange_period(Scenario()) == Scenario().physics.time_step == 0.01
+    assert exchange_period(Scenario()) == plant_step(Scenario()) == 0.01
     scenario = Scenario()
     scenario.run.period = 0.025
     with pytest.raises(ScenarioError, match=r"run.period 0.025 s is not a whole number"):

@@ -33,9 +33,8 @@ def render_png(out: Path) -> Path:
     scenario = Scenario()
     # The cell alone, as in the README: the operator's body would stand in front of the camera.
     scenario = dataclasses.replace(scenario, body=dataclasses.replace(scenario.body, enabled=False))
-    camera = dataclasses.replace(scenario.station.camera, enabled=True)
     station = make_cell_station(
-        station_scenario(scenario, camera=camera, initial_placements=STATE_11)
+        station_scenario(scenario, initial_placements=STATE_11), camera=True
     )
     context = station.create_default_context()
     image = station.diagram.GetOutputPort("sim.camera.rgb_image").Eval(context)

@@ -392,7 +392,8 @@ def _add_station(p) -> None:
         "--lcm",
         metavar="URL",
         default=None,
-        help="LCM URL to serve on (default udpm://239.241.129.92:20185?ttl=0: this machine only)",
+        help="LCM URL to serve on (default: the scenario's lcm_buses.default, "
+        "udpm://239.241.129.92:20185?ttl=0 unless it says otherwise: this machine only)",
     )
     p.add_argument(
         "--timeout",
@@ -424,7 +425,8 @@ def _add_drivers(p) -> None:
         "--lcm",
         metavar="URL",
         default=None,
-        help="LCM URL to serve on (default udpm://239.241.129.92:20185?ttl=0: this machine only)",
+        help="LCM URL to serve on (default: the scenario's lcm_buses.default, "
+        "udpm://239.241.129.92:20185?ttl=0 unless it says otherwise: this machine only)",
     )
 
 

@@ -241,11 +241,11 @@ def drivers_command(args) -> int:
     """`hrc-drake drivers`: serve the scenario's real devices on `--lcm` until Ctrl-C or
     SIGTERM (exit status 0); 1 if a device cannot be reached or fails while served; 2 if the
     scenario puts nothing on real hardware."""
-    from hrc_drake.cell.link.lockstep import DEFAULT_LCM_URL, check_lcm_url
-    from hrc_drake.scenario.load import load_scenario
+    from hrc_drake.cell.link.lockstep import check_lcm_url
+    from hrc_drake.cell.scenario import lcm_url, load_cell_scenario
 
-    url = check_lcm_url(args.lcm or DEFAULT_LCM_URL, "--lcm")
-    scenario = load_scenario(args.scenario, args.scenario_text)
+    scenario = load_cell_scenario(args.scenario, args.scenario_text)
+    url = check_lcm_url(args.lcm or lcm_url(scenario), "--lcm")
     if not scenario.drivers.on_hardware():
         print(
             f"hrc-drake drivers: error: nothing to drive: drivers.ur3 and drivers.rg2 are "

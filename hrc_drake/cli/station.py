@@ -8,13 +8,13 @@ import shlex
 import sys
 
 from hrc_drake.cell.link.lockstep import (
-    DEFAULT_LCM_URL,
     LockstepTimeouts,
     ScenarioMismatch,
     StationLinkError,
 )
 from hrc_drake.cell.link.remote import check_lcm_url, serve_scenario
 from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
+from hrc_drake.cell.scenario import lcm_url
 from hrc_drake.cli.drivers import refuse_real_devices
 from hrc_drake.cli.scenario_args import (
     scenario_argv,
@@ -54,10 +54,10 @@ def station_command(args) -> int:
     controller runs another scenario, or runs the link otherwise (`--realtime`). A scenario
     that puts a device on real hardware is refused (UsageError, exit status 2): `hrc-drake
     drivers` serves those."""
-    url = check_lcm_url(args.lcm or DEFAULT_LCM_URL, "--lcm")
     if not args.timeout > 0:
         raise UsageError(f"--timeout {args.timeout}: give a number of seconds > 0")
     scenario = scenario_from_args(args)
+    url = check_lcm_url(args.lcm or lcm_url(scenario), "--lcm")
     refuse_real_devices(scenario, drivers_argv(args), url)
     identity = ScenarioIdentity.of(scenario, scenario_options(args))
     timeouts = LockstepTimeouts(start=args.timeout, step=args.timeout)

@@ -29,7 +29,7 @@ from pymodbus.exceptions import ModbusException
 from hrc_drake.cell.link.channels import COMMANDS, MEASUREMENTS, StationChannel
 from hrc_drake.cell.link.lcm_messages import utime
 from hrc_drake.cell.link.lcm_struct import LcmDecodeError
-from hrc_drake.cell.link.lockstep import DEFAULT_LCM_URL
+from hrc_drake.cell.scenario import DEFAULT_LCM_URL
 from hrc_drake.drivers.settings import Rg2Settings
 from hrc_drake.robot_models import RG2_MAX_FORCE, RG2_MAX_OPENING, RG2_MIN_FORCE
 

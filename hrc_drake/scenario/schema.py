@@ -16,9 +16,10 @@ would. Command-line overrides are more YAML merged on top
     expected:
       published: ["1", "4", "8", "4", "1", "2", "7", "10"]
       minimum_effort: ["1", "4", "8", "11"]
-    motion: {hold_time: 5.0}         # optional: cell, motion, physics, run, safety, body,
+    motion: {hold_time: 5.0}         # optional: cell, motion, run, safety, body,
                                      # station, drivers (hrc_drake.scenario.drivers),
                                      # sensors (hrc_drake.scenario.sensors)
+    plant_config: {time_step: 0.01}  # optional: Drake's own configs (DRAKE_SECTIONS)
     interaction: {mode: wait, interface: touch, delay: {distribution: lognormal, median: 2.5,
                   sigma: 0.3}}       # optional; the delay defaults to the interface's
 """
@@ -162,64 +163,6 @@ class MotionConfig:
     tcp_speed_limit: float = _MOTION.tcp_speed_limit
     approach_distance: float = _MOTION.approach_distance
     seed: int = _MOTION.seed
-
-
-@dataclass
-class ContactConfig:
-    """The contact material of every collision geometry whose model does not set its own: the
-    one place these figures are stated (the station hands them to Drake as SceneGraphConfig's
-    `default_proximity_properties`, and the friction to every geometry but the gripper's).
-    A model states only what differs: the gripper's rigid housing and fingers and its pads'
-    rubber. The plate, the tray and the table stay compliant although they never move: a part
-    dropped a few mm onto a rigid seat is thrown out of it. The choices are calibrated in
-    benchmarks/reports/contact.md (`benchmarks/bench_contact.py`).
-
-    Attributes:
-        hydroelastic_modulus: Pa, of compliant geometry (the parts, the arm's links). Half of
-            Drake's default 1e7 ("Default Contact Parameters": sub-millimetre penetrations for
-            household-sized objects; the hydroelastic user guide: 1e8 and above seldom used):
-            at 1e7 and 10 ms a part pressed by the rigid fingers onto a pocket's rim bursts
-            out of the grasp (docs/station.md, "Contact settings").
-        resolution_hint: m, the mesh size of compliant geometry that needs one (cylinders,
-            capsules; boxes ignore it).
-        margin: m, Drake's hydroelastic margin (its recommended 1e-4): speculative contact
-            constraints a little before touching, so that a part let go on its seat does not
-            fall into it for a step before the contact pushes back.
-        relaxation_time: s, the dissipation of SAP (Drake's linear Kelvin-Voigt model, the one
-            the default `sap` approximation uses): a compliant contact creeps to rest with this
-            time constant, so a short one rests a released part within a few steps.
-        hunt_crossley_dissipation: s/m, the dissipation of the `similar` and `lagged`
-            approximations only (SAP ignores it).
-        static_friction, dynamic_friction: Coulomb friction coefficients.
-    """
-
-    hydroelastic_modulus: float = 5.0e6
-    resolution_hint: float = 0.01
-    margin: float = 1.0e-4
-    relaxation_time: float = 0.001
-    hunt_crossley_dissipation: float = 10.0
-    static_friction: float = 0.6
-    dynamic_friction: float = 0.5
-
-
-@dataclass
-class PhysicsConfig:
-    """The MultibodyPlant's settings (the names of Drake's `MultibodyPlantConfig`).
-
-    The defaults are calibrated (benchmarks/reports/contact.md, cell.md): with the contact
-    material below (a 1 ms relaxation time and Drake's 0.1 mm margin), 10 ms rests parts let go
-    near their seats within 0.12 s and the sensor reads every configuration, at twice the
-    real-time factor of 5 ms (the earlier 10 ms failure was the 0.1 s relaxation time and no
-    margin); `sap` rests the 67 g oval flange in its pocket where `lagged`/`similar` leave it
-    chattering (0.4 N of its 0.66 N weight carried, 9 mm/s left after 2 s, at 5 ms), at the
-    same cost. The bolts' weld constraints need a SAP-family approximation.
-    """
-
-    time_step: float = 1e-2
-    contact_model: str = "hydroelastic_with_fallback"
-    discrete_contact_approximation: str = "sap"
-    contact_surface_representation: str = "polygon"
-    contact: ContactConfig = field(default_factory=ContactConfig)
 
 
 @dataclass
@@ -411,24 +354,6 @@ class GripperConfig:
 
 
 @dataclass
-class CameraSettings:
-    """An RGB camera looking at the cell from the operator's side (stills).
-
-    Attributes:
-        enabled: add the camera (`--still` turns it on).
-        position, target: where it stands and what it looks at, in world [m].
-        width, height: image size [px]; fov_y: vertical field of view [deg].
-    """
-
-    enabled: bool = False
-    position: list[float] = field(default_factory=lambda: [0.95, -0.75, 0.80])
-    target: list[float] = field(default_factory=lambda: [0.17, -0.06, 0.14])
-    width: int = 1024
-    height: int = 640
-    fov_y: float = 40.0
-
-
-@dataclass
 class StationConfig:
     """What the simulated station holds beyond the assembly's models.
 
@@ -436,14 +361,14 @@ class StationConfig:
         robot: add the UR3 and the gripper (False: the workpieces only, for fast cell tests).
         initial_placements: part instance -> a task token (`F1`, `S23`, `F02`) or `tray`; parts
             not named start in the tray.
-        ur3, rg2, camera: see their types.
+        ur3, rg2: see their types. The station's cameras are Drake's own `CameraConfig`s, in
+            the scenario's `cameras` (`DRAKE_SECTIONS`).
     """
 
     robot: bool = True
     initial_placements: dict[str, str] = field(default_factory=dict)
     ur3: ArmConfig = field(default_factory=ArmConfig)
     rg2: GripperConfig = field(default_factory=GripperConfig)
-    camera: CameraSettings = field(default_factory=CameraSettings)
 
 
 @dataclass
@@ -473,6 +398,23 @@ class InteractionConfig:
     delay: DelayConfig | None = None
 
 
+# The scenario's sections that are Drake's own config types, read by Drake's `yaml_load_typed`
+# in the cell layer (`hrc_drake.cell.scenario.CellConfigs`: `MultibodyPlantConfig`,
+# `SceneGraphConfig`, `SimulatorConfig`, `CameraConfig`s, `DrakeLcmParams` by bus). This layer
+# is Drake-free: it reads only the rest, and keeps the text of these as given (`DrakeSection`).
+DRAKE_SECTIONS = ("plant_config", "scene_graph_config", "simulator_config", "cameras", "lcm_buses")
+
+
+@dataclass(frozen=True)
+class DrakeSection:
+    """The Drake sections (`DRAKE_SECTIONS`) one source gave, as YAML flow text: the scenario
+    file, or one `--scenario-text`. The cell layers them in order, as `hardware_sim` layers its
+    `--scenario_text` on the file."""
+
+    source: str
+    text: str
+
+
 @dataclass
 class Scenario:
     """One run of the cell (or of the decision loop): see the module docstring.
@@ -492,7 +434,6 @@ class Scenario:
     expected: Expected = field(default_factory=Expected)
     cell: CellLayout | None = None
     motion: MotionConfig = field(default_factory=MotionConfig)
-    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     run: RunConfig = field(default_factory=RunConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     body: BodyConfig = field(default_factory=BodyConfig)
@@ -503,6 +444,8 @@ class Scenario:
     sensors: SensorsConfig | str = Preset.IDEAL.value
     interaction: InteractionConfig = field(default_factory=InteractionConfig)
     faults: list[FaultConfig] = field(default_factory=list)
+    # The Drake sections as given, in order (filled by the loader, never a YAML key).
+    drake: list[DrakeSection] = field(default_factory=list, metadata={"yaml": False})
 
     @property
     def assembly_path(self) -> Path:
@@ -559,21 +502,20 @@ class Scenario:
 
 
 __all__ = [
+    "DRAKE_SECTIONS",
     "TEXT_SOURCE",
     "ArmConfig",
     "BodyConfig",
-    "CameraSettings",
-    "ContactConfig",
     "DeciderConfig",
     "DelayConfig",
     "Deviation",
+    "DrakeSection",
     "DriversConfig",
     "Expected",
     "GripperConfig",
     "InteractionConfig",
     "MotionConfig",
     "OperatorConfig",
-    "PhysicsConfig",
     "RunConfig",
     "SafetyConfig",
     "Scenario",

@@ -58,12 +58,9 @@ from hrc_drake.cell.link.channels import END_CHANNEL, REPORT_CHANNEL, StationCha
 from hrc_drake.cell.link.lcm_messages import lcmt_station_session, session_message
 from hrc_drake.cell.link.lcm_struct import LcmDecodeError
 from hrc_drake.cell.link.scenario_identity import ScenarioIdentity, mismatch
+from hrc_drake.cell.scenario import DEFAULT_LCM_URL, plant_step
 from hrc_drake.paths import UsageError
 from hrc_drake.scenario.schema import Scenario, ScenarioError
-
-# Host-local multicast (ttl=0: the datagrams never leave this machine), on a port of its own so
-# that another LCM user's default group (239.255.76.67:7667) does not mix in.
-DEFAULT_LCM_URL = "udpm://239.241.129.92:20185?ttl=0"
 
 
 def check_lcm_url(url: str, flag: str) -> str:
@@ -191,11 +188,11 @@ def exchange_period(scenario: Scenario) -> float:
     """The lockstep's exchange period: the plant's time step. The controller's period must be
     a whole number of them, exactly in floating point, so that every update of either side
     falls on an exchange; ScenarioError naming the keys otherwise."""
-    step, period = scenario.physics.time_step, scenario.run.period
+    step, period = plant_step(scenario), scenario.run.period
     count = round(period / step)
     if count < 1 or count * step != period:
         raise ScenarioError(
-            f"run.period {period} s is not a whole number of physics.time_step {step} s: the "
+            f"run.period {period} s is not a whole number of plant_config.time_step {step} s: the "
             "station over LCM exchanges at every plant step; choose run.period = n × time_step"
         )
     return step

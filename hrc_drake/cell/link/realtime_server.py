@@ -30,7 +30,6 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.lcm import DrakeLcm
 from pydrake.multibody.plant import ContactResults
-from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import (
     BasicVector,
     Context,
@@ -301,7 +300,7 @@ class RealtimeStationServer:
         self._commands = self._add_commands(builder, bus, station, step, rates[ARM_COMMAND])
         self._publishers = []
         self._add_measurements(builder, bus, station, rates, owners)
-        self._simulator = Simulator(builder.Build())
+        self._simulator = self._hooks.simulator(builder.Build())
         self._root = self._simulator.get_mutable_context()
         self._simulator.set_monitor(self._watch)
         self._stop: str | None = None  # why the monitor stopped the simulation

@@ -42,6 +42,7 @@ from hrc_drake.cell.scenario import (
     cell_design,
     load_cell_scenario,
     motion_options,
+    plant_step,
 )
 from hrc_drake.cell.station.cell_station import CellStation
 from hrc_drake.cell.station.safety_function import SafetyFunctionLog
@@ -81,7 +82,7 @@ def serve_scenario(
     if pace is not None:
         from hrc_drake.cell.link.realtime_server import serve_realtime_station
 
-        rates, step = channel_rates(scenario), scenario.physics.time_step
+        rates, step = channel_rates(scenario), plant_step(scenario)
         return serve_realtime_station(station, DrakeLcm(url), rates, step, pace, timeouts, identity)
     period = exchange_period(scenario)
     return serve_cell_station(station, DrakeLcm(url), period, timeouts, identity)

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.lcm import DrakeLcm
-from pydrake.systems.analysis import Simulator
+from pydrake.systems.analysis import ApplySimulatorConfig, Simulator, SimulatorConfig
 from pydrake.systems.framework import (
     BasicVector,
     Context,
@@ -122,12 +122,21 @@ class StationHooks:
     """What a simulated station needs besides its ports: weld switching through the
     `Simulator` monitor (`welds_changed(root)`, then `apply_welds(root)`), the touching
     pairs for a run's collision watch (`contacts(root)`), and its fault record and safety
-    function's log for the session's report (`record(root)`)."""
+    function's log for the session's report (`record(root)`), and the scenario's
+    `simulator_config` for the server's simulator."""
 
     welds_changed: Callable[[Context], bool] | None = None
     apply_welds: Callable[[Context], None] | None = None
     contacts: Callable[[Context], Contacts] | None = None
     record: Callable[[Context], StationRecord] | None = None
+    simulator_config: SimulatorConfig | None = None
+
+    def simulator(self, diagram: Diagram) -> Simulator:
+        """A Simulator of `diagram`, with `simulator_config` applied when there is one."""
+        simulator = Simulator(diagram)
+        if self.simulator_config is not None:
+            ApplySimulatorConfig(self.simulator_config, simulator)
+        return simulator
 
 
 def check_station_ports(diagram: Diagram) -> None:
@@ -172,7 +181,7 @@ class CellStationServer:
         self._hold = builder.AddNamedSystem("command_hold", CommandHold(period))
         for name in _default_commands():
             builder.Connect(self._hold.GetOutputPort(name), station.GetInputPort(name))
-        self._simulator = Simulator(builder.Build())
+        self._simulator = self._hooks.simulator(builder.Build())
         self._root = self._simulator.get_mutable_context()
         self._station_context = station.GetMyContextFromRoot(self._root)
         self._hold_context = self._hold.GetMyMutableContextFromRoot(self._root)
@@ -362,6 +371,7 @@ def cell_station_hooks(station) -> StationHooks:
     """The hooks of a `CellStation` (`hrc_drake.cell.station.build`): its welds, the touching
     pairs of `sim.contact_results` by owner, and its `StationRecord`."""
     from hrc_drake.cell.link.station_record import StationRecord
+    from hrc_drake.cell.scenario import cell_configs
     from hrc_drake.cell.station.contacts import geometry_owners, owner_pairs
 
     owners = geometry_owners(station.plant)
@@ -382,7 +392,8 @@ def cell_station_hooks(station) -> StationHooks:
     def record(root: Context) -> StationRecord:
         return StationRecord.of(station, root)
 
-    return StationHooks(welds_changed, apply_welds, contacts, record)
+    config = cell_configs(station.scenario).simulator_config
+    return StationHooks(welds_changed, apply_welds, contacts, record, config)
 
 
 def serve_cell_station(

@@ -27,7 +27,6 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 from pydrake.geometry import Meshcat
-from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Diagram, DiagramBuilder, EventStatus
 
 from hrc_drake.atomic import atomic_write_bytes, atomic_write_text
@@ -45,6 +44,8 @@ from hrc_drake.cell.run.safety_check import (
     check_separation,
 )
 from hrc_drake.cell.run.view import frame_cell
+from hrc_drake.cell.scenario import make_simulator
+from hrc_drake.cell.scenario import plant_step as scenario_plant_step
 from hrc_drake.cell.station.cell_station import CellStation
 from hrc_drake.cell.station.contacts import Owner, geometry_owners, owner_pairs
 from hrc_drake.cell.station.safety_function import SafetyFunctionLog
@@ -205,7 +206,7 @@ class ClosedLoop:
                 builder.ExportInput(port, port.get_name())
         diagram = builder.Build()
         diagram.set_name("hrc_closed_loop")
-        self.simulator = Simulator(diagram)
+        self.simulator = make_simulator(setup.scenario, diagram)
         self.watch = _Watch(
             _ContactWatch(),
             _StackLight(cell.meshcat) if setup.scenario.body.enabled else None,
@@ -478,7 +479,7 @@ def _monitor(loop: ClosedLoop):
     status_port = loop.controller.diagram.GetOutputPort("status")
     controller_context = loop.controller.diagram.GetMyContextFromRoot(root)
     period = setup.scenario.run.period
-    plant_step = setup.scenario.physics.time_step
+    plant_step = scenario_plant_step(setup.scenario)
     waits = setup.wait_for_planner
 
     def monitor(context) -> EventStatus:

@@ -30,7 +30,6 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
-from pydrake.common.schema import Transform
 from pydrake.common.value import AbstractValue
 from pydrake.geometry import (
     MakeRenderEngineVtk,
@@ -41,7 +40,6 @@ from pydrake.geometry import (
     RenderEngineVtkParams,
     RoleAssign,
 )
-from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.math import SpatialVelocity
 from pydrake.multibody.plant import (
     AddMultibodyPlant,
@@ -59,7 +57,17 @@ from hrc_drake.atomic import atomic_write_text
 from hrc_drake.cell.person import desk_of
 from hrc_drake.cell.ports import NOBODY
 from hrc_drake.cell.robot_envelope import RobotEnvelope
-from hrc_drake.cell.scenario import cell_design, motion_options, plant_config, scene_graph_config
+from hrc_drake.cell.scenario import (
+    OPERATOR_VIEW,
+    SAP_FAMILY,
+    cell_configs,
+    cell_design,
+    contact_material,
+    make_simulator,
+    motion_options,
+    plant_config,
+    scene_graph_config,
+)
 from hrc_drake.cell.station.arm_servo import GravityCompensation, servo_actuators
 from hrc_drake.cell.station.camera import export_configuration
 from hrc_drake.cell.station.camera_verdicts import check_camera_noise
@@ -87,7 +95,7 @@ from hrc_drake.motion.scene import read_cell_frames
 from hrc_drake.obstacle_models import DEBRIS, OBSTACLE
 from hrc_drake.robot_models import set_rg2_opening
 from hrc_drake.robot_names import GRIPPER, UR3, UR3_JOINTS
-from hrc_drake.scenario.schema import Activity, CameraSettings, Scenario
+from hrc_drake.scenario.schema import Activity, Scenario
 from hrc_drake.scenario.sensors import camera_model
 from hrc_drake.tasks.assembly import SpecError
 from hrc_drake.tasks.decide import Operator
@@ -95,16 +103,14 @@ from hrc_drake.tasks.graph import StateSpace, generate_states
 from hrc_drake.tasks.spec import load_spec
 from hrc_drake.workpiece_sdf import BOSS_MODULUS_SCALE, is_boss
 
-_SAP_FAMILY = ("sap", "similar", "lagged")
-
 
 def check_station_scenario(scenario: Scenario, design: CellDesign) -> None:
     """Value checks of what the station builds; ValueError naming the scenario key."""
-    approximation = scenario.physics.discrete_contact_approximation
-    if approximation not in _SAP_FAMILY:
-        raise ValueError(
-            f"physics.discrete_contact_approximation={approximation!r}: the station's bolts "
-            f"(locked joints) need a SAP-family one; use one of {', '.join(_SAP_FAMILY)}"
+    approximation = plant_config(scenario).discrete_contact_approximation
+    if approximation not in SAP_FAMILY:  # cell_configs refuses it at load; a scenario built
+        raise ValueError(  # in code may not have been loaded
+            f"plant_config.discrete_contact_approximation={approximation!r}: the station's "
+            f"bolts (locked joints) need a SAP-family one; use one of {', '.join(SAP_FAMILY)}"
         )
     station = scenario.station
     for part, where in station.initial_placements.items():
@@ -153,7 +159,7 @@ def _apply_material(plant: MultibodyPlant, scene_graph, scenario: Scenario) -> N
     on every geometry whose model states none, so SceneGraph's defaults would never apply.
     A part's boss, whose box reaches up into the part, takes the scenario's modulus scaled by
     `BOSS_MODULUS_SCALE` (hrc_drake.workpiece_sdf)."""
-    contact = scenario.physics.contact
+    contact = contact_material(scenario)
     friction = CoulombFriction(contact.static_friction, contact.dynamic_friction)
     boss_modulus = contact.hydroelastic_modulus * BOSS_MODULUS_SCALE
     inspector = scene_graph.model_inspector()
@@ -338,42 +344,20 @@ class RestingParts(LeafSystem):
         )
 
 
-def _look_at(position, target) -> RigidTransform:
-    # Camera frame of RgbdSensor: +z forward, +x right, +y down in the image.
-    p, t = np.asarray(position, dtype=float), np.asarray(target, dtype=float)
-    z = (t - p) / np.linalg.norm(t - p)
-    x = np.cross(z, [0.0, 0.0, 1.0])
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    return RigidTransform(RotationMatrix(np.column_stack([x, y, z])), p)
-
-
-def _add_camera(builder: DiagramBuilder, scene_graph, settings: CameraSettings) -> None:
-    """The operator's-side RGB camera, described by a Drake `CameraConfig`; its image renders
-    only when `sim.camera.rgb_image` is evaluated (a still), as the sensor is built from the
-    config's cameras (`MakeCameras`) rather than `ApplyCameraConfig`, which would also publish
-    every frame on LCM."""
-    config = CameraConfig(
-        name="operator_view",
-        width=settings.width,
-        height=settings.height,
-        focal=CameraConfig.FovDegrees(y=settings.fov_y),
-        clipping_near=0.05,
-        clipping_far=5.0,
-        z_near=0.06,
-        z_far=4.9,
-        X_PB=Transform(_look_at(settings.position, settings.target)),
-        renderer_name="vtk",
-        renderer_class="RenderEngineVtk",
-    )
-    scene_graph.AddRenderer(config.renderer_name, MakeRenderEngineVtk(RenderEngineVtkParams()))
+def _add_camera(builder: DiagramBuilder, scene_graph, config: CameraConfig, port: str) -> None:
+    """An RGB camera described by a Drake `CameraConfig`; its image renders only when `port`
+    is evaluated (a still), as the sensor is built from the config (`MakeCameras`) rather than
+    `ApplyCameraConfig`, which would also publish every frame on LCM."""
+    if not scene_graph.HasRenderer(config.renderer_name):
+        params = RenderEngineVtkParams()
+        scene_graph.AddRenderer(config.renderer_name, MakeRenderEngineVtk(params))
     color, depth = config.MakeCameras()
     sensor = builder.AddNamedSystem(
         config.name,
         RgbdSensor(scene_graph.world_frame_id(), config.X_PB.GetDeterministicValue(), color, depth),
     )
     builder.Connect(scene_graph.get_query_output_port(), sensor.query_object_input_port())
-    builder.ExportOutput(sensor.color_image_output_port(), "sim.camera.rgb_image")
+    builder.ExportOutput(sensor.color_image_output_port(), port)
 
 
 def _add_faults(builder: DiagramBuilder, plant: MultibodyPlant, scenario: Scenario, seats):
@@ -452,8 +436,9 @@ def make_cell_station(
     state `space` of its spec (default: from `scenario.assembly`). `arm_start` is where the
     arm starts [rad] (default: `station.ur3.initial_positions`, else the ready posture; a run
     starts it at the planner's home); `camera` whether the still camera is built (default:
-    `station.camera.enabled`). `operator` answers the interface's prompts (default: the
-    scenario's operator); `body_script` moves the operator's body (default: `BoltingScript`).
+    the scenario's `cameras`, if any; True with none given: the operator's view). `operator`
+    answers the interface's prompts (default: the scenario's operator); `body_script` moves
+    the operator's body (default: `BoltingScript`).
     With `meshcat` a visualizer draws the cell there (and records, if asked). CellModelError
     (before anything is simulated) if the spec does not fit the cell; ValueError naming the
     scenario key for a bad station value."""
@@ -533,10 +518,16 @@ def _connect_safety_function(builder: DiagramBuilder) -> None:
 
 
 def _add_viewers(builder, scene_graph, scenario: Scenario, camera: bool | None, meshcat):
-    """The still camera (when `camera`, default the scenario's `station.camera.enabled`) and,
-    with `meshcat`, a visualizer drawing the cell there (returned; else None)."""
-    if scenario.station.camera.enabled if camera is None else camera:
-        _add_camera(builder, scene_graph, scenario.station.camera)
+    """The scenario's cameras (`cameras`; with `camera` True and none given, the operator's
+    view; with `camera` False, none) and, with `meshcat`, a visualizer drawing the cell there
+    (returned; else None). The first camera's image is `sim.camera.rgb_image`, any other's
+    `sim.camera.NAME.rgb_image`."""
+    cameras = cell_configs(scenario).cameras if camera is not False else []
+    if camera and not cameras:
+        cameras = [OPERATOR_VIEW]
+    for index, config in enumerate(cameras):
+        port = "sim.camera.rgb_image" if index == 0 else f"sim.camera.{config.name}.rgb_image"
+        _add_camera(builder, scene_graph, config, port)
     if meshcat is None:
         return None
     params = MeshcatVisualizerParams(delete_on_initialization_event=False)
@@ -565,7 +556,7 @@ def simulate_station(
     context = context if context is not None else station.create_default_context()
     if recording is not None and station.meshcat is None:
         raise ValueError("a recording needs Meshcat: pass one to make_cell_station")
-    simulator = Simulator(station.diagram, context)
+    simulator = make_simulator(station.scenario, station.diagram, context)
     if recording is not None:
         station.visualizer.StartRecording()
     simulator.AdvanceTo(context.get_time() + duration)
