@@ -89,38 +89,7 @@ def cmd_adversary(args) -> int:
     effort = agreement(exact, policy_worst_case(game, solve_exact(mdp).choice))
     # What a policy file keeps: the proposals with all K mistakes to come, whatever is left.
     fixed = agreement(exact, policy_worst_case(game, result.choice[args.mistakes]))
-    budget = args.mistakes
-    report = {
-        "spec": space.spec.name,
-        "states": space.n_states,
-        "mistakes": budget,
-        "augmented_states": learned.states,
-        "seed": args.seed,
-        "gamma": gamma,
-        "converged": result.converged,
-        "rounds": result.rounds,
-        "episodes": result.episodes,
-        "steps": result.steps,
-        "wall_time": round(result.wall_time, 3),
-        "exact_wall_time": round(exact.wall_time, 3),
-        "equal": learned.equal,
-        "equal_per_mistakes_left": list(learned.per_level),
-        "loops": learned.loops,
-        "value_gap": float(np.max(np.abs(result.values - exact.values))),
-        "worst_case_from_start": int(policy_worst_case(game, result.choice)[budget, 0]),
-        "exact_worst_case_from_start": int(exact.tasks[budget, 0]),
-        "minimum_effort": {
-            "mistake_prob": args.mistake_prob,
-            "longer": effort.longer,
-            "loops": effort.loops,
-        },
-        "file_policy": {
-            "equal_with_all_mistakes_to_come": fixed.per_level[-1],
-            "equal": fixed.equal,
-            "loops": fixed.loops,
-        },
-        "policy": None,
-    }
+    report = _report(args, space, game, result, exact, learned, effort, fixed)
     ok = result.converged and learned.all_equal
     if args.out is not None and result.converged:
         meta = {"seed": args.seed, "episodes": result.episodes, "rounds": result.rounds}
@@ -138,6 +107,42 @@ def cmd_adversary(args) -> int:
             file=sys.stderr,
         )
     return 0 if ok else 1
+
+
+def _report(args, space, game, result, exact, learned, effort, fixed) -> dict:
+    """The command's JSON report: the learner against the exact min-max, the expected-value
+    policy's worst case, and what a policy file keeps."""
+    return {
+        "spec": space.spec.name,
+        "states": space.n_states,
+        "mistakes": args.mistakes,
+        "augmented_states": learned.states,
+        "seed": args.seed,
+        "gamma": game.gamma,
+        "converged": result.converged,
+        "rounds": result.rounds,
+        "episodes": result.episodes,
+        "steps": result.steps,
+        "wall_time": round(result.wall_time, 3),
+        "exact_wall_time": round(exact.wall_time, 3),
+        "equal": learned.equal,
+        "equal_per_mistakes_left": list(learned.per_level),
+        "loops": learned.loops,
+        "value_gap": float(np.max(np.abs(result.values - exact.values))),
+        "worst_case_from_start": int(policy_worst_case(game, result.choice)[args.mistakes, 0]),
+        "exact_worst_case_from_start": int(exact.tasks[args.mistakes, 0]),
+        "minimum_effort": {
+            "mistake_prob": args.mistake_prob,
+            "longer": effort.longer,
+            "loops": effort.loops,
+        },
+        "file_policy": {
+            "equal_with_all_mistakes_to_come": fixed.per_level[-1],
+            "equal": fixed.equal,
+            "loops": fixed.loops,
+        },
+        "policy": None,
+    }
 
 
 def _print(r: dict, per_level: tuple[int, ...], per: int) -> None:

@@ -409,6 +409,92 @@ def _greedy(
     return best, edges[hit[first]]
 
 
+class _AnswerTable:
+    """Minimax-Q's table: per (k, proposal) row, a slot per distinct answer seen (grown as
+    answers come), its value, the round of its last backup, and the row's minimum over its
+    answers (a proposal never tried: `optimistic`)."""
+
+    def __init__(self, rows: int, n_edges: int, optimistic: float):
+        self.n_edges, self.slots = n_edges, 1
+        self.q = np.full((rows, 1), np.nan)
+        self.answer = np.full((rows, 1), -1, dtype=np.int64)
+        self.updated = np.full((rows, 1), -1, dtype=np.int16)  # round of the last backup
+        self.seen = np.zeros(rows, dtype=np.int64)  # distinct answers seen
+        self.tries = np.zeros(rows, dtype=np.int64)
+        self.q_min = np.full(rows, optimistic)
+
+    def slot(self, row: np.ndarray, performed: np.ndarray) -> np.ndarray:
+        """The slot of each (row, answer), a new one for an answer not seen before."""
+        match = self.answer[row] == performed[:, None]
+        new = ~match.any(axis=1)
+        if new.any():
+            key = np.unique(row[new] * self.n_edges + performed[new])
+            r, p = key // self.n_edges, key % self.n_edges
+            first = np.ones(len(r), dtype=bool)
+            first[1:] = r[1:] != r[:-1]
+            pos = np.arange(len(r))
+            col = self.seen[r] + pos - np.maximum.accumulate(np.where(first, pos, 0))
+            if col.max() >= self.slots:
+                self._grow(int(col.max()) + 1 - self.slots)
+            self.answer[r, col] = p
+            np.add.at(self.seen, r, 1)
+            match = self.answer[row] == performed[:, None]
+        return np.argmax(match, axis=1)
+
+    def _grow(self, grow: int) -> None:
+        rows = len(self.seen)
+        self.q = np.hstack([self.q, np.full((rows, grow), np.nan)])
+        self.answer = np.hstack([self.answer, np.full((rows, grow), -1, dtype=np.int64)])
+        self.updated = np.hstack([self.updated, np.full((rows, grow), -1, dtype=np.int16)])
+        self.slots += grow
+
+    def backup(self, row: np.ndarray, col: np.ndarray, target: np.ndarray, rnd: int) -> int:
+        """Set the slots to `target` in round `rnd`; how many changed (a new slot counts)."""
+        changed = int(np.count_nonzero(~(self.q[row, col] == target)))  # NaN: new
+        self.q[row, col] = target
+        self.updated[row, col] = rnd
+        np.add.at(self.tries, row, 1)
+        self.q_min[row] = np.nanmin(self.q[row], axis=1)  # repeated rows: the same value
+        return changed
+
+    def settled(self, confirm: int, last_change: int) -> bool:
+        """Every answer seen tried `confirm` more times, and every slot backed up since the
+        last change."""
+        covered = bool(np.all(self.tries >= self.seen + confirm))
+        return covered and bool(np.all(self.updated[self.answer >= 0] > last_change))
+
+
+def _starts_by_depth(game: AdversaryGame) -> list[tuple[np.ndarray, np.ndarray]]:
+    """A round's exploring starts: every (k, proposal), one batch per depth, deepest first."""
+    space, src, levels = game.space, game.mdp.edge_src, game.budget + 1
+    starts = []
+    for d in range(int(space.depth.max()), -1, -1):
+        e = np.flatnonzero(space.depth[src] == d)
+        if len(e):
+            starts.append((np.repeat(np.arange(levels), len(e)), np.tile(e, levels)))
+    return starts
+
+
+def _play(game, table: _AnswerTable, opponent, k, e, rnd: int, max_steps: int):
+    """A batch of greedy episodes from the proposals `e` with `k` mistakes left, backed up as
+    they go; (slots changed, steps, episodes that ran out of steps)."""
+    n_edges, edge_start, changed, steps = game.mdp.n_edges, game.mdp.edge_start, 0, 0
+    for _step in range(max_steps):
+        performed, s2, k2, reward, done = opponent.answer(k, e)
+        row = k * n_edges + e
+        col = table.slot(row, performed)
+        v2, go = np.zeros(len(e)), ~done
+        if go.any():
+            v2[go] = _greedy(table.q_min, edge_start, n_edges, k2[go], s2[go])[0]
+        changed += table.backup(row, col, reward + game.gamma * v2, rnd)
+        steps += len(e)
+        k = k2[go]
+        if not go.any():
+            break
+        e = _greedy(table.q_min, edge_start, n_edges, k, s2[go])[1]
+    return changed, steps, len(k)
+
+
 def train_minimax(
     game: AdversaryGame,
     schedule: MinimaxSchedule | None = None,
@@ -430,92 +516,30 @@ def train_minimax(
     schedule = schedule or MinimaxSchedule()
     start = time.perf_counter()
     opponent = CyclingOpponent(game, np.random.default_rng(seed))
-    mdp, space, gamma = game.mdp, game.space, game.gamma
-    n, n_edges, levels = space.n_states, mdp.n_edges, game.budget + 1
-    edge_start, src = mdp.edge_start, mdp.edge_src
-    rows = levels * n_edges
-    slots = 1  # answer slots per (k, proposal); grows as answers are seen
-    q = np.full((rows, slots), np.nan)
-    answer = np.full((rows, slots), -1, dtype=np.int64)
-    updated = np.full((rows, slots), -1, dtype=np.int16)  # round of the last backup
-    seen = np.zeros(rows, dtype=np.int64)  # distinct answers seen
-    tries = np.zeros(rows, dtype=np.int64)
-    q_min = np.full(rows, max(mdp.config.rewards.terminal, mdp.config.rewards.step))
-
-    starts_by_depth = []
-    for d in range(int(space.depth.max()), -1, -1):
-        e = np.flatnonzero(space.depth[src] == d)
-        if len(e):
-            starts_by_depth.append((np.repeat(np.arange(levels), len(e)), np.tile(e, levels)))
-
-    episodes = steps = 0
-    last_change = -1
-    converged = False
-    rnd = 0
+    mdp, levels = game.mdp, game.budget + 1
+    n_edges, rewards = mdp.n_edges, mdp.config.rewards
+    table = _AnswerTable(levels * n_edges, n_edges, max(rewards.terminal, rewards.step))
+    starts_by_depth = _starts_by_depth(game)
+    episodes = steps = rnd = 0
+    last_change, converged = -1, False
     for rnd in range(1, min(schedule.max_rounds, np.iinfo(np.int16).max) + 1):
         changed = unfinished = 0
         for k, e in starts_by_depth:
             episodes += len(e)
-            for _step in range(schedule.max_steps):
-                performed, s2, k2, reward, done = opponent.answer(k, e)
-                row = k * n_edges + e
-                match = answer[row] == performed[:, None]
-                new = ~match.any(axis=1)
-                if new.any():  # a slot for each answer not seen before
-                    key = np.unique(row[new] * n_edges + performed[new])
-                    r, p = key // n_edges, key % n_edges
-                    first = np.ones(len(r), dtype=bool)
-                    first[1:] = r[1:] != r[:-1]
-                    pos = np.arange(len(r))
-                    col = seen[r] + pos - np.maximum.accumulate(np.where(first, pos, 0))
-                    if col.max() >= slots:
-                        grow = int(col.max()) + 1 - slots
-                        q = np.hstack([q, np.full((rows, grow), np.nan)])
-                        answer = np.hstack([answer, np.full((rows, grow), -1, dtype=np.int64)])
-                        updated = np.hstack([updated, np.full((rows, grow), -1, dtype=np.int16)])
-                        slots += grow
-                    answer[r, col] = p
-                    np.add.at(seen, r, 1)
-                    match = answer[row] == performed[:, None]
-                col = np.argmax(match, axis=1)
-                v2 = np.zeros(len(e))
-                go = ~done
-                if go.any():
-                    v2[go] = _greedy(q_min, edge_start, n_edges, k2[go], s2[go])[0]
-                target = reward + gamma * v2
-                changed += int(np.count_nonzero(~(q[row, col] == target)))  # NaN: new
-                q[row, col] = target
-                updated[row, col] = rnd
-                np.add.at(tries, row, 1)
-                q_min[row] = np.nanmin(q[row], axis=1)  # repeated rows: the same value
-                steps += len(e)
-                k, e = k2[go], None
-                if not go.any():
-                    break
-                e = _greedy(q_min, edge_start, n_edges, k, s2[go])[1]
-            unfinished += len(k)
-        if changed:
-            last_change = rnd
+            batch = _play(game, table, opponent, k, e, rnd, schedule.max_steps)
+            changed, steps, unfinished = changed + batch[0], steps + batch[1], unfinished + batch[2]
+        last_change = rnd if changed else last_change
         if progress:
             progress(rnd, schedule.max_rounds, changed)
-        covered = bool(np.all(tries >= seen + schedule.confirm))
-        fresh = bool(np.all(updated[answer >= 0] > last_change))
-        if not changed and covered and fresh and not unfinished:
+        if not changed and not unfinished and table.settled(schedule.confirm, last_change):
             converged = True
             break
-
-    values = np.zeros((levels, n))
-    choice = np.full((levels, n), -1, dtype=np.int64)
-    live = np.flatnonzero(np.diff(edge_start) > 0)
-    for k in range(levels):
-        values[k, live], choice[k, live] = _greedy(
-            q_min, edge_start, n_edges, np.full(len(live), k), live
-        )
+    values, choice = _greedy_everywhere(game, table.q_min)
     return MinimaxResult(
         values=values,
         choice=choice,
-        q=q.reshape(levels, n_edges, slots),
-        answer=answer.reshape(levels, n_edges, slots),
+        q=table.q.reshape(levels, n_edges, table.slots),
+        answer=table.answer.reshape(levels, n_edges, table.slots),
         episodes=episodes,
         steps=steps,
         rounds=rnd,
@@ -523,6 +547,19 @@ def train_minimax(
         wall_time=time.perf_counter() - start,
         seed=seed,
     )
+
+
+def _greedy_everywhere(game: AdversaryGame, q_min: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The learned values and proposals of every (k, state); 0 and -1 where no task is left."""
+    levels, edge_start = game.budget + 1, game.mdp.edge_start
+    values = np.zeros((levels, game.space.n_states))
+    choice = np.full((levels, game.space.n_states), -1, dtype=np.int64)
+    live = np.flatnonzero(np.diff(edge_start) > 0)
+    for k in range(levels):
+        values[k, live], choice[k, live] = _greedy(
+            q_min, edge_start, game.mdp.n_edges, np.full(len(live), k), live
+        )
+    return values, choice
 
 
 def minimax_policy(

@@ -314,6 +314,62 @@ def _batches(states: np.ndarray, weight: np.ndarray | None = None):
     yield from (part for part in np.split(states, cuts) if len(part))
 
 
+def _exploring_starts(
+    learner: _Learner, depth: np.ndarray, aimed: np.ndarray, deepest_first: bool, steps: int
+) -> float:
+    """One episode from each task of each aimed state, level by level (deepest or shallowest
+    first); the sum of their returns."""
+    total, levels = 0.0, depth[aimed]
+    for level in sorted(set(levels.tolist()), reverse=deepest_first):
+        for states in _batches(aimed[levels == level], learner.count):
+            count = learner.count[states]
+            offsets = np.cumsum(count) - count
+            first = np.repeat(learner.edge_start[states] - offsets, count)
+            pairs = first + np.arange(int(count.sum()))
+            _, returns, _ = learner.episodes_from(np.repeat(states, count), pairs, steps)
+            total += float(returns.sum())
+    return total
+
+
+def _greedy_walks(learner: _Learner, aimed: np.ndarray, steps: int, loop_after: int):
+    """One greedy walk from each aimed state; (the sum of their returns, the states whose walk
+    went round in circles)."""
+    total, late = 0.0, []
+    for states in _batches(aimed):
+        _, returns, circling = learner.episodes_from(states, None, steps, loop_after)
+        total += float(returns.sum())
+        late.append(circling)
+    return total, np.concatenate(late)
+
+
+def _race(learner: _Learner, edge_src: np.ndarray, schedule: CoverageSchedule):
+    """Choices within noise of each other, sampled again until resolved (racing the
+    contenders), one episode per pair and pass (a batch updates a pair once); (the sum of the
+    returns, the states still unresolved)."""
+    indifference = schedule.indifference * learner.tolerance / schedule.tolerance
+    total = 0.0
+    for _ in range(schedule.max_passes):
+        hot = learner.unresolved(indifference, schedule.confidence)
+        if not len(hot):
+            break
+        for lo in range(0, len(hot), BATCH):
+            pairs = hot[lo : lo + BATCH]
+            _, returns, _ = learner.episodes_from(edge_src[pairs], pairs, schedule.continuation)
+            total += float(returns.sum())
+    return total, np.unique(edge_src[learner.unresolved(indifference, schedule.confidence)])
+
+
+def _aim(learner: _Learner, edge_src: np.ndarray, *where: np.ndarray) -> np.ndarray:
+    """The non-terminal states among `where` (index arrays), and those whose values still move
+    or have gone stale: the next round's exploring starts."""
+    aim = np.zeros(len(learner.count), bool)
+    for states in where:
+        aim[states] = True
+    aim[edge_src[learner.last_change >= learner.tolerance]] = True
+    aim[edge_src[learner.stale()]] = True
+    return np.flatnonzero(aim & (learner.count > 0)).astype(np.int32)
+
+
 def train_coverage(
     mdp: SequenceMDP,
     schedule: CoverageSchedule,
@@ -322,58 +378,23 @@ def train_coverage(
 ) -> CoverageOutcome:
     """Learn a Q-table for `mdp` with `schedule` (module doc); seeded: same seed, same table."""
     space = mdp.space
-    rng = np.random.default_rng(seed)
     q0 = max(0.0, float(mdp.out_reward.max())) if mdp.n_edges else 0.0  # optimistic start
-    learner = _Learner(mdp, rng, q0, schedule.tolerance)
-    depth = space.depth
+    learner = _Learner(mdp, np.random.default_rng(seed), q0, schedule.tolerance)
     non_terminal = np.flatnonzero(learner.count > 0).astype(np.int32)
     # Followed as proposed, a greedy walk needs at most the undos back to the base and the
     # tasks of a whole assembly; a longer run of followed proposals is going round in circles.
-    loop_after = 2 * int(depth.max()) + 2
-    aimed, full = non_terminal, True
-    previous = learner.best[non_terminal].copy()
+    loop_after = 2 * int(space.depth.max()) + 2
+    aimed, full, previous = non_terminal, True, learner.best[non_terminal].copy()
     round_returns: list[float] = []
-    routes = None
-    stable = full_sweeps = rounds = 0
-    converged = False
+    routes, stable, full_sweeps, rounds, converged = None, 0, 0, 0, False
     for rounds in range(1, schedule.max_rounds + 1):
-        total, episodes_before = 0.0, learner.episodes
-        levels = depth[aimed]
-        for level in sorted(set(levels.tolist()), reverse=rounds % 2 == 1):
-            for states in _batches(aimed[levels == level], learner.count):
-                count = learner.count[states]
-                offsets = np.cumsum(count) - count
-                pairs = np.repeat(learner.edge_start[states] - offsets, count) + np.arange(
-                    int(count.sum())
-                )
-                _, returns, _ = learner.episodes_from(
-                    np.repeat(states, count), pairs, schedule.continuation
-                )
-                total += float(returns.sum())
-        late = []
-        for states in _batches(aimed):
-            _, returns, circling = learner.episodes_from(
-                states, None, schedule.max_steps, loop_after
-            )
-            total += float(returns.sum())
-            late.append(circling)
-        late = np.concatenate(late)
-        # Choices within noise of each other: sampled again in this round until resolved
-        # (racing the contenders), one episode per pair and pass (a batch updates a pair once).
-        indifference = schedule.indifference * learner.tolerance / schedule.tolerance
-        for _ in range(schedule.max_passes):
-            hot = learner.unresolved(indifference, schedule.confidence)
-            if not len(hot):
-                break
-            for lo in range(0, len(hot), BATCH):
-                pairs = hot[lo : lo + BATCH]
-                _, returns, _ = learner.episodes_from(
-                    mdp.edge_src[pairs], pairs, schedule.continuation
-                )
-                total += float(returns.sum())
-        unresolved = np.unique(mdp.edge_src[learner.unresolved(indifference, schedule.confidence)])
-        round_returns.append(total / max(learner.episodes - episodes_before, 1))
-        loops = len(late)
+        episodes_before = learner.episodes
+        total = _exploring_starts(
+            learner, space.depth, aimed, rounds % 2 == 1, schedule.continuation
+        )
+        walked, late = _greedy_walks(learner, aimed, schedule.max_steps, loop_after)
+        raced, unresolved = _race(learner, mdp.edge_src, schedule)
+        round_returns.append((total + walked + raced) / max(learner.episodes - episodes_before, 1))
         choice = learner.best[non_terminal]
         gain = learner.value[non_terminal] - learner.q[previous]
         changed = (choice != previous) & (gain >= learner.tolerance)
@@ -393,15 +414,8 @@ def train_coverage(
         if full and stable >= schedule.patience and len(unresolved) == 0:
             converged = True  # the policy is the one this full sweep checked
             break
-        aim = np.zeros(space.n_states, bool)
-        aim[late] = True
-        aim[unfinished] = True
-        aim[unresolved] = True
-        aim[non_terminal[changed]] = True
-        aim[mdp.edge_src[learner.last_change >= learner.tolerance]] = True
-        aim[mdp.edge_src[learner.stale()]] = True
-        aimed = np.flatnonzero(aim & (learner.count > 0)).astype(np.int32)
-        full = len(aimed) == 0 or (loops == 0 and len(unresolved) == 0 and not full)
+        aimed = _aim(learner, mdp.edge_src, late, unfinished, unresolved, non_terminal[changed])
+        full = len(aimed) == 0 or (len(late) == 0 and len(unresolved) == 0 and not full)
         if full:
             aimed = non_terminal
         previous = choice

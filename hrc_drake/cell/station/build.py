@@ -467,19 +467,9 @@ def make_cell_station(
     diagram = builder.Build()
     diagram.set_name("cell_station")
     return CellStation(
-        diagram,
-        plant,
-        scene_graph,
-        scenario,
-        design,
-        frames,
-        instances,
-        bolts,
-        meshcat,
-        visualizer,
-        injector,
-        person,
-    )
+        diagram, plant, scene_graph, scenario, design, frames, instances, bolts, meshcat,
+        visualizer, injector, person,
+    )  # fmt: skip
 
 
 def _add_robot(builder, plant, instances, scenario: Scenario, frames, space: StateSpace):
