@@ -41,7 +41,7 @@ def publish(text: str, report, lean: bool) -> None:
 
 def write_report(text: str, report) -> None:
     """Write a benchmark's report to the `report` path (atomically), lean or not, and say
-    where (the separation benchmarks: their `--out` chooses the path)."""
+    where (`bench_separation.py`: its `--out` chooses the path)."""
     from hrc_drake.atomic import atomic_write_text
 
     atomic_write_text(report, text)

@@ -59,3 +59,23 @@ def test_the_check_sees_names():
     tokens = [t for doc in DOCS for t in _backticked(doc)]
     assert sum(bool(PATH.match(t)) for t in tokens) > 20
     assert sum(bool(DOTTED.match(t)) for t in tokens) > 5
+
+
+# A row of docs/testing.md's benchmark table: | `script` | what | `command` | report |.
+BENCH_ROW = re.compile(r"^\| `(benchmarks/bench_\w+\.py)` \|([^|]*)\| `([^`]*)` \|([^|]*)\|$", re.M)
+
+
+def test_every_benchmark_is_listed_with_its_command_and_report():
+    """docs/testing.md lists every `benchmarks/bench_*.py`, each row with what it measures, a
+    command that runs that script and the report it writes; it lists no script that is gone."""
+    rows = BENCH_ROW.findall((REPO / "docs" / "testing.md").read_text())
+    listed = {script for script, *_ in rows}
+    shipped = {f"benchmarks/{p.name}" for p in (REPO / "benchmarks").glob("bench_*.py")}
+    assert sorted(shipped - listed) == [], "not in docs/testing.md's table: add a row for each"
+    assert sorted(listed - shipped) == [], "docs/testing.md lists scripts that are gone: drop them"
+    bad = [
+        script
+        for script, what, command, report in rows
+        if not what.strip() or not command.startswith(f"python {script}") or ".md" not in report
+    ]
+    assert bad == [], f"rows without what, a command running the script, or a report: {bad}"
