@@ -29,6 +29,7 @@ from pydrake.systems.framework import DiagramBuilder
 
 from hrc_drake.cell_models import CellDesign, add_cell_models
 from hrc_drake.motion.scene import TCP, read_cell_frames
+from hrc_drake.rg2_kinematics import joint_angles
 from hrc_drake.robot_models import RG2_JOINTS, RG2_MAX_OPENING, set_rg2_opening
 from hrc_drake.robot_names import GRIPPER, UR3, UR3_JOINTS
 
@@ -125,6 +126,7 @@ class RobotEnvelope:
             [plant.GetJointByName(name, arm).velocity_start() for name in UR3_JOINTS]
         )
         self._gripper = gripper
+        self._linkage = {name: plant.GetJointByName(name, gripper) for name in RG2_JOINTS}
         self._sweeps = self._linkage_sweeps()
         robot = [
             plant.get_body(index)
@@ -256,9 +258,11 @@ class RobotEnvelope:
             return self._posed[1]
         plant.SetPositions(context, self._arm, q)
         if opening != self._opening:
-            # The measured opening changes in 0.1 mm steps, seldom between two calls; each
-            # set looks up the linkage's six joints by name.
-            set_rg2_opening(plant, context, opening, self._gripper)
+            # A quantised opening (`sensors:`) seldom changes between two calls; an exact one
+            # changes at every call, so the linkage's joints are looked up once, not by name
+            # at every set (`set_rg2_opening`'s angles, `rg2_kinematics.joint_angles`).
+            for name, angle in joint_angles(opening).items():
+                self._linkage[name].set_angle(context, angle)
             self._opening = opening
         X = np.array([plant.EvalBodyPoseInWorld(context, b).GetAsMatrix34() for b in self.bodies])
         X.flags.writeable = False  # shared with the next call at this pose
@@ -326,9 +330,17 @@ def _norm(x: np.ndarray) -> np.ndarray:
 def nearest_points(shapes: Primitives, R_WB: np.ndarray, p_WB: np.ndarray, points) -> Pairs:
     """The distance from each of `points` (n×3, world) to each of `shapes` posed by the bodies'
     poses (R_WB, p_WB), and the nearest point on the shape (see `Primitives`)."""
+    return nearest_to_posed(shapes, *posed_shapes(shapes, R_WB, p_WB), points)
+
+
+def posed_shapes(shapes: Primitives, R_WB: np.ndarray, p_WB: np.ndarray):
+    """(R_WC m×3×3, p_WC m×3): each of `shapes` in the world, on the bodies posed (R_WB, p_WB)."""
     R = R_WB[shapes.body]
-    R_WC = R @ shapes.R_BC
-    p_WC = (R @ shapes.p_BC[..., None])[..., 0] + p_WB[shapes.body]
+    return R @ shapes.R_BC, (R @ shapes.p_BC[..., None])[..., 0] + p_WB[shapes.body]
+
+
+def nearest_to_posed(shapes: Primitives, R_WC: np.ndarray, p_WC: np.ndarray, points) -> Pairs:
+    """`nearest_points` of `shapes` already posed in the world (`posed_shapes`)."""
     p = (points[None, :, :] - p_WC[:, None, :]) @ R_WC  # each point in each shape's frame
     half, disc, rounding = shapes.half[:, None, :], shapes.disc[:, None], shapes.round[:, None]
     # Nearest point of the core (box, then the disc across x–y), then of the rounded shape.
@@ -364,6 +376,8 @@ __all__ = [
     "Primitives",
     "RobotEnvelope",
     "nearest_points",
+    "nearest_to_posed",
+    "posed_shapes",
     "primitive",
     "speeds_toward",
 ]

@@ -1,8 +1,10 @@
 """Speed and separation monitoring's arithmetic (ISO/TS 15066:2016 §5.5.4), stated once for the
-three that evaluate it: the controller's planning monitor (`hrc_drake.cell.controller.separation`),
+four that evaluate it through one pipeline (`hrc_drake.cell.separation_pipeline`): the
+controller's planning monitor (`hrc_drake.cell.controller.separation`) and its forecast monitor,
 the station's safety function (`hrc_drake.cell.station.safety_function`) and the run's own check
-(`hrc_drake.cell.run.safety_check`). Each has its own robot model (`RobotEnvelope`) and its own
-idea of the person's travel S_h; the protective separation distance around it is the same:
+(`hrc_drake.cell.run.safety_check`). Each side has its own robot model (`RobotEnvelope`) and each
+evaluator its own idea of the person's travel S_h; the protective separation distance around it
+is the same:
 
     S_p = S_h + v_r T_r + S_s + C + Z_d + Z_r
 
@@ -23,9 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from hrc_drake.cell.person import CHAIN_GAP, touchable
+from hrc_drake.cell.person import touchable
 from hrc_drake.cell.ports import BodySpheres
-from hrc_drake.cell.robot_envelope import RobotEnvelope, nearest_points
 from hrc_drake.scenario.safety import HumanSpeed, SafetyConfig
 
 # A joint this much faster than commanded is moved from outside [rad/s] (our choice: the
@@ -75,24 +76,6 @@ def bounded_travel(v0, window: float, acceleration: float, cap) -> np.ndarray:
     cap = np.maximum(cap, v0)
     rising = np.minimum((cap - v0) / acceleration, window)
     return v0 * rising + acceleration * rising * rising / 2 + cap * (window - rising)
-
-
-def body_gaps(
-    envelope: RobotEnvelope,
-    q: np.ndarray,
-    opening: float | None,
-    carrying: str | tuple[str, ...] | None,
-    body: BodySpheres,
-):
-    """(R_WB, p_WB, pairs, gap): the envelope posed at arm positions `q` and the gripper's
-    measured `opening` (None: the fingers over their whole travel) with the part (or parts,
-    `RobotEnvelope.shapes`) `carrying`,
-    its nearest points to every body sphere, and each pair's gap, the distance less the sphere's
-    radius counted `1 + CHAIN_GAP` times (a chain of spheres is thinner than its capsule)."""
-    shapes = envelope.shapes(carrying, opening is not None)
-    R_WB, p_WB = envelope.pose(np.asarray(q, dtype=float), opening)
-    pairs = nearest_points(shapes, R_WB, p_WB, body.centres)
-    return R_WB, p_WB, pairs, pairs.distance - body.radii[None, :] * (1.0 + CHAIN_GAP)
 
 
 def person_travel(
@@ -147,7 +130,6 @@ __all__ = [
     "REDUCED_SPEED",
     "allowed_scale",
     "beyond_contact_speed",
-    "body_gaps",
     "bounded_travel",
     "entry_scales",
     "person_travel",

@@ -90,7 +90,7 @@ class MotionPath:
     """Poses along a plan: plan times `taus` (evenly spaced), with q and q̇ at full speed, the
     gripper's commanded opening and the part carried at each. The opening is the plan's, so that
     the monitor is asked about the gripper as it will be: with the opening unknown it takes the
-    fingers over their whole travel (`hrc_drake.cell.ssm.body_gaps`), which put a carry beside
+    fingers over their whole travel (`hrc_drake.cell.separation_pipeline`), which put a carry beside
     the operator's hand at the nut bin at a stop that the monitor, reading the measured opening,
     never made (lean `shared-desk`, follows, seed 0, exact forecast). Holding a part, the
     command is `MotionOptions.grip_squeeze` (2 mm) under its width, so the forecast's fingers

@@ -20,14 +20,13 @@ from pydrake.systems.framework import Diagram, DiagramBuilder
 
 from hrc_drake.cell.controller.forecast import OperatorForecast, forecast_body
 from hrc_drake.cell.controller.guard import GuardSettings
-from hrc_drake.cell.controller.intent import MotionIntent
 from hrc_drake.cell.controller.keep_clear import KeepClearSettings
 from hrc_drake.cell.controller.separation import (
     MONITOR_LAG,
     BodyAge,
     ControllerSeparationMonitor,
     SafetyLog,
-    assess,
+    planned_limit,
 )
 from hrc_drake.cell.controller.supervisor import (
     ARM_PORTS,
@@ -37,7 +36,12 @@ from hrc_drake.cell.controller.supervisor import (
 )
 from hrc_drake.cell.person import desk_of
 from hrc_drake.cell.robot_envelope import RobotEnvelope
-from hrc_drake.cell.ssm import NEAR_SPEED
+from hrc_drake.cell.separation_pipeline import (
+    FORECAST_POSES_KEPT,
+    SeparationPipeline,
+    pipeline_of,
+)
+from hrc_drake.cell.ssm import NEAR_SPEED, stopping_time
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.motion.clearance import remembered
 from hrc_drake.motion.options import MotionOptions
@@ -122,16 +126,22 @@ REACH_BOUND, TCP_BOUND, STOP_BOUND = 0.25, 1.0, 0.5  # m, m/s, s
 
 
 def keep_clear_settings(
-    scenario: Scenario, design: CellDesign, envelope: RobotEnvelope | None, options: MotionOptions
+    scenario: Scenario,
+    design: CellDesign,
+    envelope: RobotEnvelope | SeparationPipeline | None,
+    options: MotionOptions,
 ) -> KeepClearSettings:
     """Predictive separation's forecast and forecast monitor for `scenario`: with
     `safety.separation: predictive` and an operator on a shared desk (`body.activity: desk`);
     otherwise none (reactive: the monitor alone). The forecast assumes the scenario's person,
-    not the one each operator seed draws: the controller does not know who stands there."""
+    not the one each operator seed draws: the controller does not know who stands there.
+    `envelope`: the controller's model of the robot, or its `SeparationPipeline` (shared with
+    its monitor)."""
     safety, body = scenario.safety, scenario.body
     predictive = safety.separation == Separation.PREDICTIVE
     if not predictive or envelope is None or body.activity != Activity.DESK:
         return KeepClearSettings(max_wait=safety.max_wait, departure=safety.departure)
+    pipeline = pipeline_of(envelope)
     desk = desk_of(load_cell_frames(design), design.layout)
     delay = scenario.interaction_model().delay
     forecast = OperatorForecast(
@@ -145,18 +155,22 @@ def keep_clear_settings(
 
     def scale(q, qdot, opening, carrying, centres, radii, velocities) -> float:
         spheres = forecast_body(centres, radii, velocities)
+        if len(spheres.radii) == 0:
+            return 1.0
         # Far from every sphere the monitor cannot limit: skip its full assessment.
-        wrist = envelope.pose(q, opening)[1]
-        near = spheres.centres[None, :, :] - wrist[:, None, :]
+        robot = pipeline.robot(q, opening, carrying)
+        near = spheres.centres[None, :, :] - robot.p_WB[:, None, :]
         if (np.linalg.norm(near, axis=2) - spheres.radii[None]).min() > (
             reach + safety.slow_band + safety.human_uncertainty
         ):
             return 1.0
-        intent = MotionIntent(qdot=qdot, carrying=carrying, moving=True, rate=1.0)
-        reading = assess(
-            envelope, q, qdot, spheres, intent, safety, acceleration, opening, period, lag
-        )
-        return reading.limit
+        # The monitor's planned limit (`assess`) of the plan at full speed: its velocities now
+        # and ahead are `qdot`, so only the plan's row is needed.
+        qdot = np.asarray(qdot, dtype=float)
+        geometry = pipeline.pairs(q, opening, carrying, spheres)
+        v_r1 = np.maximum(0.0, geometry.robot_speeds(qdot[None, :])[0])
+        t_s1 = stopping_time(np.abs(qdot), acceleration)
+        return planned_limit(geometry, v_r1, t_s1, safety, period, lag)
 
     return KeepClearSettings(
         forecast,
@@ -195,8 +209,13 @@ def make_controller(
     builder = DiagramBuilder()
     limits = supervisor_limits(scenario, options)
     opening = scenario.station.rg2.initial_opening
-    envelope = RobotEnvelope(design) if scenario.body.enabled else None
-    clear = keep_clear_settings(scenario, design, envelope, options)
+    # One pipeline for the controller's side: its monitor and its forecast monitor.
+    pipeline = (
+        SeparationPipeline(RobotEnvelope(design), FORECAST_POSES_KEPT)
+        if scenario.body.enabled
+        else None
+    )
+    clear = keep_clear_settings(scenario, design, pipeline, options)
     supervisor = builder.AddNamedSystem(
         "supervisor", Supervisor(space, policy, plans, home, opening, limits, on_task, clear)
     )
@@ -214,7 +233,7 @@ def make_controller(
                 scenario.safety,
                 options.joint_acceleration_limit,
                 scenario.run.period,
-                envelope,
+                pipeline,
                 body_age(scenario),
             ),
         )

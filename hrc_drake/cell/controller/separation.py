@@ -52,17 +52,21 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 from hrc_drake.cell.controller.intent import MotionIntent
 from hrc_drake.cell.person import touchable
 from hrc_drake.cell.ports import NOBODY, BodySpheres
-from hrc_drake.cell.robot_envelope import RobotEnvelope, speeds_toward
+from hrc_drake.cell.robot_envelope import RobotEnvelope
+from hrc_drake.cell.separation_pipeline import (
+    BodyPairs,
+    SeparationPipeline,
+    pipeline_of,
+    protective_separation,
+)
 from hrc_drake.cell.ssm import (
     FAR_SPEED,
     IMPOSED_SPEED,
     NEAR_DISTANCE,
     NEAR_SPEED,
     beyond_contact_speed,
-    body_gaps,
     entry_scales,
     person_travel,
-    protective_distance,
     separation_constant,
     stopping_time,
 )
@@ -275,7 +279,7 @@ def banded_scales(v_h, gap, v_r1, t_rp: float, t_s1: float, config: SafetyConfig
 
 
 def assess(
-    envelope: RobotEnvelope,
+    envelope: RobotEnvelope | SeparationPipeline,
     q: np.ndarray,
     v: np.ndarray,
     body: BodySpheres,
@@ -295,7 +299,8 @@ def assess(
     S_p, where the plan only creeps toward the person as fast as lets it stop short of them,
     the arm may also go on for `lag` [s] at the speed it has before a limit set now slows it
     (`MONITOR_LAG`). With `band_creep` the plan creeps on within the slow band (`BandCreep`).
-    Poses `envelope`'s own context (its only side effect)."""
+    `envelope`: the controller's model of the robot, or its side's `SeparationPipeline`; poses
+    the envelope's own context (its only side effect)."""
     v = np.asarray(v, dtype=float)
     moving = bool(np.abs(v).max(initial=0.0) > config.moving_speed)
     commanded = np.asarray(intent.qdot, dtype=float) * intent.rate
@@ -305,26 +310,14 @@ def assess(
     # The plan's velocities until a limit set now governs the arm (`MotionIntent.ahead`): the
     # fastest of them toward each sphere, and the fastest joint's stopping time.
     ahead = np.asarray(intent.velocities_ahead(), dtype=float)
-    R_WB, p_WB, pairs, gap = body_gaps(envelope, q, opening, intent.carrying, body)
-    speeds = speeds_toward(envelope.link_velocities(R_WB, p_WB, np.vstack([v, ahead])), pairs)
-    v_h = -np.einsum("nj,mnj->mn", body.velocities, pairs.direction)
+    geometry = pipeline_of(envelope).pairs(q, opening, intent.carrying, body)
+    speeds = geometry.robot_speeds(np.vstack([v, ahead]))
     v_r, v_r1 = np.maximum(0.0, speeds[0]), np.maximum(0.0, speeds[1:].max(axis=0))
-    t_r = config.reaction_time
     # Measured: the S_p the standard asks to keep.
-    t_s = stopping_time(v, joint_acceleration)
+    s_p = protective_separation(geometry, v_r, stopping_time(v, joint_acceleration), config)
     t_s1 = stopping_time(np.abs(ahead).max(axis=0), joint_acceleration)
-    s_p = protective_distance(person_travel(v_h, gap, t_r + t_s, config), v_r, t_s, config)
-    # Planned: the plan at scale s keeps S_p(s) + slow_band, or moves no faster than the
-    # contact speed toward the person.
-    separated = banded_scales(v_h, gap, v_r1, t_r + sampling, t_s1, config, band_creep)
-    slow = CONTACT_SHARE * config.contact_speed / np.maximum(v_r1, _SLOWEST)
-    # ... and only as fast as lets it stop short of the person where they are now: power and
-    # force limiting permits a person coming into the robot, not the robot driving into them.
-    reaction = t_r + sampling + lag
-    short_of = entry_scales(gap, separation_constant(config), v_r1 * reaction, v_r1 * t_s1 / 2)
-    slow = np.where(touchable(body)[None, :], np.minimum(slow, short_of), 0.0)  # head: none
-    limit = float(np.maximum(separated, np.minimum(slow, 1.0)).min()) if config.enabled else 1.0
-    limit = 0.0 if limit < SLOWEST_SCALE else limit
+    gap = geometry.gap
+    limit = planned_limit(geometry, v_r1, t_s1, config, sampling, lag, band_creep)
     return SeparationReading(
         separation=float(gap.min()),
         margin=float((gap - s_p).min()),
@@ -333,6 +326,45 @@ def assess(
         moving=moving,
         imposed=imposed,
     )
+
+
+def planned_limit(
+    geometry: BodyPairs,
+    v_r1: np.ndarray,
+    t_s1: float,
+    config: SafetyConfig,
+    sampling: float = 0.0,
+    lag: float = 0.0,
+    band_creep: bool = False,
+) -> float:
+    """The plan's speed scale (`SeparationReading.limit`) beside the body of `geometry`, the
+    plan moving toward each sphere at `v_r1` (m×n, at least 0) at full speed with stopping
+    time `t_s1` (see `assess`): what the controller's monitor and its forecast monitor both
+    decide by."""
+    if not config.enabled:
+        return 1.0
+    gap, t_r, v_h = geometry.gap, config.reaction_time, geometry.person_speed()
+    t_rp = t_r + sampling
+    # Only a pair the plan at full speed would bring within S_p(1) + slow_band can limit it:
+    # every other pair's scale is 1 (`planned_scales`), whatever its contact speed. The rest
+    # are judged alone, each as it would be among all (the arithmetic is per pair); with none
+    # (a third of the monitor's periods on row 5) the plan goes at full speed.
+    near = planned_distance(1.0, v_h, gap, v_r1, t_rp, t_s1, config) > gap - config.slow_band
+    if not near.any():
+        return 1.0
+    gap, v_h, v_r1 = gap[near], v_h[near], v_r1[near]
+    touch = np.broadcast_to(touchable(geometry.body)[None, :], near.shape)[near]
+    # Planned: the plan at scale s keeps S_p(s) + slow_band, or moves no faster than the
+    # contact speed toward the person.
+    separated = banded_scales(v_h, gap, v_r1, t_rp, t_s1, config, band_creep)
+    slow = CONTACT_SHARE * config.contact_speed / np.maximum(v_r1, _SLOWEST)
+    # ... and only as fast as lets it stop short of the person where they are now: power and
+    # force limiting permits a person coming into the robot, not the robot driving into them.
+    reaction = t_r + sampling + lag
+    short_of = entry_scales(gap, separation_constant(config), v_r1 * reaction, v_r1 * t_s1 / 2)
+    slow = np.where(touch, np.minimum(slow, short_of), 0.0)  # head: none
+    limit = float(np.maximum(separated, np.minimum(slow, 1.0)).min())
+    return 0.0 if limit < SLOWEST_SCALE else limit
 
 
 def log_step(
@@ -412,7 +444,8 @@ class ControllerSeparationMonitor(LeafSystem):
     optional: unconnected, the fingers count over their whole travel). Output ports:
     `speed_limit` (1) and `reading` (SeparationReading). The log is the abstract state updated
     every `period` (`ControllerSeparationMonitor.log(context)`). `envelope` replaces the model
-    built from `design` (one per monitor). `age`: what it allows for the body reading's age
+    built from `design`: an envelope, or the controller's `SeparationPipeline`, which the
+    forecast monitor shares (`pipeline`). `age`: what it allows for the body reading's age
     (default: an exact tracker); a stale reading stops the plan."""
 
     def __init__(
@@ -421,11 +454,12 @@ class ControllerSeparationMonitor(LeafSystem):
         config: SafetyConfig,
         joint_acceleration: float,
         period: float,
-        envelope: RobotEnvelope | None = None,
+        envelope: RobotEnvelope | SeparationPipeline | None = None,
         age: BodyAge | None = None,
     ):
         super().__init__()
-        self.envelope = envelope if envelope is not None else RobotEnvelope(design)
+        self.pipeline = pipeline_of(envelope if envelope is not None else RobotEnvelope(design))
+        self.envelope = self.pipeline.envelope
         self._config, self._acc, self._period = config, joint_acceleration, period
         self._age = age if age is not None else BodyAge()
         self._state_port = self.DeclareVectorInputPort("ur3.state_estimated", 2 * len(UR3_JOINTS))
@@ -461,7 +495,7 @@ class ControllerSeparationMonitor(LeafSystem):
             opening = float(self._gripper_port.Eval(context)[0])
         body = self._body_port.Eval(context)
         reading = assess(
-            self.envelope,
+            self.pipeline,
             x[:n],
             x[n:],
             body,
@@ -506,6 +540,7 @@ __all__ = [
     "log_step",
     "plan_moves",
     "planned_distance",
+    "planned_limit",
     "planned_scales",
     "reading_age",
     "stale_reading",

@@ -43,7 +43,7 @@ from hrc_drake.cell.run.safety_check import (
     SafetyTrace,
     check_separation,
 )
-from hrc_drake.cell.run.view import frame_cell
+from hrc_drake.cell.run.view import ForecastView, StackLight, frame_cell
 from hrc_drake.cell.scenario import make_simulator
 from hrc_drake.cell.scenario import plant_step as scenario_plant_step
 from hrc_drake.cell.station.cell_station import CellStation
@@ -209,13 +209,13 @@ class ClosedLoop:
         self.simulator = make_simulator(setup.scenario, diagram)
         self.watch = _Watch(
             _ContactWatch(),
-            _StackLight(cell.meshcat) if setup.scenario.body.enabled else None,
+            StackLight(cell.meshcat) if setup.scenario.body.enabled else None,
             (still[0], Path(still[1])) if still is not None else None,
         )
         if setup.scenario.body.enabled:
             self.watch.safety = _SafetySampler(self, setup.scenario.run.period)
         if cell.meshcat is not None and setup.scenario.safety.separation == Separation.PREDICTIVE:
-            self.watch.forecast = _ForecastView(cell.meshcat, len(VIEW_TIMES))
+            self.watch.forecast = ForecastView(cell.meshcat, len(VIEW_TIMES))
         self.simulator.set_monitor(_monitor(self))
         self._started = False
 
@@ -330,86 +330,16 @@ class _ContactWatch:
                 self.collisions.append(f"{now:.2f} s: {text}")
 
 
-_LAMPS = {"moving": (0.1, 0.8, 0.2), "slowed": (1.0, 0.7, 0.0), "stopped": (0.9, 0.1, 0.1)}
-
-
-class _StackLight:
-    """The speed the separation monitor allows over time (`changes`), and with Meshcat a stack
-    light beside the robot (also in recordings): green for the plan's own speed, amber while the
-    monitor slows the robot, red while it stops it."""
-
-    def __init__(self, meshcat):
-        from pydrake.geometry import Cylinder, Rgba, Sphere
-        from pydrake.math import RigidTransform
-
-        self.meshcat, self.state = meshcat, None
-        self.changes: list[tuple[float, str]] = []
-        if meshcat is None:
-            return
-        meshcat.SetObject("/safety/pole", Cylinder(0.008, 0.3), Rgba(0.3, 0.3, 0.3, 1.0))
-        meshcat.SetTransform("/safety/pole", RigidTransform([-0.15, 0.25, 0.15]))
-        for k, (name, rgb) in enumerate(_LAMPS.items()):
-            meshcat.SetObject(f"/safety/{name}", Sphere(0.025), Rgba(*rgb, 1.0))
-            meshcat.SetTransform(f"/safety/{name}", RigidTransform([-0.15, 0.25, 0.32 + 0.055 * k]))
-            meshcat.SetProperty(f"/safety/{name}", "visible", False, 0.0)
-
-    def show(self, status: SupervisorStatus, now: float) -> None:
-        """Light the lamp of the robot's state at `now` (recorded at that time)."""
-        # The speed the monitor allows, also during the hold (a monitored stop: red while the
-        # person is within S_p of the still robot).
-        state = "moving"
-        if status.clock.speed < 1.0 - 1e-9:
-            state = "stopped" if status.clock.speed <= 1e-9 else "slowed"
-        if state == self.state:
-            return
-        self.state = state
-        self.changes.append((round(now, 3), state))
-        if self.meshcat is None:
-            return
-        for name in _LAMPS:
-            self.meshcat.SetProperty(f"/safety/{name}", "visible", name == state, now)
-
-
-class _ForecastView:
-    """With Meshcat (also in recordings): the controller's forecast of the operator's hand
-    over the next three seconds as translucent amber spheres, drawn each time the robot times
-    its plan around it (predictive separation)."""
-
-    RADIUS = 0.06  # m: the hand and the forecast's uncertainty
-
-    def __init__(self, meshcat, count: int):
-        from pydrake.geometry import Rgba, Sphere
-
-        self.meshcat, self.shown = meshcat, ()
-        for k in range(count):
-            meshcat.SetObject(f"/forecast/{k}", Sphere(self.RADIUS), Rgba(1.0, 0.6, 0.1, 0.25))
-            meshcat.SetProperty(f"/forecast/{k}", "visible", False, 0.0)
-
-    def show(self, status: SupervisorStatus, now: float) -> None:
-        """Draw the forecast of `status` when it changed (recorded at `now`)."""
-        from pydrake.math import RigidTransform
-
-        view = status.clear.forecast_view if status.plan is not None else ()
-        if view == self.shown:
-            return
-        self.shown = view
-        for k, point in enumerate(view):
-            self.meshcat.SetTransform(f"/forecast/{k}", RigidTransform(list(point)), now)
-            self.meshcat.SetProperty(f"/forecast/{k}", "visible", True, now)
-        for k in range(len(view), len(VIEW_TIMES)):
-            self.meshcat.SetProperty(f"/forecast/{k}", "visible", False, now)
-
-
 @dataclass
 class _Watch:
     """What the loop's monitor keeps between calls."""
 
     contacts: _ContactWatch
-    lights: _StackLight | None
+    lights: StackLight | None
     still: tuple[float, Path] | None
     next_check: float = 0.0
     welds: frozenset = frozenset()  # the welds applied last
-    forecast: _ForecastView | None = None
+    forecast: ForecastView | None = None
     safety: _SafetySampler | None = None  # the samples the run's own safety check reads
 
 
@@ -420,11 +350,11 @@ class _SafetySampler:
     def __init__(self, loop: ClosedLoop, period: float):
         self.trace = SafetyTrace(period)
         self._cell, self._controller = loop.cell.diagram, loop.controller.diagram
-        self._held = (
-            self._cell.GetOutputPort("sim.held_part")
-            if self._cell.HasOutputPort("sim.held_part")
-            else None
-        )
+        # The part held: of the configuration the controller also reads (computed once for
+        # both), or under a camera the contact sensor's (cheaper than the exact reading).
+        camera = self._cell.HasOutputPort("sim.configuration")
+        held = camera and self._cell.HasOutputPort("sim.held_part")
+        self._held = self._cell.GetOutputPort("sim.held_part") if held else None
         self._arm, self._opening, self._body, self._configuration = (
             self._truth(name)
             for name in (
@@ -458,9 +388,8 @@ class _SafetySampler:
         )
 
     def _carrying(self, cell) -> str | None:
-        """The part in the gripper: the contact sensor's `sim.held_part` (cheaper than its
-        whole reading), or, from a station that does not export it (over LCM), the held part
-        of its configuration."""
+        """The part in the gripper: the held part of the cell's configuration, or the
+        contact sensor's `sim.held_part` where a camera reads the configuration."""
         if self._held is not None:
             return self._held.Eval(cell) or None
         return self._configuration.Eval(cell).held()

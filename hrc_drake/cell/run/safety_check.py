@@ -32,15 +32,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hrc_drake.cell.ports import BodySpheres
-from hrc_drake.cell.robot_envelope import RobotEnvelope, speeds_toward
-from hrc_drake.cell.ssm import (
-    IMPOSED_SPEED,
-    REDUCED_SPEED,
-    beyond_contact_speed,
-    body_gaps,
-    protective_distance,
-    stopping_time,
+from hrc_drake.cell.robot_envelope import RobotEnvelope
+from hrc_drake.cell.separation_pipeline import (
+    SeparationPipeline,
+    pipeline_of,
+    protective_separation,
 )
+from hrc_drake.cell.ssm import IMPOSED_SPEED, REDUCED_SPEED, beyond_contact_speed, stopping_time
 from hrc_drake.scenario.safety import SafetyConfig
 
 
@@ -126,29 +124,29 @@ def _travel_toward(
 
 def check_separation(
     samples: list[SafetySample],
-    envelope: RobotEnvelope,
+    envelope: RobotEnvelope | SeparationPipeline,
     config: SafetyConfig,
     joint_acceleration: float,
 ) -> SafetyCheck:
-    """The check of the module docstring over a run's `samples`."""
+    """The check of the module docstring over a run's `samples`; `envelope`: the check's own
+    model of the robot, or a `SeparationPipeline` of one."""
+    pipeline = pipeline_of(envelope)
     violations = imposed = contacts = beyond = 0
     least, worst = float("inf"), None
     for k, sample in enumerate(samples):
         body = sample.body
         if len(body.radii) == 0:
             continue
-        R_WB, p_WB, pairs, gap = body_gaps(
-            envelope, sample.q, sample.opening, sample.carrying, body
-        )
+        geometry = pipeline.pairs(sample.q, sample.opening, sample.carrying, body)
+        gap = geometry.gap
         contacts += int(gap.min() <= 0.0)
         speed = float(np.abs(sample.v).max(initial=0.0))
         if speed <= config.moving_speed:
             continue
         t_s = stopping_time(sample.v, joint_acceleration)
-        velocities = envelope.link_velocities(R_WB, p_WB, sample.v[None, :])
-        v_r = np.maximum(0.0, speeds_toward(velocities, pairs)[0])
-        s_h = _travel_toward(samples, k, config.reaction_time + t_s, pairs.direction)
-        s_p = protective_distance(s_h, v_r, t_s, config)
+        v_r = np.maximum(0.0, geometry.robot_speeds(sample.v[None, :])[0])
+        s_h = _travel_toward(samples, k, config.reaction_time + t_s, geometry.pairs.direction)
+        s_p = protective_separation(geometry, v_r, t_s, config, travel=s_h)
         margin = float((gap - s_p).min())
         fast = bool(((gap < s_p) & beyond_contact_speed(v_r, REDUCED_SPEED, body)).any())
         if np.abs(sample.v - sample.commanded).max(initial=0.0) > IMPOSED_SPEED:

@@ -10,11 +10,16 @@ checks both, `tests/test_browser.py`). The person can still orbit and zoom from 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from pydrake.geometry import Meshcat
 
+from hrc_drake.cell.controller.keep_clear import VIEW_TIMES
 from hrc_drake.motion.poses import CellFrames
+
+if TYPE_CHECKING:
+    from hrc_drake.cell.controller.supervisor import SupervisorStatus
 
 # Meshcat's default camera is a three.js PerspectiveCamera with a 75° vertical field of view
 # (meshcat.js, `Viewer.create_camera`: `new PerspectiveCamera(75, 1, 0.01, 100)`).
@@ -85,4 +90,74 @@ def frame_cell(meshcat: Meshcat, frames: CellFrames) -> CameraPose:
     return pose
 
 
-__all__ = ["CameraPose", "cell_camera", "frame_cell", "framed_points"]
+_LAMPS = {"moving": (0.1, 0.8, 0.2), "slowed": (1.0, 0.7, 0.0), "stopped": (0.9, 0.1, 0.1)}
+
+
+class StackLight:
+    """The speed the separation monitor allows over time (`changes`), and with Meshcat a stack
+    light beside the robot (also in recordings): green for the plan's own speed, amber while the
+    monitor slows the robot, red while it stops it."""
+
+    def __init__(self, meshcat):
+        from pydrake.geometry import Cylinder, Rgba, Sphere
+        from pydrake.math import RigidTransform
+
+        self.meshcat, self.state = meshcat, None
+        self.changes: list[tuple[float, str]] = []
+        if meshcat is None:
+            return
+        meshcat.SetObject("/safety/pole", Cylinder(0.008, 0.3), Rgba(0.3, 0.3, 0.3, 1.0))
+        meshcat.SetTransform("/safety/pole", RigidTransform([-0.15, 0.25, 0.15]))
+        for k, (name, rgb) in enumerate(_LAMPS.items()):
+            meshcat.SetObject(f"/safety/{name}", Sphere(0.025), Rgba(*rgb, 1.0))
+            meshcat.SetTransform(f"/safety/{name}", RigidTransform([-0.15, 0.25, 0.32 + 0.055 * k]))
+            meshcat.SetProperty(f"/safety/{name}", "visible", False, 0.0)
+
+    def show(self, status: SupervisorStatus, now: float) -> None:
+        """Light the lamp of the robot's state at `now` (recorded at that time)."""
+        # The speed the monitor allows, also during the hold (a monitored stop: red while the
+        # person is within S_p of the still robot).
+        state = "moving"
+        if status.clock.speed < 1.0 - 1e-9:
+            state = "stopped" if status.clock.speed <= 1e-9 else "slowed"
+        if state == self.state:
+            return
+        self.state = state
+        self.changes.append((round(now, 3), state))
+        if self.meshcat is None:
+            return
+        for name in _LAMPS:
+            self.meshcat.SetProperty(f"/safety/{name}", "visible", name == state, now)
+
+
+class ForecastView:
+    """With Meshcat (also in recordings): the controller's forecast of the operator's hand
+    over the next three seconds as translucent amber spheres, drawn each time the robot times
+    its plan around it (predictive separation)."""
+
+    RADIUS = 0.06  # m: the hand and the forecast's uncertainty
+
+    def __init__(self, meshcat, count: int):
+        from pydrake.geometry import Rgba, Sphere
+
+        self.meshcat, self.shown = meshcat, ()
+        for k in range(count):
+            meshcat.SetObject(f"/forecast/{k}", Sphere(self.RADIUS), Rgba(1.0, 0.6, 0.1, 0.25))
+            meshcat.SetProperty(f"/forecast/{k}", "visible", False, 0.0)
+
+    def show(self, status: SupervisorStatus, now: float) -> None:
+        """Draw the forecast of `status` when it changed (recorded at `now`)."""
+        from pydrake.math import RigidTransform
+
+        view = status.clear.forecast_view if status.plan is not None else ()
+        if view == self.shown:
+            return
+        self.shown = view
+        for k, point in enumerate(view):
+            self.meshcat.SetTransform(f"/forecast/{k}", RigidTransform(list(point)), now)
+            self.meshcat.SetProperty(f"/forecast/{k}", "visible", True, now)
+        for k in range(len(view), len(VIEW_TIMES)):
+            self.meshcat.SetProperty(f"/forecast/{k}", "visible", False, now)
+
+
+__all__ = ["CameraPose", "ForecastView", "StackLight", "cell_camera", "frame_cell", "framed_points"]

@@ -47,10 +47,14 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from hrc_drake.cell.ports import NOBODY, BodySpheres, SafetyMode
-from hrc_drake.cell.robot_envelope import RobotEnvelope, speeds_toward
+from hrc_drake.cell.robot_envelope import RobotEnvelope
+from hrc_drake.cell.separation_pipeline import (
+    SeparationPipeline,
+    pipeline_of,
+    protective_separation,
+)
 from hrc_drake.cell.ssm import (
     beyond_contact_speed,
-    body_gaps,
     person_travel,
     protective_distance,
     separation_constant,
@@ -120,7 +124,7 @@ class SeparationVerdict:
 
 
 def judge_separation(
-    envelope: RobotEnvelope,
+    envelope: RobotEnvelope | SeparationPipeline,
     q: np.ndarray,
     v: np.ndarray,
     opening: float,
@@ -131,19 +135,19 @@ def judge_separation(
     period: float,
 ) -> SeparationVerdict:
     """The safety function's judgement (see the module docstring) of the arm at measured `q`,
-    `v`, the gripper at `opening` holding `carrying`, beside `body`."""
+    `v`, the gripper at `opening` holding `carrying`, beside `body`; `envelope`: the station's
+    model of the robot, or its `SeparationPipeline`."""
     moving = bool(np.abs(v).max(initial=0.0) > config.moving_speed)
     if len(body.radii) == 0:
         return SeparationVerdict(moving=moving)
     function = config.function
-    R_WB, p_WB, pairs, gap = body_gaps(envelope, q, opening, carrying, body)
-    v_h = -np.einsum("nj,mnj->mn", body.velocities, pairs.direction)
-    velocities = envelope.link_velocities(R_WB, p_WB, np.asarray(v, dtype=float)[None, :])
-    v_r = np.maximum(0.0, speeds_toward(velocities, pairs)[0])
-    t_r, t_s = config.reaction_time, stopping_time(v, joint_acceleration)
-    travel = person_travel(v_h, gap, t_r + t_s + period, config)
-    s_p = protective_distance(travel, v_r, t_s, config, period)
-    at_rest = person_travel(v_h, gap, t_r + period, config) + separation_constant(config)
+    geometry = pipeline_of(envelope).pairs(q, opening, carrying, body)
+    gap = geometry.gap
+    v_r = np.maximum(0.0, geometry.robot_speeds(np.asarray(v, dtype=float)[None, :])[0])
+    t_s = stopping_time(v, joint_acceleration)
+    s_p = protective_separation(geometry, v_r, t_s, config, period)
+    travel = person_travel(geometry.person_speed(), gap, config.reaction_time + period, config)
+    at_rest = travel + separation_constant(config)
     short, beyond = gap - s_p, beyond_contact_speed(v_r, config.contact_speed, body)
     # Slow enough is not enough: the arm must also be able to stop short of the person where
     # they are now (power and force limiting permits them coming into it, not it into them).
@@ -375,14 +379,14 @@ class SafetyFunction(LeafSystem):
 
     def __init__(
         self,
-        envelope: RobotEnvelope,
+        envelope: RobotEnvelope | SeparationPipeline,
         config: SafetyConfig,
         joint_acceleration: float,
         period: float,
         widths: Mapping[str, float],
     ):
         super().__init__()
-        self._envelope, self._config, self._widths = envelope, config, dict(widths)
+        self._pipeline, self._config, self._widths = pipeline_of(envelope), config, dict(widths)
         self._acc, self._period = joint_acceleration, period
         self._position = self.DeclareVectorInputPort("ur3.position", _N)
         self._velocity = self.DeclareVectorInputPort("ur3.velocity", _N)
@@ -434,7 +438,7 @@ class SafetyFunction(LeafSystem):
         q, v = x[:_N], x[_N:]
         opening = float(self._gripper.Eval(context)[0])
         verdict = judge_separation(
-            self._envelope,
+            self._pipeline,
             q,
             v,
             opening,
