@@ -169,6 +169,14 @@ def _steps_table(full: dict) -> list[str]:
     return lines
 
 
+def _section(title: str, columns: tuple[str, ...], rows: list[str]) -> list[str]:
+    """A report section: its title and a table of `rows` under `columns` (none: no section)."""
+    if not rows:
+        return []
+    header = f"| {' | '.join(columns)} |"
+    return [f"## {title}", "", header, "|" + "---|" * len(columns), *rows, ""]
+
+
 def _report(results: dict) -> str:
     lines = [
         "# Larger assemblies through the cell",
@@ -214,15 +222,11 @@ def _report(results: dict) -> str:
                 else f"error: {item['error']} | | |"
             )
             rows.append(f"| `{item['command']}` | {outcome} |")
-    if rows:
-        lines += [
-            "## simulate, lean, with and without deviations",
-            "",
-            "| command | outcome | simulated [s] | run wall [s] | process wall [s] |",
-            "|---|---|---|---|---|",
-            *rows,
-            "",
-        ]
+    lines += _section(
+        "simulate, lean, with and without deviations",
+        ("command", "outcome", "simulated [s]", "run wall [s]", "process wall [s]"),
+        rows,
+    )
     rows = []
     for name in SPECS:
         item = results.get("evaluate", {}).get(name)
@@ -236,15 +240,9 @@ def _report(results: dict) -> str:
             else f"error: {item['error']}"
         )
         rows.append(f"| `{item['command']}` | {outcome} | {item['process_wall']:.0f} |")
-    if rows:
-        lines += [
-            "## evaluate --cell, random operator, lean",
-            "",
-            "| command | outcome | wall [s] |",
-            "|---|---|---|",
-            *rows,
-            "",
-        ]
+    lines += _section(
+        "evaluate --cell, random operator, lean", ("command", "outcome", "wall [s]"), rows
+    )
     return "\n".join(lines)
 
 

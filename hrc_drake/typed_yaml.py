@@ -73,7 +73,7 @@ def safe_load_unique(text: str) -> Any:
 
 
 @dataclasses.dataclass(frozen=True)
-class _Tagged:
+class Tagged:
     """A YAML node with a local tag, `!Name {...}`: the tag's name (without the `!`) and the
     node's value (a mapping, for a variant). Only a union of dataclasses takes one."""
 
@@ -82,29 +82,29 @@ class _Tagged:
 
 
 class _TaggedLoader(_UniqueKeyLoader):
-    """`_UniqueKeyLoader` reading a node with a local tag (`!GripLost {task: 2}`) as a `_Tagged`
+    """`_UniqueKeyLoader` reading a node with a local tag (`!GripLost {task: 2}`) as a `Tagged`
     value, for a union of dataclasses to choose its member by (as Drake's loader does). Still
     a SafeLoader: a tag builds no object but that small value; YAML's own `!!` tags are
     unchanged."""
 
 
-def _construct_tagged(loader: _TaggedLoader, name: str, node: yaml.Node) -> _Tagged:
+def _construct_tagged(loader: _TaggedLoader, name: str, node: yaml.Node) -> Tagged:
     if isinstance(node, yaml.MappingNode):
-        return _Tagged(name, loader.construct_mapping(node, deep=True))
+        return Tagged(name, loader.construct_mapping(node, deep=True))
     if isinstance(node, yaml.SequenceNode):
-        return _Tagged(name, loader.construct_sequence(node, deep=True))
-    return _Tagged(name, loader.construct_scalar(node))
+        return Tagged(name, loader.construct_sequence(node, deep=True))
+    return Tagged(name, loader.construct_scalar(node))
 
 
 _TaggedLoader.add_multi_constructor("!", _construct_tagged)
 
 
 class _TaggedDumper(yaml.SafeDumper):
-    """PyYAML's safe dumper, writing a `_Tagged` value back as the tagged node it was read
+    """PyYAML's safe dumper, writing a `Tagged` value back as the tagged node it was read
     from."""
 
 
-def _represent_tagged(dumper: _TaggedDumper, tagged: _Tagged) -> yaml.Node:
+def _represent_tagged(dumper: _TaggedDumper, tagged: Tagged) -> yaml.Node:
     tag = f"!{tagged.name}"
     if isinstance(tagged.value, dict):
         return dumper.represent_mapping(tag, tagged.value)
@@ -113,7 +113,7 @@ def _represent_tagged(dumper: _TaggedDumper, tagged: _Tagged) -> yaml.Node:
     return dumper.represent_scalar(tag, str(tagged.value))
 
 
-_TaggedDumper.add_representer(_Tagged, _represent_tagged)
+_TaggedDumper.add_representer(Tagged, _represent_tagged)
 
 
 def load_tagged(text: str) -> Any:
@@ -200,7 +200,7 @@ def _variant(value: Any, members: list[type], key: str, default: Any) -> Any:
     """The member of a union of dataclasses that the YAML tag `!Name` names (the class's
     `__name__`), read from the tagged mapping as that dataclass (merged onto `default` when it
     is already of that member, as Drake merges)."""
-    if not isinstance(value, _Tagged):
+    if not isinstance(value, Tagged):
         raise TypedYamlError(f"{key}: {_untagged(value, members)}; the tags are {_tags(members)}")
     chosen = next((m for m in members if m.__name__ == value.name), None)
     if chosen is None:
@@ -223,7 +223,7 @@ def _convert(value: Any, tp: Any, key: str, default: Any = dataclasses.MISSING) 
     members = _variants(tp)
     if members and not (value is None and type(None) in args):
         return _variant(value, members, key, default)
-    if isinstance(value, _Tagged):
+    if isinstance(value, Tagged):
         raise TypedYamlError(
             f"{key}: a tag (!{value.name}) chooses among variants; {key} has none: leave it out"
         )

@@ -13,9 +13,6 @@ for with a command to try, and every scenario key listed with its meaning and de
   members of a union such as the drivers' and the faults' tagged entries, and the `sensors:`
   mapping's preset and per-port keys) is a row of a `| key | default | meaning |` table in
   the docs, with a meaning, and the default the row states is the dataclass's.
-
-Files still being rewritten are listed in `EXEMPT_PARAGRAPHS` and `EXEMPT_OPENINGS`; the lists
-only shrink: a file on it that already passes fails the test, so that it is taken off.
 """
 
 from __future__ import annotations
@@ -38,11 +35,6 @@ DRAKE_SECTION = object()  # the default of a Drake section's own row: its rows s
 KEY_DOC = "scenario.md"  # the page of the scenario's keys (README links to it)
 MAX_LINES = 10
 OPENING_LINES = 15
-
-# Being rewritten: their paragraphs or openings do not pass yet. Remove a file once it passes
-# (the test below fails for a file listed here that passes, so the list shrinks).
-EXEMPT_PARAGRAPHS: set[str] = set()
-EXEMPT_OPENINGS: set[str] = set()
 
 # A dataclass used by several sibling fields is listed once, under a placeholder, after a row
 # for each sibling (`sensors.ur3`, ..., then `sensors.<port>.rate`).
@@ -85,9 +77,6 @@ def _long_paragraphs(doc: Path) -> list[str]:
 @pytest.mark.parametrize("doc", DOCS, ids=lambda p: p.name)
 def test_no_paragraph_is_longer_than_ten_lines(doc):
     long = _long_paragraphs(doc)
-    if doc.name in EXEMPT_PARAGRAPHS:
-        assert long, f"{doc.name} passes now: take it off EXEMPT_PARAGRAPHS"
-        return
     assert long == [], f"{doc.name}: split these paragraphs (at most {MAX_LINES} lines): {long}"
 
 
@@ -118,9 +107,6 @@ DOC_PAGES = [doc for doc in DOCS if doc.parent.name == "docs"]
 @pytest.mark.parametrize("doc", DOC_PAGES, ids=lambda p: p.name)
 def test_each_page_opens_with_what_to_do_and_a_command(doc):
     problem = _opening_problem(doc)
-    if doc.name in EXEMPT_OPENINGS:
-        assert problem, f"{doc.name} opens well now: take it off EXEMPT_OPENINGS"
-        return
     assert problem == "", f"{doc.name}: {problem}"
 
 

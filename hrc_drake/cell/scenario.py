@@ -34,9 +34,8 @@ from pydrake.systems.sensors import CameraConfig
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.scenario.load import load_scenario
-from hrc_drake.scenario.schema import DRAKE_SECTIONS, DrakeSection, Scenario, ScenarioError
+from hrc_drake.scenario.schema import DrakeSection, Scenario, ScenarioError
 from hrc_drake.tasks.assembly import AssemblySpec
-from hrc_drake.typed_yaml import dump_flow, load_tagged
 
 # `--lean`: the same models, physics and limits, with 0.5 s bolting holds (tests, previews).
 LEAN = "{motion: {hold_time: 0.5}, run: {settle_time: 0.2}}"
@@ -162,12 +161,11 @@ def cell_configs(scenario: Scenario) -> CellConfigs:
 def _read_configs(sections: tuple[DrakeSection, ...]) -> CellConfigs:
     configs = CellConfigs()
     for section in sections:
-        for key, text in _split(section):
-            try:
-                configs = yaml_load_typed(schema=CellConfigs, data=text, defaults=configs)
-            except (RuntimeError, ValueError, TypeError, AssertionError) as err:
-                raise ScenarioError(_drake_error(section.source, key, err)) from None
-            _check(configs, section.source, key)
+        try:
+            configs = yaml_load_typed(schema=CellConfigs, data=section.text, defaults=configs)
+        except (RuntimeError, ValueError, TypeError, AssertionError) as err:
+            raise ScenarioError(_drake_error(section.source, section.key, err)) from None
+        _check(configs, section.source, section.key)
     return configs
 
 
@@ -178,12 +176,6 @@ _KINDS = {
     "cameras": "a list of Drake's CameraConfig",
     "lcm_buses": "a mapping of bus names to Drake's DrakeLcmParams",
 }
-
-
-def _split(section: DrakeSection) -> list[tuple[str, str]]:
-    """Each Drake section of `section` alone (key, YAML text), so that an error names it."""
-    data = load_tagged(section.text)
-    return [(key, dump_flow({key: data[key]})) for key in DRAKE_SECTIONS if key in data]
 
 
 def _drake_error(source: str, key: str, err: Exception) -> str:
@@ -276,9 +268,16 @@ def contact_material(scenario: Scenario) -> DefaultProximityProperties:
 
 def make_simulator(scenario: Scenario, diagram, context=None) -> Simulator:
     """A Simulator of `diagram` (from `context`, if given) with the scenario's
-    `simulator_config` applied (`ApplySimulatorConfig`)."""
+    `simulator_config` applied."""
+    return configured_simulator(cell_configs(scenario).simulator_config, diagram, context)
+
+
+def configured_simulator(config: SimulatorConfig | None, diagram, context=None) -> Simulator:
+    """A Simulator of `diagram` (from `context`, if given) with `config` applied
+    (`ApplySimulatorConfig`; None: Drake's defaults, which are `SimulatorConfig()`'s)."""
     simulator = Simulator(diagram) if context is None else Simulator(diagram, context)
-    ApplySimulatorConfig(cell_configs(scenario).simulator_config, simulator)
+    if config is not None:
+        ApplySimulatorConfig(config, simulator)
     return simulator
 
 

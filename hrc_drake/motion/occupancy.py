@@ -55,8 +55,8 @@ from hrc_drake.motion.scene import (
     Layout,
     PlanningScene,
     SceneModel,
-    _support,
     part_body,
+    shape_support,
 )
 from hrc_drake.motion.task_move import resolve_task
 from hrc_drake.tasks.assembly import AssemblySpec
@@ -126,8 +126,8 @@ def _shape_boxes(inspector, geometries, X_F_body: RigidTransform, X_of, owner: s
         X = X_F_body @ X_of(g)
         R = X.rotation().matrix()
         shape = inspector.GetShape(g)
-        up = np.array([_support(shape, R.T[:, k]) for k in range(3)])
-        down = np.array([_support(shape, -R.T[:, k]) for k in range(3)])
+        up = np.array([shape_support(shape, R.T[:, k]) for k in range(3)])
+        down = np.array([shape_support(shape, -R.T[:, k]) for k in range(3)])
         lo.append(X.translation() - down)
         hi.append(X.translation() + up)
     return Boxes(np.array(lo).reshape(-1, 3), np.array(hi).reshape(-1, 3), (owner,) * len(lo))

@@ -334,7 +334,7 @@ def _scoped(plant: MultibodyPlant, body) -> str:
     return f"{plant.GetModelInstanceName(body.model_instance())}::{body.name()}"
 
 
-def _support(shape, direction: np.ndarray) -> float:
+def shape_support(shape, direction: np.ndarray) -> float:
     """max over the shape of direction · p, p in the shape's frame (direction a unit vector)."""
     d = np.asarray(direction, dtype=float)
     if isinstance(shape, Box):
@@ -403,8 +403,8 @@ def read_cell_frames(
             R = X_body_g.rotation().inverse()
             offset = float(axis_part @ (X_body_g.translation() - X_part_grasp.translation()))
             shape = inspector.GetShape(g)
-            hi = np.maximum(hi, offset + _support(shape, R @ axis_part))
-            lo = np.minimum(lo, offset - _support(shape, R @ -axis_part))
+            hi = np.maximum(hi, offset + shape_support(shape, R @ axis_part))
+            lo = np.minimum(lo, offset - shape_support(shape, R @ -axis_part))
         widths[instance] = float(hi - lo)
         grasps[instance] = tcp_in_part(X_part_grasp, widths[instance])
     tray = plant.GetBodyByName(TRAY, plant.GetModelInstanceByName(TRAY))

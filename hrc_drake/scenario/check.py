@@ -32,6 +32,7 @@ from hrc_drake.tasks.interaction import (
     IndicationDelay,
     InteractionError,
 )
+from hrc_drake.typed_yaml import Tagged
 
 # The fastest the UR3 can move the RG2's TCP [m/s]: every joint at its published speed limit
 # (UR3/CB3 user manual v3.13 via ros-industrial `ur_description/config/ur3/joint_limits.yaml`:
@@ -46,23 +47,26 @@ UR3_TCP_SPEED_MAX = 7.5
 REDUCED_SPEED = 0.25
 
 
-def _check_finite(value, key: str, fail) -> None:
-    """Refuse NaN and infinity anywhere in a scenario (YAML's `.nan`, `.inf`): every number of a
-    scenario is a quantity of the cell, and a NaN passes every `<` and `>` check below, to fail
-    later in Drake (a NaN hold time is an assertion in the planning worker, an infinite one a
-    run that never ends)."""
+def check_finite(value, key: str, fail) -> None:
+    """Refuse NaN and infinity anywhere in a scenario (YAML's `.nan`, `.inf`), `fail(key,
+    problem)` naming the first: every number of a scenario is a quantity of the cell, and a NaN
+    passes every `<` and `>` check below, to fail later in Drake (a NaN hold time is an
+    assertion in the planning worker, an infinite one a run that never ends). Walks dataclasses,
+    lists, mappings and tagged YAML nodes (the Drake sections as read, `!Rpy {deg: [...]}`)."""
     if isinstance(value, float):
         if not math.isfinite(value):
             raise fail(key, f"{value} is not a number the cell can use; give a finite number")
+    elif isinstance(value, Tagged):
+        check_finite(value.value, key, fail)
     elif dataclasses.is_dataclass(value):
         for f in dataclasses.fields(value):
-            _check_finite(getattr(value, f.name), f"{key}.{f.name}" if key else f.name, fail)
+            check_finite(getattr(value, f.name), f"{key}.{f.name}" if key else f.name, fail)
     elif isinstance(value, list | tuple):
         for i, item in enumerate(value):
-            _check_finite(item, f"{key}[{i}]", fail)
+            check_finite(item, f"{key}[{i}]", fail)
     elif isinstance(value, dict):
         for k, item in value.items():
-            _check_finite(item, f"{key}.{k}", fail)
+            check_finite(item, f"{key}.{k}", fail)
 
 
 def _check_limits(scenario, fail) -> None:
@@ -105,7 +109,7 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
     def fail(key: str, problem: str) -> ScenarioError:
         return ScenarioError(f"{where}: {key}: {problem}")
 
-    _check_finite(scenario, "", fail)
+    check_finite(scenario, "", fail)
     try:  # a name not under models/assemblies/: one line, with the known ones
         assembly_file(scenario.assembly)
     except SpecError as err:

@@ -5,7 +5,6 @@ checked once (`hrc_drake.scenario.check`). It reads a file as Drake's `yaml_load
 errors where Drake's are a converter's traceback."""
 
 import dataclasses
-import math
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -15,7 +14,7 @@ import yaml
 from hrc_drake.hri.operator import parse_operator_script
 from hrc_drake.paths import not_a_file
 from hrc_drake.resources import scenarios_dir
-from hrc_drake.scenario.check import check_scenario
+from hrc_drake.scenario.check import check_finite, check_scenario
 from hrc_drake.scenario.schema import (
     DRAKE_SECTIONS,
     TEXT_SOURCE,
@@ -111,7 +110,8 @@ def _read_text(path: Path) -> str:
 def _load_typed(text: str, source: str, defaults: Scenario | None) -> Scenario:
     """`text` read onto `defaults`: the project's sections by the project's typed reader, the
     Drake sections (`DRAKE_SECTIONS`) kept as text for the cell, which reads them with Drake's
-    own loader. The pre-pass (`load_tagged`) refuses a key given twice anywhere."""
+    own loader. The pre-pass (`load_tagged`) refuses a key given twice anywhere, and NaN or
+    infinity in a Drake section (`check_finite`), which Drake's loader takes as numbers."""
     try:
         data = load_tagged(text)
     except yaml.YAMLError as err:
@@ -119,29 +119,14 @@ def _load_typed(text: str, source: str, defaults: Scenario | None) -> Scenario:
     drake = {}
     if isinstance(data, dict):
         drake = {key: data.pop(key) for key in DRAKE_SECTIONS if key in data}
-        _refuse_non_finite(drake, source)
+        check_finite(drake, "", lambda key, problem: ScenarioError(f"{source}: {key}: {problem}"))
     try:
         scenario = load_typed(Scenario, data=data, defaults=defaults, source=source)
     except TypedYamlError as err:
         raise ScenarioError(f"{source}: {err}") from None
-    before = list(defaults.drake) if defaults is not None else []
-    scenario.drake = before + ([DrakeSection(source, dump_flow(drake))] if drake else [])
+    given = [DrakeSection(source, key, dump_flow({key: value})) for key, value in drake.items()]
+    scenario.drake = (list(defaults.drake) if defaults is not None else []) + given
     return scenario
-
-
-def _refuse_non_finite(value, source: str, key: str = "") -> None:
-    """NaN or infinity anywhere in the Drake sections is refused here, in one line naming the
-    key: Drake's loader takes them as numbers."""
-    if isinstance(value, dict):
-        for k, v in value.items():
-            _refuse_non_finite(v, source, f"{key}.{k}" if key else str(k))
-    elif isinstance(value, list):
-        for i, v in enumerate(value):
-            _refuse_non_finite(v, source, f"{key}[{i}]")
-    elif hasattr(value, "value") and hasattr(value, "name"):  # a tagged node: `!Rpy {...}`
-        _refuse_non_finite(value.value, source, key)
-    elif isinstance(value, float) and not math.isfinite(value):
-        raise ScenarioError(f"{source}: {key}: {value} is not a finite number; give one")
 
 
 def with_operator_script(scenario: Scenario, script: str) -> Scenario:

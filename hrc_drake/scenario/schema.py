@@ -407,11 +407,12 @@ DRAKE_SECTIONS = ("plant_config", "scene_graph_config", "simulator_config", "cam
 
 @dataclass(frozen=True)
 class DrakeSection:
-    """The Drake sections (`DRAKE_SECTIONS`) one source gave, as YAML flow text: the scenario
-    file, or one `--scenario-text`. The cell layers them in order, as `hardware_sim` layers its
-    `--scenario_text` on the file."""
+    """One Drake section (`key`, one of `DRAKE_SECTIONS`) as one source gave it, as YAML flow
+    text `{key: ...}`: the scenario file, or one `--scenario-text`. The cell layers them in
+    order, as `hardware_sim` layers its `--scenario_text` on the file."""
 
     source: str
+    key: str
     text: str
 
 

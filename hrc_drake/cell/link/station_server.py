@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.lcm import DrakeLcm
-from pydrake.systems.analysis import ApplySimulatorConfig, Simulator, SimulatorConfig
+from pydrake.systems.analysis import Simulator, SimulatorConfig
 from pydrake.systems.framework import (
     BasicVector,
     Context,
@@ -53,6 +53,7 @@ from hrc_drake.cell.link.lockstep import (
     publish,
 )
 from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
+from hrc_drake.cell.scenario import cell_configs, configured_simulator
 
 if TYPE_CHECKING:
     from hrc_drake.cell.link.station_record import StationRecord
@@ -133,10 +134,7 @@ class StationHooks:
 
     def simulator(self, diagram: Diagram) -> Simulator:
         """A Simulator of `diagram`, with `simulator_config` applied when there is one."""
-        simulator = Simulator(diagram)
-        if self.simulator_config is not None:
-            ApplySimulatorConfig(self.simulator_config, simulator)
-        return simulator
+        return configured_simulator(self.simulator_config, diagram)
 
 
 def check_station_ports(diagram: Diagram) -> None:
@@ -371,7 +369,6 @@ def cell_station_hooks(station) -> StationHooks:
     """The hooks of a `CellStation` (`hrc_drake.cell.station.build`): its welds, the touching
     pairs of `sim.contact_results` by owner, and its `StationRecord`."""
     from hrc_drake.cell.link.station_record import StationRecord
-    from hrc_drake.cell.scenario import cell_configs
     from hrc_drake.cell.station.contacts import geometry_owners, owner_pairs
 
     owners = geometry_owners(station.plant)
