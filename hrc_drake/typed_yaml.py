@@ -138,10 +138,6 @@ def _short(value: Any, limit: int = 60) -> str:
     return text if len(text) <= limit else f"{text[: limit - 5]}...{text[-1]}"
 
 
-def _type_name(tp: Any) -> str:
-    return getattr(tp, "__name__", str(tp))
-
-
 def yaml_error_line(err: yaml.YAMLError, source: str) -> str:
     """PyYAML's several-line message as one line naming `source`, the line and the column:
     ``flange.yaml, line 3, column 6: bad YAML: expected ',' or '}', but got ':' (while parsing a

@@ -1,5 +1,7 @@
 """The path–time timing of a motion against a forecast (`hrc_drake.motion.path_time`)."""
 
+import itertools
+
 import numpy as np
 import pytest
 from pydrake.trajectories import PiecewisePolynomial
@@ -426,3 +428,50 @@ def test_a_remembered_scale_answers_a_question_asked_before_without_asking_again
     # Size 3: the first question was forgotten, so it is asked again.
     scale(q, qdot, 0.05, None, c, r, v)
     assert len(asked) == 2 + 2 * len(variants)
+
+
+def _every_wait(plan, occupancy, scale, max_wait, slowing_ok, clear_only) -> float:
+    """The wait of `time_around`'s search for the one motion of `plan` at time 0, each wait's
+    whole delay asked (its search before it stopped asking once the answer was known)."""
+    poses = motion_path(plan, 0.0, plan.duration, SAMPLE)
+    best_wait, best_cost, memo = 0.0, np.inf, {}
+    for wait in np.arange(0.0, max_wait + 1e-6, 0.2):
+        lost = forecast_delay(poses, wait, occupancy, scale, memo)
+        if lost <= 1e-6:
+            if not slowing_ok or wait < best_cost - 1e-6:
+                best_wait = float(wait)
+            break
+        if clear_only and wait > 0.0:
+            continue
+        cost = wait + 1.2 * lost
+        if cost < best_cost - 1e-6:
+            best_wait, best_cost = float(wait), cost
+    return best_wait
+
+
+def test_the_wait_search_stops_asking_once_the_answer_is_known_and_finds_the_same_wait():
+    """`time_around` asks each wait's delay only as far as it can still matter (a clearing
+    wait first, then only up to where a wait could still cost the least): on hands that leave
+    the path at several times or stay beside it, with both monitors, every mode and two
+    longest waits, it takes the wait that asking every wait in full takes, and asks the
+    monitor less."""
+    plan, asked = _plan(), {"every": 0, "search": 0}
+    hands = [_sits(at=0.6, until=u) for u in (1.0, 2.5, 5.0, 8.0)]
+    hands += [_blocks_then_stands_beside(u) for u in (2.0, 4.0)]
+    modes = itertools.product(hands, (_graded, _stops_near), (False, True), (False, True))
+    for occupancy, monitor, slowing_ok, clear_only in modes:
+        for max_wait in (1.0, 6.0):
+            flags = {"slowing_ok": slowing_ok, "clear_only": clear_only}
+
+            def every(*args, monitor=monitor) -> float:
+                asked["every"] += 1
+                return monitor(*args)
+
+            def search(*args, monitor=monitor) -> float:
+                asked["search"] += 1
+                return monitor(*args)
+
+            wait = _every_wait(plan, occupancy, every, max_wait, **flags)
+            holds = time_around(plan, 0.0, 0.0, occupancy, search, max_wait, **flags)
+            assert [(h.tau, h.until) for h in holds] == ([(0.0, wait)] if wait > 0.0 else [])
+    assert asked["search"] < asked["every"]

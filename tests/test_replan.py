@@ -181,7 +181,6 @@ def test_an_ordinary_request_plans_and_caches_as_before(planner, on_the_table):
     assert request.keywords() == {}
     normal = planner.plan_task(frozenset(), "F1")
     assert planner.plan_task(frozenset(), "F1", instance=None, source_pose=None) is normal
-    assert planner.has_plan(frozenset(), "F1")
     measured = planner.plan_task(frozenset(), "F1", instance=PART, source_pose=on_the_table)
     assert measured is not normal and planner.plan_task(frozenset(), "F1") is normal
     assert PlanRequest.of(frozenset(), "F1", instance=PART).key() != request.key()
@@ -285,7 +284,8 @@ def test_a_held_part_is_carried_from_where_the_arm_is_to_another_seat_or_home(
     _assert_near(_tcp(planner, plan, plan.t_in_place), tcp_pose(planner.frames, PART, X_dst))
     np.testing.assert_allclose(plan.positions(plan.duration), planner.q_home, atol=1e-6)
     validate_plan(plan, planner)
-    assert planner.has_plan(frozenset(), task, instance=PART, q_start=mid_carry, held=True)
+    again = planner.plan_task(frozenset(), task, instance=PART, q_start=mid_carry, held=True)
+    assert again is plan  # from the plan cache
     # A held part is held somewhere: the plan needs the arm's posture.
     with pytest.raises(ValueError, match="needs its instance and q_start"):
         planner.plan_task(frozenset(), task, instance=PART, held=True)

@@ -19,7 +19,7 @@ asks: `hrc_drake.cell.ssm` turns these distances and speeds into ISO/TS 15066's 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.geometry import Box, Capsule, Convex, Cylinder, Ellipsoid, Mesh, Sphere
@@ -59,6 +59,18 @@ class Primitives:
     half: np.ndarray
     disc: np.ndarray
     round: np.ndarray
+    _spread: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def spread(self, n: int) -> tuple[np.ndarray, ...]:
+        """(half, −half m×3×n; disc, round, disc > 0 m×n): the shapes' sizes laid out against
+        n points (`nearest_to_posed`), made once per n."""
+        found = self._spread.get(n)
+        if found is None:
+            m = len(self.names)
+            half = np.ascontiguousarray(np.broadcast_to(self.half[:, :, None], (m, 3, n)))
+            disc, rounding = (np.repeat(x[:, None], n, axis=1) for x in (self.disc, self.round))
+            found = self._spread[n] = (half, -half, disc, rounding, disc > 0.0)
+        return found
 
     @staticmethod
     def join(parts: list[Primitives]) -> Primitives:
@@ -323,10 +335,6 @@ class Pairs:
     link: np.ndarray
 
 
-def _norm(x: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.einsum("...i,...i->...", x, x))
-
-
 def nearest_points(shapes: Primitives, R_WB: np.ndarray, p_WB: np.ndarray, points) -> Pairs:
     """The distance from each of `points` (n×3, world) to each of `shapes` posed by the bodies'
     poses (R_WB, p_WB), and the nearest point on the shape (see `Primitives`)."""
@@ -341,34 +349,47 @@ def posed_shapes(shapes: Primitives, R_WB: np.ndarray, p_WB: np.ndarray):
 
 def nearest_to_posed(shapes: Primitives, R_WC: np.ndarray, p_WC: np.ndarray, points) -> Pairs:
     """`nearest_points` of `shapes` already posed in the world (`posed_shapes`)."""
-    p = (points[None, :, :] - p_WC[:, None, :]) @ R_WC  # each point in each shape's frame
-    half, disc, rounding = shapes.half[:, None, :], shapes.disc[:, None], shapes.round[:, None]
+    # Laid out shape × axis × point (m×3×n), so that each step below runs over whole rows of
+    # points: broadcast over m×n×3, a shape's three numbers cost numpy a loop per pair. Each
+    # length is summed in the order np.einsum summed it over m×n×3 ((x² + z²) + y²; x² + y²)
+    # and matmul takes the transposed operands, so every figure is as before to the last bit.
+    half, neg_half, disc, rounding, has_disc = shapes.spread(len(points))
+    p = R_WC.transpose(0, 2, 1) @ (points.T[None, :, :] - p_WC[:, :, None])  # in C
     # Nearest point of the core (box, then the disc across x–y), then of the rounded shape.
-    core = np.minimum(np.maximum(p, -half), half)
-    across = p[..., :2] - core[..., :2]
-    length = _norm(across)
-    core[..., :2] += across * np.minimum(1.0, disc / np.maximum(length, _TINY))[..., None]
+    core = np.minimum(np.maximum(p, neg_half), half)
+    across = p[:, :2] - core[:, :2]
+    length = np.sqrt(across[:, 0] * across[:, 0] + across[:, 1] * across[:, 1])
+    core[:, :2] += across * np.minimum(1.0, disc / np.maximum(length, _TINY))[:, None]
     offset = p - core
-    out = _norm(offset)
-    unit = offset / np.maximum(out, _TINY)[..., None]
-    local = core + unit * np.minimum(rounding, out)[..., None]
+    x, y, z = offset.transpose(1, 0, 2)
+    out = np.sqrt((x * x + z * z) + y * y)
+    unit = offset / np.maximum(out, _TINY)[:, None]
+    local = core + unit * np.minimum(rounding, out)[:, None]
     # Inside the core: the depth to its nearest face (negative). A shape with a disc has no
     # box across x–y (`primitive`), so `length` is the radial distance there.
     excess = np.abs(p) - half
-    lateral = np.where(disc > 0.0, length - disc, np.maximum(excess[..., 0], excess[..., 1]))
-    inside = np.minimum(np.maximum(lateral, excess[..., 2]), 0.0)
+    lateral = np.where(has_disc, length - disc, np.maximum(excess[:, 0], excess[:, 1]))
+    inside = np.minimum(np.maximum(lateral, excess[:, 2]), 0.0)
+    # To the world as m×n×3 arrays, as before: the callers' einsum sums by the layout.
     R_CW = R_WC.transpose(0, 2, 1)
-    witness = local @ R_CW + p_WC[:, None, :]
-    return Pairs(out + inside - rounding, witness, unit @ R_CW, shapes.link)
+    witness = local.transpose(0, 2, 1) @ R_CW
+    witness += p_WC[:, None, :]
+    return Pairs(out + inside - rounding, witness, unit.transpose(0, 2, 1) @ R_CW, shapes.link)
 
 
 def speeds_toward(links: np.ndarray, pairs: Pairs) -> np.ndarray:
     """(k, m, n): the speed of each witness point along its pair's direction, for each row of
     link velocities (`RobotEnvelope.link_velocities`): (v_o + ω × w)·d = v_o·d + ω·(w × d)."""
+    # Component by component, each dot product summed in the order np.einsum summed it here
+    # (v_o·d: (0 + 2) + 1 over a contiguous row; ω·(w × d): 0 + 1 + 2), so every speed is
+    # the same to the last bit, without einsum's and fancy indexing's overhead.
     w, d = pairs.witness, pairs.direction
-    w_x_d = w[..., _YZX] * d[..., _ZXY] - w[..., _ZXY] * d[..., _YZX]
-    omega, origin = links[:, pairs.link, 0], links[:, pairs.link, 1]
-    return np.einsum("kmj,mnj->kmn", origin, d) + np.einsum("kmj,mnj->kmn", omega, w_x_d)
+    w0, w1, w2, d0, d1, d2 = w[..., 0], w[..., 1], w[..., 2], d[..., 0], d[..., 1], d[..., 2]
+    c0, c1, c2 = w1 * d2 - w2 * d1, w2 * d0 - w0 * d2, w0 * d1 - w1 * d0
+    row = links[:, pairs.link, :, :, None]  # k×m×2×3×1: (ω, v_o) of each shape's link
+    omega, origin = row[:, :, 0], row[:, :, 1]
+    along = (origin[:, :, 0] * d0 + origin[:, :, 2] * d2) + origin[:, :, 1] * d1
+    return along + ((omega[:, :, 0] * c0 + omega[:, :, 1] * c1) + omega[:, :, 2] * c2)
 
 
 __all__ = [

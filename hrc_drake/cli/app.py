@@ -14,6 +14,7 @@ import sys
 import threading
 from pathlib import Path
 
+import hrc_drake
 from hrc_drake.cli.adversary import add_adversary_parser
 from hrc_drake.cli.evaluate import (
     add_evaluate_parser,
@@ -49,16 +50,6 @@ EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130  # the shell's status for a command ended by SIGINT (128 + 2)
 
 DESCRIPTION = "`hrc-drake`: the command line of the task layer and the cell."
-
-
-def package_version() -> str:
-    """The installed version of the `hrc_drake` distribution (pyproject.toml's `version`)."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("hrc_drake")
-    except PackageNotFoundError:  # run from a checkout that was never installed
-        return "unknown (not installed: pip install -e .)"
 
 
 def assembly_argument(text: str) -> Path:
@@ -208,7 +199,7 @@ def cmd_drivers(args) -> int:
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of `hrc-drake`."""
     parser = argparse.ArgumentParser(prog="hrc-drake", description=DESCRIPTION)
-    parser.add_argument("--version", action="version", version=f"hrc-drake {package_version()}")
+    parser.add_argument("--version", action="version", version=f"hrc-drake {hrc_drake.__version__}")
     common = _common_flags()
     sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
 
@@ -385,9 +376,8 @@ def _add_simulate(p) -> None:
     )
 
 
-def _add_station(p) -> None:
-    """`station`'s flags."""
-    _add_scenario_flags(p, simulate=False)
+def _add_lcm_flag(p) -> None:
+    """`--lcm URL`, the bus `station` and `drivers` serve on."""
     p.add_argument(
         "--lcm",
         metavar="URL",
@@ -395,6 +385,12 @@ def _add_station(p) -> None:
         help="LCM URL to serve on (default: the scenario's lcm_buses.default, "
         "udpm://239.241.129.92:20185?ttl=0 unless it says otherwise: this machine only)",
     )
+
+
+def _add_station(p) -> None:
+    """`station`'s flags."""
+    _add_scenario_flags(p, simulate=False)
+    _add_lcm_flag(p)
     p.add_argument(
         "--timeout",
         type=float,
@@ -421,13 +417,7 @@ def _add_drivers(p) -> None:
         help='YAML merged over the scenario, e.g. "{drivers: {rg2: !Rg2Modbus {host: 10.0.0.9}}}"; '
         "repeat it to merge several, in order",
     )
-    p.add_argument(
-        "--lcm",
-        metavar="URL",
-        default=None,
-        help="LCM URL to serve on (default: the scenario's lcm_buses.default, "
-        "udpm://239.241.129.92:20185?ttl=0 unless it says otherwise: this machine only)",
-    )
+    _add_lcm_flag(p)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -4,10 +4,8 @@ from __future__ import annotations
 
 import json
 import math
-import signal
 import socket
 import sys
-import threading
 from dataclasses import dataclass
 
 from hrc_drake.cell.run.run import run_scenario, scenario_policy
@@ -94,11 +92,7 @@ def simulate_command(args) -> int:
 
     Ctrl-C ends it with one line: during the simulation, once the recording and the summary
     (or `--json`) of what ran are written, marked interrupted; before it, with nothing
-    written."""
-    # A shell that starts a job in the background hands it SIGINT ignored, and Python then
-    # leaves it ignored: Ctrl-C (or a SIGINT sent on purpose) would not end the run.
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+    written. (`main` has made SIGINT raise KeyboardInterrupt, as the run needs.)"""
     try:
         return _simulate(args)
     except KeyboardInterrupt:

@@ -4,7 +4,7 @@ outputs, `UR3_COMMAND` into `servoJ` (docs/hardware.md, "UR3: RTDE").
 `Ur3RtdeDriver` wraps one `rtde_receive.RTDEReceiveInterface` and one
 `rtde_control.RTDEControlInterface` (passed in, so that tests give fakes; by default made for
 `Ur3RtdeSettings.host`). `status(stamp)` is the arm's `lcmt_panda_status`, `command(message)`
-servoes to a command's joint positions, and `Ur3Bridge(driver, lcm).run()` (`serve_ur3`)
+servoes to a command's joint positions, and `Ur3Bridge(driver, lcm).run()`
 serves both over LCM at the RTDE rate. What it guarantees:
 
 - **The status** is the station's own (`ur3_status`, so the controller reads it as it reads the
@@ -394,15 +394,3 @@ class Ur3Bridge:
                 count += 1
         finally:
             self.driver.stop()
-
-
-def serve_ur3(
-    driver: Ur3RtdeDriver,
-    lcm,
-    clock: Callable[[], float] = time.time,
-    cycles: int | None = None,
-    stop: Event | None = None,
-) -> None:
-    """Serve the UR3 on `lcm` at RTDE's rate: `Ur3Bridge(driver, lcm, clock).run(cycles,
-    stop)`."""
-    Ur3Bridge(driver, lcm, clock).run(cycles, stop)

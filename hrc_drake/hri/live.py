@@ -83,21 +83,6 @@ class PanelPrompt:
     sim_time: float
     meshcat: Meshcat
 
-    def button_for(self, task: str) -> str:
-        """The name of the first button that performs `task` (KeyError naming the offered
-        tasks)."""
-        for name, t in self.buttons.items():
-            if t == task:
-                return name
-        raise KeyError(
-            f"no button performs {task!r}; offered: {sorted(set(self.buttons.values()))}"
-        )
-
-    @property
-    def mistake_button(self) -> str | None:
-        """The name of the "mistake" button, if the panel offers one."""
-        return next((name for name in self.buttons if name.startswith("mistake")), None)
-
 
 ON_ITS_WAY = ", robot on its way"  # the label's end on the task the robot started on
 

@@ -49,6 +49,8 @@ WAIT_STEP = 0.2  # s between the waits tried
 # either way, so it is left out.
 RUNNING_LATE = (0.0,)
 _EPS = 1e-6
+# Room [s] over floating-point rounding for a delay known to exceed what the caller needs.
+_MARGIN = 1e-9
 
 
 @dataclass(frozen=True)
@@ -147,6 +149,7 @@ def forecast_delay(
     occupancy: Occupancy,
     scale: ScaleFn,
     memo: dict[tuple[int, int], float] | None = None,
+    above: float = np.inf,
 ) -> float:
     """Seconds the monitor is forecast to add to the motion if it starts at `begin` (absolute):
     the motion played forward in steps of its pose spacing, its plan time advancing at the
@@ -154,7 +157,10 @@ def forecast_delay(
     stays where it stopped until the body leaves). Capped at the forecast's end. `memo` keeps
     the scales already asked, by (pose, forecast sample), for further calls on the same
     `poses` and `occupancy`: the waits a motion tries meet the same pairs again, and each
-    costs the monitor's whole assessment."""
+    costs the monitor's whole assessment. `above`: the caller needs the delay only up to
+    there; once the motion has lost more than that (with `_EPS` to spare, for the delay may
+    end up to `_EPS` under the time lost so far), the time lost so far, less `_EPS`, is
+    returned: a lower bound of the delay, above `above`."""
     offsets = poses.taus - poses.taus[0]
     duration = float(offsets[-1])
     dt = duration / max(len(offsets) - 1, 1)
@@ -183,7 +189,50 @@ def forecast_delay(
                     memo[(k, i)] = s
         tau += s * dt
         t += dt
+        if s < 1.0 and (t - begin) - tau - _EPS > above + _MARGIN:
+            # A scale is at most 1 (`ScaleFn`): time lost is never won back, so the delay is
+            # at least this.
+            return (t - begin) - tau - _EPS
     return max(0.0, (t - begin) - tau) if tau < duration - _EPS else (t - begin) - duration
+
+
+def _wait(
+    delay: Callable[[float, float], float],
+    waits: np.ndarray,
+    slowing_ok: bool,
+    clear_only: bool,
+) -> float:
+    """The wait `time_around` takes among `waits` (ascending) before a motion, given
+    `delay(wait, above)`: the monitor's forecast delay after `wait`, exact up to `above` (past
+    it, any value above it)."""
+    if not slowing_ok:
+        # The first wait that clears the motion is taken whatever the others cost: it is
+        # looked for first, each delay only as far as the motion goes unslowed.
+        for wait in waits:
+            if delay(wait, _EPS) <= _EPS:
+                return float(wait)
+        if clear_only:
+            return 0.0  # only a clearing wait is taken, and none clears
+    best_wait, best_cost = 0.0, np.inf
+    for wait in waits:
+        if wait >= best_cost - _EPS:
+            break  # no later wait, clearing or not, costs less than the best one
+        # The delay matters up to where this wait could still cost the least: beyond, it
+        # neither clears the motion nor is taken.
+        above = _EPS
+        if not (clear_only and wait > 0.0):
+            above = max(_EPS, (best_cost - _EPS - wait) / STOP_PENALTY)
+        lost = delay(wait, above)
+        if lost <= _EPS:  # separation forecast to hold: no later wait costs less
+            if wait < best_cost - _EPS:
+                best_wait = float(wait)
+            break
+        if clear_only and wait > 0.0:
+            continue  # only a wait that clears the motion is taken, against going now
+        cost = wait + STOP_PENALTY * lost
+        if cost < best_cost - _EPS:
+            best_wait, best_cost = float(wait), cost
+    return best_wait
 
 
 def time_around(
@@ -224,22 +273,16 @@ def time_around(
         longest = max_wait
         if spent is not None and abs(spent[0] - motion.start) < _EPS:
             longest = max(0.0, max_wait - spent[1])
-        best_wait, best_cost = 0.0, np.inf
         memo: dict[tuple[int, int], float] = {}
-        for wait in np.arange(0.0, longest + _EPS, WAIT_STEP):
-            lost = max(
-                forecast_delay(poses, begin + wait + late, occupancy, scale, memo)
+
+        def delay(wait: float, above: float, poses=poses, begin=begin, memo=memo) -> float:
+            return max(
+                forecast_delay(poses, begin + wait + late, occupancy, scale, memo, above)
                 for late in RUNNING_LATE
             )
-            if lost <= _EPS:  # separation forecast to hold: no later wait costs less
-                if not slowing_ok or wait < best_cost - _EPS:
-                    best_wait = float(wait)
-                break
-            if clear_only and wait > 0.0:
-                continue  # only a wait that clears the motion is taken, against going now
-            cost = wait + STOP_PENALTY * lost
-            if cost < best_cost - _EPS:
-                best_wait, best_cost = float(wait), cost
+
+        waits = np.arange(0.0, longest + _EPS, WAIT_STEP)
+        best_wait = _wait(delay, waits, slowing_ok, clear_only)
         if best_wait > 0.0:
             shift += best_wait
             holds.append(Hold(motion.start, begin + best_wait))

@@ -124,8 +124,3 @@ class Plan:
     def motion_time(self) -> float:
         """Seconds the arm moves."""
         return sum(m.duration for m in self.motions)
-
-    @property
-    def optimal_motion_time(self) -> float:
-        """Toppra's time-optimal seconds on the same paths under the same limits."""
-        return sum(m.optimal_duration for m in self.motions)

@@ -1,4 +1,4 @@
-"""A `Plan` as plain data and bytes, exactly: for handing plans between processes.
+"""A `Plan` as plain data, exactly: for handing plans between processes.
 
 pydrake's trajectories do not all pickle (PiecewisePolynomial has no pickle support in pydrake
 1.51), so a plan is written as the exact parameters of each trajectory piece, as the planner
@@ -14,14 +14,12 @@ built them (`Timeline` in `timeline.py`, `Retimed.trajectory()` in `trajectory.p
 
 The plain data holds only dicts, lists, bytes, strings, floats, ints, bools and None (Python
 floats round-trip exactly through pickle; polynomial coefficients are packed little-endian
-float64 bytes); `plan_from_bytes` refuses anything else.
+float64 bytes).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import io
-import pickle
 from collections.abc import Iterator
 
 import numpy as np
@@ -242,20 +240,3 @@ def plan_from_data(data: dict) -> Plan:
         if result is not None:
             return result
     raise AssertionError("plan_from_data_in_steps ends with the plan")
-
-
-class _PlainUnpickler(pickle.Unpickler):
-    """Loads builtin containers and scalars only: plain data names no class to import."""
-
-    def find_class(self, module: str, name: str):
-        raise pickle.UnpicklingError(f"plan bytes name {module}.{name}; plain data names none")
-
-
-def plan_to_bytes(plan: Plan) -> bytes:
-    """A plan as bytes (its plain data, pickled)."""
-    return pickle.dumps(plan_to_data(plan), protocol=pickle.HIGHEST_PROTOCOL)
-
-
-def plan_from_bytes(data: bytes) -> Plan:
-    """The plan written by `plan_to_bytes`; refuses bytes that hold anything but plain data."""
-    return plan_from_data(_PlainUnpickler(io.BytesIO(data)).load())

@@ -239,32 +239,6 @@ class MotionPlanner:
             self._plans[key] = self._plan(configuration, move, measured)
         return self._plans[key]
 
-    def has_plan(
-        self,
-        configuration: Iterable[str],
-        task: str,
-        *,
-        last_token: str | None = None,
-        layout: Mapping[str, str] | None = None,
-        instance: str | None = None,
-        source_pose: RigidTransform | None = None,
-        q_start: np.ndarray | None = None,
-        obstacle: RigidTransform | None = None,
-        held: bool = False,
-        start_opening: float | None = None,
-    ) -> bool:
-        """Whether `plan_task` with these arguments would return a plan made earlier."""
-        move, measured = resolve_request(
-            self.frames,
-            frozenset(configuration),
-            task,
-            last_token,
-            layout,
-            MeasuredKeywords(instance, source_pose, q_start, obstacle, held, start_opening),
-            len(self.q_home),
-        )
-        return plan_key(move, measured) in self._plans
-
     def _pick(
         self, move: TaskMove, measured: Measured, opening: float, q_start: np.ndarray
     ) -> _Pick:

@@ -82,10 +82,6 @@ class CellFrames:
         """A copy with base slot `slot` moved to `X_W_slot` (tests: an unreachable seat)."""
         return replace(self, seats={**self.seats, slot: X_W_slot})
 
-    def with_homes(self, homes: Mapping[str, RigidTransform]) -> CellFrames:
-        """A copy with some parts' tray homes (X_W_part) replaced."""
-        return replace(self, homes={**self.homes, **homes})
-
 
 def part_pose(frames: CellFrames, token: str, configuration: Iterable[str]) -> RigidTransform:
     """X_W_part of the part placed at `token`, given the tokens in place (`configuration`).

@@ -367,14 +367,9 @@ def _payload(table: CostTable) -> dict[str, Any]:
     return payload
 
 
-def cost_table_json(table: CostTable) -> dict[str, Any]:
-    """The JSON object of a cost table file (with its checksum)."""
-    return with_checksum(_payload(table))
-
-
 def save_cost_table(table: CostTable, path: str | Path) -> None:
     """Save atomically, with the spec and cell hashes and a checksum of the content."""
-    atomic_write_text(Path(path), json.dumps(cost_table_json(table), indent=1) + "\n")
+    atomic_write_text(Path(path), json.dumps(with_checksum(_payload(table)), indent=1) + "\n")
 
 
 def _number(value: Any, what: str) -> float:

@@ -119,10 +119,6 @@ class SequenceMDP:
         """Edge ids of a state's actions."""
         return range(int(self.edge_start[state]), int(self.edge_start[state + 1]))
 
-    def is_absorbing(self, state: int) -> bool:
-        """Whether the episode ends in `state` (a terminal state)."""
-        return self.space.kind[state] == StateKind.TERMINAL
-
 
 def build_mdp(space: StateSpace, config: MdpConfig | None = None) -> SequenceMDP:
     """The MDP of a state space under an operator and reward model."""

@@ -35,6 +35,7 @@ from hrc_drake.cell.controller.supervisor import (
     TaskRecord,
 )
 from hrc_drake.cell.person import desk_of
+from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.robot_envelope import RobotEnvelope
 from hrc_drake.cell.separation_pipeline import (
     FORECAST_POSES_KEPT,
@@ -43,11 +44,11 @@ from hrc_drake.cell.separation_pipeline import (
 )
 from hrc_drake.cell.ssm import NEAR_SPEED, stopping_time
 from hrc_drake.cell_models import CellDesign
-from hrc_drake.motion.clearance import remembered
+from hrc_drake.motion.clearance import ScaleFn, remembered
 from hrc_drake.motion.options import MotionOptions
 from hrc_drake.motion.scene import load_cell_frames
 from hrc_drake.motion.service import PlanService
-from hrc_drake.scenario.safety import Separation
+from hrc_drake.scenario.safety import SafetyConfig, Separation
 from hrc_drake.scenario.schema import Activity, Scenario
 from hrc_drake.scenario.sensors import PORTS, sensor_models
 from hrc_drake.tasks.graph import StateSpace
@@ -123,6 +124,56 @@ def supervisor_limits(scenario: Scenario, options: MotionOptions) -> SupervisorL
 # the parts it carries): a point of the robot lies within REACH_BOUND of some body origin of
 # its envelope, moves at most TCP_BOUND, and stops within STOP_BOUND.
 REACH_BOUND, TCP_BOUND, STOP_BOUND = 0.25, 1.0, 0.5  # m, m/s, s
+# Forecast samples whose body the forecast monitor keeps: more than a re-timing's horizon
+# holds (the plan's rest, `safety.max_wait` and 1 s, at `OperatorForecast.SAMPLE`).
+BODIES_KEPT = 256
+
+
+def forecast_monitor(
+    pipeline: SeparationPipeline, safety: SafetyConfig, acceleration: float, period: float
+) -> ScaleFn:
+    """The forecast monitor of predictive separation (`ScaleFn`): the controller's monitor's
+    planned limit for a pose of the plan at full speed beside one forecast sample, on the
+    controller's `pipeline`, with the arm's joint `acceleration` limit [rad/s²] and the
+    monitor's `period` [s]."""
+    lag = MONITOR_LAG * period
+    reach = REACH_BOUND + max(
+        (NEAR_SPEED + TCP_BOUND) * (safety.reaction_time + period + STOP_BOUND), 0.0
+    )
+
+    # Each forecast sample is asked about at many poses: its body, by its values, is kept.
+    bodies: dict[tuple, BodySpheres] = {}
+
+    def body_of(centres, radii, velocities) -> BodySpheres:
+        values = (np.asarray(a, dtype=float).tobytes() for a in (centres, radii, velocities))
+        key = (len(radii), *values)
+        found = bodies.get(key)
+        if found is None:
+            if len(bodies) >= BODIES_KEPT:
+                bodies.pop(next(iter(bodies)))  # the oldest
+            found = bodies[key] = forecast_body(centres, radii, velocities)
+        return found
+
+    def scale(q, qdot, opening, carrying, centres, radii, velocities) -> float:
+        spheres = body_of(centres, radii, velocities)
+        if len(spheres.radii) == 0:
+            return 1.0
+        # Far from every sphere the monitor cannot limit: skip its full assessment.
+        robot = pipeline.robot(q, opening, carrying)
+        near = spheres.centres[None, :, :] - robot.p_WB[:, None, :]
+        if (np.linalg.norm(near, axis=2) - spheres.radii[None]).min() > (
+            reach + safety.slow_band + safety.human_uncertainty
+        ):
+            return 1.0
+        # The monitor's planned limit (`assess`) of the plan at full speed: its velocities now
+        # and ahead are `qdot`, so only the plan's row is needed.
+        qdot = np.asarray(qdot, dtype=float)
+        geometry = pipeline.pairs(q, opening, carrying, spheres)
+        v_r1 = np.maximum(0.0, geometry.robot_speeds(qdot[None, :])[0])
+        t_s1 = stopping_time(np.abs(qdot), acceleration)
+        return planned_limit(geometry, v_r1, t_s1, safety, period, lag)
+
+    return scale
 
 
 def keep_clear_settings(
@@ -147,31 +198,8 @@ def keep_clear_settings(
     forecast = OperatorForecast(
         body.person(), desk, delay.median, delay.sigma, safety.forecast_spread
     )
-    acceleration, period = options.joint_acceleration_limit, scenario.run.period
-    lag = MONITOR_LAG * period
-    reach = REACH_BOUND + max(
-        (NEAR_SPEED + TCP_BOUND) * (safety.reaction_time + period + STOP_BOUND), 0.0
-    )
-
-    def scale(q, qdot, opening, carrying, centres, radii, velocities) -> float:
-        spheres = forecast_body(centres, radii, velocities)
-        if len(spheres.radii) == 0:
-            return 1.0
-        # Far from every sphere the monitor cannot limit: skip its full assessment.
-        robot = pipeline.robot(q, opening, carrying)
-        near = spheres.centres[None, :, :] - robot.p_WB[:, None, :]
-        if (np.linalg.norm(near, axis=2) - spheres.radii[None]).min() > (
-            reach + safety.slow_band + safety.human_uncertainty
-        ):
-            return 1.0
-        # The monitor's planned limit (`assess`) of the plan at full speed: its velocities now
-        # and ahead are `qdot`, so only the plan's row is needed.
-        qdot = np.asarray(qdot, dtype=float)
-        geometry = pipeline.pairs(q, opening, carrying, spheres)
-        v_r1 = np.maximum(0.0, geometry.robot_speeds(qdot[None, :])[0])
-        t_s1 = stopping_time(np.abs(qdot), acceleration)
-        return planned_limit(geometry, v_r1, t_s1, safety, period, lag)
-
+    acceleration = options.joint_acceleration_limit
+    scale = forecast_monitor(pipeline, safety, acceleration, scenario.run.period)
     return KeepClearSettings(
         forecast,
         remembered(scale),

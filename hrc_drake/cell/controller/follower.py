@@ -121,7 +121,7 @@ class PlanFollower:
         limit = min(limit, speed_cap(clock.caps, now, tau))  # the motion's path timing
         qdot = np.abs(plan.trajectory.EvalDerivative(min(tau, plan.duration), 1)).max()
         step = self._limits.joint_acceleration * self._limits.period / max(qdot, 1e-9)
-        speed = float(np.clip(limit, clock.speed - step, clock.speed + step))
+        speed = float(min(max(limit, clock.speed - step), clock.speed + step))  # np.clip's
         hold_now = clock.hold_at(now) if s.held(now) else None  # the planned wait it stands in
         since = clock.held_since
         if hold_now is not None and (since is None or since.tau != hold_now.tau):

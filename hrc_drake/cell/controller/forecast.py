@@ -15,6 +15,9 @@ from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.hri.activity import Desk, HandTimeline, Person, Stay, desk_stays, stays_timeline
 from hrc_drake.motion.clearance import Occupancy
 
+# Timelines an `OperatorForecast` keeps: the few anchors of a task, each at its offsets.
+TIMELINES_KEPT = 64
+
 
 @dataclass(frozen=True)
 class Anchor:
@@ -56,6 +59,10 @@ class OperatorForecast:
     ):
         self.person, self.desk, self.delay, self.sigma = person, desk, delay, sigma
         self.spread = spread
+        # The stays and timelines asked for, kept: the Supervisor compares the tracked hand
+        # with the same timelines every check while the anchor stays (all are immutable).
+        self._stays: dict[str, tuple[Stay, ...]] = {}
+        self._timelines: dict[tuple[Anchor, float], HandTimeline] = {}
 
     def offsets(self, indicated: bool | str) -> tuple[float, ...]:
         """The time offsets of the timelines a forecast joins (see the class docstring):
@@ -85,12 +92,22 @@ class OperatorForecast:
 
     def stays(self, task: str) -> tuple[Stay, ...]:
         """The stays of the activity the forecast expects after the indication of `task`."""
-        return desk_stays(self.person, self.desk, task)
+        found = self._stays.get(task)
+        if found is None:
+            found = self._stays[task] = desk_stays(self.person, self.desk, task)
+        return found
 
     def timeline(self, anchor: Anchor, shift: float = 0.0) -> HandTimeline:
         """The hand's forecast moves for `anchor`, `shift` seconds later."""
-        stays = self.stays(anchor.task)[anchor.done :]
-        return stays_timeline(self.person, stays, anchor.at + anchor.lag + shift, anchor.start)
+        key = (anchor, shift)
+        found = self._timelines.get(key)
+        if found is None:
+            if len(self._timelines) >= TIMELINES_KEPT:
+                self._timelines.pop(next(iter(self._timelines)))  # the oldest
+            stays = self.stays(anchor.task)[anchor.done :]
+            start = anchor.at + anchor.lag + shift
+            found = self._timelines[key] = stays_timeline(self.person, stays, start, anchor.start)
+        return found
 
     def occupancy(
         self, anchor: Anchor, start: float, end: float, offsets: tuple[float, ...] = (0.0,)

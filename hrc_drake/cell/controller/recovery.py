@@ -148,6 +148,8 @@ class FaultRecovery:
 
     @staticmethod
     def _grip_lost_at(s: SupervisorStatus, at: float | None) -> SupervisorStatus:
+        if s.recovery.grip_lost_at == at:
+            return s  # as it was (asked every update): no copy of the status
         return replace(s, recovery=replace(s.recovery, grip_lost_at=at))
 
     def lose_part(

@@ -226,54 +226,99 @@ def planned_scales(v_h, gap, v_r1, t_rp: float, t_s1: float, config: SafetyConfi
     v0 w + a w² / 2 until the hand reaches its cap c at w = R = (c - v0) / a, then linear at c;
     convex, and so is S_h(w(s)) + X(s). S_p(s) ≤ room holds where both S_h + X ≤ room and
     X ≤ room: from s = 0 up to the smaller of their largest roots (S_p grows with s)."""
-    # Broadcast by the arithmetic (np.broadcast_to cost a tenth of a call): the last line
-    # meets every argument.
-    v0, gap, v_r1, room = (np.asarray(x, dtype=float) for x in (v_h, gap, v_r1, room))
-    const = separation_constant(config)
-    r1, r2 = v_r1 * t_rp, v_r1 * t_s1 / 2.0
-    cap = np.where(gap < NEAR_DISTANCE + NEAR_AHEAD, NEAR_SPEED, FAR_SPEED)
-    if config.human_speed == HumanSpeed.CONSTANT:
-        reach = np.zeros_like(v0)  # at the cap from the start: S_h = c w
-        accel = 0.0
-    else:
-        accel = config.hand_acceleration
-        cap = np.maximum(cap, v0)  # a hand already faster keeps its speed
-        reach = (cap - v0) / accel
-    # S_h + X on each piece of the window as c0 + c1 s + c2 s²: rising (w ≤ R), then at the cap.
-    rising = (
-        v0 * t_rp + accel * t_rp * t_rp / 2.0 + const,
-        (v0 + accel * t_rp) * t_s1 + r1,
-        accel * t_s1 * t_s1 / 2.0 + r2,
-    )
-    at_cap = (
-        v0 * reach + accel * reach * reach / 2.0 + cap * (t_rp - reach) + const,
-        cap * t_s1 + r1,
-        r2,
-    )
-    # The rising piece holds the root where the cap comes only past it (or past s = 1).
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s_cap = np.where(t_s1 > 0.0, (reach - t_rp) / t_s1, np.where(reach > t_rp, np.inf, -np.inf))
-    at = np.minimum(np.maximum(s_cap, 0.0), 1.0)
-    in_rising = (s_cap > 0.0) & (
-        (s_cap >= 1.0) | (rising[0] + rising[1] * at + rising[2] * at * at > room)
-    )
-    c0, c1, c2 = (np.where(in_rising, a, b) for a, b in zip(rising, at_cap, strict=True))
-    # Between full and blocked, c0 ≤ room on the piece chosen (the at-cap line is a tangent
-    # under the convex rising piece), so each piece's larger root is the one sought.
-    scales = np.minimum(entry_scales(room, c0, c1, c2), entry_scales(room, const, r1, r2))
-    scales = np.minimum(np.maximum(scales - _ROOT_SLACK, 0.0), 1.0)
-    full = planned_distance(1.0, v0, gap, v_r1, t_rp, t_s1, config) <= room
-    blocked = planned_distance(0.0, v0, gap, v_r1, t_rp, t_s1, config) > room
-    return np.where(full, 1.0, np.where(blocked, 0.0, scales))
+    return _PlannedScales(v_h, gap, v_r1, t_rp, t_s1, config).scales(room)
 
 
-def banded_scales(v_h, gap, v_r1, t_rp: float, t_s1: float, config: SafetyConfig, creep: bool):
+class _PlannedScales:
+    """`planned_scales`' terms that do not depend on the room, once for the rooms `banded_scales`
+    asks about: its closed form's arithmetic and `planned_distance`'s, in the same order."""
+
+    def __init__(self, v_h, gap, v_r1, t_rp: float, t_s1: float, config: SafetyConfig):
+        v0, gap, v_r1 = (np.asarray(x, dtype=float) for x in (v_h, gap, v_r1))
+        self.const = const = separation_constant(config)
+        self.r1, self.r2 = r1, r2 = v_r1 * t_rp, v_r1 * t_s1 / 2.0
+        cap = np.where(gap < NEAR_DISTANCE + NEAR_AHEAD, NEAR_SPEED, FAR_SPEED)
+        if config.human_speed == HumanSpeed.CONSTANT:
+            reach = np.zeros_like(v0)  # at the cap from the start: S_h = c w
+            accel = 0.0
+        else:
+            accel = config.hand_acceleration
+            cap = np.maximum(cap, v0)  # a hand already faster keeps its speed
+            reach = (cap - v0) / accel
+        # S_h + X on each piece of the window as c0 + c1 s + c2 s²: rising (w ≤ R), then at
+        # the cap.
+        self.rising = rising = (
+            v0 * t_rp + accel * t_rp * t_rp / 2.0 + const,
+            (v0 + accel * t_rp) * t_s1 + r1,
+            accel * t_s1 * t_s1 / 2.0 + r2,
+        )
+        self.at_cap = (
+            v0 * reach + accel * reach * reach / 2.0 + cap * (t_rp - reach) + const,
+            cap * t_s1 + r1,
+            r2,
+        )
+        # The rising piece holds the root where the cap comes only past it (or past s = 1);
+        # t_s1 is one number, so only its side of the choice is worked out.
+        s_cap = (reach - t_rp) / t_s1 if t_s1 > 0.0 else np.where(reach > t_rp, np.inf, -np.inf)
+        at = np.minimum(np.maximum(s_cap, 0.0), 1.0)
+        self.capped = s_cap > 0.0, s_cap >= 1.0
+        self.rising_at = rising[0] + rising[1] * at + rising[2] * at * at
+        # S_p(0) (`planned_distance`) with the hand's travel from the terms above.
+        self._hand = v0, cap, reach, t_rp, t_s1, config
+        zero = v_r1 * 0.0
+        travel = self._travel(v0, cap, reach, t_rp + t_s1 * 0.0, config)
+        self.stopped_at = travel + zero * t_rp + zero * 0.0 * t_s1 / 2 + const
+
+    @staticmethod
+    def _travel(v0, cap, reach, window: float, config: SafetyConfig) -> np.ndarray:
+        """`person_travel` over `window` (near at NEAR_DISTANCE + NEAR_AHEAD), its cap and its
+        reach (`bounded_travel`'s (cap − v0) / acceleration) already worked out."""
+        if config.human_speed == HumanSpeed.CONSTANT:
+            return cap * window
+        acceleration = config.hand_acceleration
+        rising = np.minimum(reach, window)
+        travel = v0 * rising + acceleration * rising * rising / 2 + cap * (window - rising)
+        return np.maximum(travel, 0.0)
+
+    def scales(self, room, full: np.ndarray | None = None) -> np.ndarray:
+        """`planned_scales` at `room`; `full`: where S_p(1) ≤ room, if the caller knows."""
+        room = np.asarray(room, dtype=float)
+        reaches, beyond = self.capped
+        in_rising = reaches & (beyond | (self.rising_at > room))
+        c0, c1, c2 = (
+            np.where(in_rising, a, b) for a, b in zip(self.rising, self.at_cap, strict=True)
+        )
+        # Between full and blocked, c0 ≤ room on the piece chosen (the at-cap line is a tangent
+        # under the convex rising piece), so each piece's larger root is the one sought.
+        k, const, r1, r2 = len(c0), self.const, self.r1, self.r2
+        if c0.ndim and room.shape == c0.shape == r1.shape:
+            # Both in one call (the arithmetic is per entry: the same figures).
+            both = entry_scales(
+                np.concatenate([room, room]),
+                np.concatenate([c0, np.full_like(c0, const)]),
+                np.concatenate([c1, r1]),
+                np.concatenate([c2, r2]),
+            )
+            scales = np.minimum(both[:k], both[k:])
+        else:
+            scales = np.minimum(entry_scales(room, c0, c1, c2), entry_scales(room, const, r1, r2))
+        scales = np.minimum(np.maximum(scales - _ROOT_SLACK, 0.0), 1.0)
+        if full is None:  # S_p(1) (`planned_distance`: v_r1 s t_rp = r1, v_r1 s² t_s1 / 2 = r2)
+            v0, cap, reach, t_rp, t_s1, config = self._hand
+            travel = self._travel(v0, cap, reach, t_rp + t_s1 * 1.0, config)
+            full = travel + self.r1 + self.r2 + self.const <= room
+        return np.where(full, 1.0, np.where(self.stopped_at > room, 0.0, scales))
+
+
+def banded_scales(v_h, gap, v_r1, t_rp, t_s1, config: SafetyConfig, creep: bool, full=None):
     """Per pair, the plan's speed scale that keeps S_p(s) + `slow_band` (`planned_scales`);
     with `creep` (`BandCreep`), within the band at least `CREEP_SHARE` of the scale that keeps
-    S_p(s) itself, up to `BAND_CREEP`."""
-    separated = planned_scales(v_h, gap, v_r1, t_rp, t_s1, config, gap - config.slow_band)
+    S_p(s) itself, up to `BAND_CREEP`. `full`: where S_p(1) ≤ gap − slow_band, if the caller
+    knows (`planned_limit`: nowhere)."""
+    plan = _PlannedScales(v_h, gap, v_r1, t_rp, t_s1, config)
+    separated = plan.scales(np.asarray(gap) - config.slow_band, full)
     if creep and separated.min() < BAND_CREEP:
-        within = planned_scales(v_h, gap, v_r1, t_rp, t_s1, config, gap)
+        within = plan.scales(gap)
         separated = np.maximum(separated, np.minimum(CREEP_SHARE * within, BAND_CREEP))
     return separated
 
@@ -349,14 +394,18 @@ def planned_limit(
     # every other pair's scale is 1 (`planned_scales`), whatever its contact speed. The rest
     # are judged alone, each as it would be among all (the arithmetic is per pair); with none
     # (a third of the monitor's periods on row 5) the plan goes at full speed.
-    near = planned_distance(1.0, v_h, gap, v_r1, t_rp, t_s1, config) > gap - config.slow_band
+    # S_p(1) as `planned_distance` has it (v_r1 s t_rp and v_r1 s² t_s1 / 2 at s = 1).
+    travel = person_travel(v_h, gap, t_rp + t_s1 * 1.0, config, NEAR_DISTANCE + NEAR_AHEAD)
+    s_p1 = travel + v_r1 * t_rp + v_r1 * t_s1 / 2 + separation_constant(config)
+    near = s_p1 > gap - config.slow_band
     if not near.any():
         return 1.0
     gap, v_h, v_r1 = gap[near], v_h[near], v_r1[near]
     touch = np.broadcast_to(touchable(geometry.body)[None, :], near.shape)[near]
     # Planned: the plan at scale s keeps S_p(s) + slow_band, or moves no faster than the
     # contact speed toward the person.
-    separated = banded_scales(v_h, gap, v_r1, t_rp, t_s1, config, band_creep)
+    # None of them keeps S_p(1) + slow_band (`near`): `full` nowhere.
+    separated = banded_scales(v_h, gap, v_r1, t_rp, t_s1, config, band_creep, full=False)
     slow = CONTACT_SHARE * config.contact_speed / np.maximum(v_r1, _SLOWEST)
     # ... and only as fast as lets it stop short of the person where they are now: power and
     # force limiting permits a person coming into the robot, not the robot driving into them.

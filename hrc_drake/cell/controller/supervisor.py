@@ -158,14 +158,10 @@ class Supervisor(LeafSystem):
             prerequisites_of_calc=deps,
         )
         ticket = {self._command.ticket()}
-        force = self._limits.grip_force
         for name, size, part in (
             ("ur3.position", N_JOINTS, lambda c: c.q),
             ("ur3.velocity", N_JOINTS, lambda c: c.v),
             ("rg2.opening", 1, lambda c: [c.opening]),
-            # The gripper always grips with the scenario's force (a real RG2 takes one with
-            # every target width); the opening says whether it closes on a part.
-            ("rg2.force", 1, lambda c: [force]),
         ):
             self.DeclareVectorOutputPort(
                 name,
@@ -175,6 +171,16 @@ class Supervisor(LeafSystem):
                 ),
                 prerequisites_of_calc=ticket,
             )
+        # The gripper always grips with the scenario's force (a real RG2 takes one with every
+        # target width); the opening says whether it closes on a part. Depending on nothing,
+        # it is worked out once, not at every plant step.
+        force = [self._limits.grip_force]
+        self.DeclareVectorOutputPort(
+            "rg2.force",
+            1,
+            lambda context, out: out.SetFromVector(force),
+            prerequisites_of_calc={self.nothing_ticket()},
+        )
         for name, value, calc in (
             ("hri.prompt", Prompt(), self._calc_prompt),
             ("intent", MotionIntent(), self._calc_intent),
@@ -233,7 +239,7 @@ class Supervisor(LeafSystem):
         try:
             if not stale:  # a stale reading says nothing of where the arm is now
                 self._check_tracking(status, cell, now)
-            speed = float(np.clip(limit, 0.0, 1.0))
+            speed = float(min(max(limit, 0.0), 1.0))  # np.clip's, without its overhead
             status = self._follower.advance(status, speed, now, cell.opening())
             status = self._step(status, cell, now)
             status = self._keep_clear.update(status, cell.body, now)

@@ -337,7 +337,10 @@ class SupervisorStatus:
         hold = clock.hold_at(now)
         if hold is not None:
             tau = min(tau, hold.tau)
-        return float(np.clip(tau, 0.0, clock.plan.duration)) if clock.plan is not None else tau
+        if clock.plan is None:
+            return tau
+        # np.clip's arithmetic on a scalar (asked many times an update), without its overhead.
+        return float(min(max(tau, 0.0), clock.plan.duration))
 
     def held(self, now: float) -> bool:
         """Whether the arm stands in a planned wait at `now`."""

@@ -15,6 +15,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from drake import lcmt_panda_command, lcmt_panda_status
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import BasicVector, InputPort, LeafSystem
 
 from hrc_drake.cell.link.lcm_messages import (
     N_JOINTS,
@@ -59,6 +61,30 @@ class Port:
     name: str
     size: int | None = None
     model: Callable[[], object] | None = None
+
+    def declare_input(self, system: LeafSystem) -> InputPort:
+        """This port declared as an input of `system`."""
+        if self.size is not None:
+            return system.DeclareVectorInputPort(self.name, BasicVector(self.size))
+        return system.DeclareAbstractInputPort(self.name, AbstractValue.Make(self.model()))
+
+    def declare_output(self, system: LeafSystem, value: Callable, deps: set) -> None:
+        """This port declared as an output of `system` whose value is `value(context)` (a vector
+        of `size`, or an object like `model()`), computed from the `deps` tickets."""
+        if self.size is not None:
+            system.DeclareVectorOutputPort(
+                self.name,
+                BasicVector(self.size),
+                lambda context, output: output.SetFromVector(value(context)),
+                prerequisites_of_calc=deps,
+            )
+        else:
+            system.DeclareAbstractOutputPort(
+                self.name,
+                lambda: AbstractValue.Make(self.model()),
+                lambda context, output: output.set_value(value(context)),
+                prerequisites_of_calc=deps,
+            )
 
 
 @dataclass(frozen=True)

@@ -13,10 +13,8 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from pydrake.common.value import AbstractValue
 from pydrake.lcm import DrakeLcm
 from pydrake.systems.framework import (
-    BasicVector,
     Context,
     Diagram,
     DiagramBuilder,
@@ -48,12 +46,6 @@ from hrc_drake.cell.link.scenario_identity import ScenarioIdentity
 from hrc_drake.scenario.schema import Scenario
 
 
-def _declare_port_input(system: LeafSystem, port: Port):
-    if port.size is not None:
-        return system.DeclareVectorInputPort(port.name, BasicVector(port.size))
-    return system.DeclareAbstractInputPort(port.name, AbstractValue.Make(port.model()))
-
-
 def _step_of(t: float, period: float) -> int:
     """The exchange at or just before time `t` (events fall on multiples of `period`)."""
     return int(np.floor(t / period + 1e-6))
@@ -79,7 +71,7 @@ class StationClient(LeafSystem):
         self._timeouts = timeouts if timeouts is not None else LockstepTimeouts()
         self._measured = [*MEASUREMENTS, *([SIM_CONTACTS] if sim_contacts else [])]
         self._inbox = Inbox(lcm, {c.channel: c for c in self._measured}, REPORT_CHANNEL)
-        self._inputs = {p.name: _declare_port_input(self, p) for c in COMMANDS for p in c.ports}
+        self._inputs = {p.name: p.declare_input(self) for c in COMMANDS for p in c.ports}
         for channel in self._measured:
             for index, port in enumerate(channel.ports):
                 self._declare_output(channel, index, port)
@@ -92,23 +84,9 @@ class StationClient(LeafSystem):
     def _declare_output(self, channel: StationChannel, index: int, port: Port) -> None:
         # The measurements depend on the time only: the station's answer for that time.
         deps = {self.time_ticket()}
-
-        def calc(context, output):
-            value = self._measurement(context)[channel.channel][index]
-            if port.size is not None:
-                output.SetFromVector(value)
-            else:
-                output.set_value(value)
-
-        if port.size is not None:
-            self.DeclareVectorOutputPort(
-                port.name, BasicVector(port.size), calc, prerequisites_of_calc=deps
-            )
-        else:
-            model = port.model
-            self.DeclareAbstractOutputPort(
-                port.name, lambda: AbstractValue.Make(model()), calc, prerequisites_of_calc=deps
-            )
+        port.declare_output(
+            self, lambda context: self._measurement(context)[channel.channel][index], deps
+        )
 
     def _send(self, context: Context, suffix: str, k: int) -> None:
         """Publish the commands as `context` has them, stamped with exchange `k`."""

@@ -69,7 +69,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import LeafSystem
 
 from hrc_drake.cell.link.channels import COMMANDS, SIM_CONTACTS, Port
 from hrc_drake.scenario.schema import Scenario
@@ -243,13 +243,7 @@ class MessageEncoder(LeafSystem):
     ):
         super().__init__()
         self._make, self._clock = make, clock
-        self._ports = []
-        for port in ports:
-            if port.size is not None:
-                self._ports.append(self.DeclareVectorInputPort(port.name, BasicVector(port.size)))
-            else:
-                value = AbstractValue.Make(port.model())
-                self._ports.append(self.DeclareAbstractInputPort(port.name, value))
+        self._ports = [port.declare_input(self) for port in ports]
         self.DeclareAbstractOutputPort("message", lambda: AbstractValue.Make(message()), self._calc)
 
     def _calc(self, context, output) -> None:

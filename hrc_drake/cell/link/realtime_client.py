@@ -210,26 +210,13 @@ class RealtimeReadings(LeafSystem):
         self.DeclarePeriodicPublishEvent(period, 0.0, self._watch)
 
     def _declare_output(self, channel: str, index: int, port: Port, deps: set) -> None:
-        def calc(context, output):
+        def value(context):
             value = self._decoded[channel].Eval(context)[index]
             if channel in STAMPED_CHANNELS:
                 value = self._restamped(context, value, channel)
-            if port.size is not None:
-                output.SetFromVector(value)
-            else:
-                output.set_value(value)
+            return value
 
-        if port.size is not None:
-            self.DeclareVectorOutputPort(
-                port.name, BasicVector(port.size), calc, prerequisites_of_calc=deps
-            )
-        else:
-            self.DeclareAbstractOutputPort(
-                port.name,
-                lambda model=port.model: AbstractValue.Make(model()),
-                calc,
-                prerequisites_of_calc=deps,
-            )
+        port.declare_output(self, value, deps)
 
     def _stamps(self, context) -> dict[str, int]:
         return {c: p.Eval(context).utime for c, p in self._messages.items()}

@@ -148,22 +148,7 @@ class RealtimeCommands(LeafSystem):
         self._latched = self.DeclareAbstractState(AbstractValue.Make(Latched(dict(hold))))
         deps = {self.abstract_state_ticket(self._latched)}
         for port in (p for c in COMMANDS for p in c.ports):
-
-            def calc(context, output, name=port.name, vector=port.size is not None):
-                value = self._state(context).applied[name]
-                output.SetFromVector(value) if vector else output.set_value(value)
-
-            if port.size is not None:
-                self.DeclareVectorOutputPort(
-                    port.name, BasicVector(port.size), calc, prerequisites_of_calc=deps
-                )
-            else:
-                self.DeclareAbstractOutputPort(
-                    port.name,
-                    lambda model=port.model: AbstractValue.Make(model()),
-                    calc,
-                    prerequisites_of_calc=deps,
-                )
+            port.declare_output(self, lambda c, name=port.name: self._state(c).applied[name], deps)
         self.DeclareVectorOutputPort(
             "ur3.command_stale",
             BasicVector(1),
@@ -510,23 +495,13 @@ def serve_realtime_station(
     `lcm` in real time at `pace` until the controller ends the session; the session's report.
     `rates`: the channels' (`channel_rates`); `step`: the plant's time step; `identity`: the
     scenario it serves, which the controller must run (`ScenarioMismatch` otherwise)."""
-    if isinstance(station, Diagram):
-        server = RealtimeStationServer(
-            station, lcm, rates, step, pace, timeouts=timeouts, identity=identity
-        )
-    else:
-        server = RealtimeStationServer(
-            station.diagram,
-            lcm,
-            rates,
-            step,
-            pace,
-            hooks=cell_station_hooks(station),
-            owners=geometry_owners(station.plant),
-            timeouts=timeouts,
-            identity=identity,
-        )
-    return server.serve()
+    simulated = {}
+    if not isinstance(station, Diagram):
+        simulated = {"hooks": cell_station_hooks(station), "owners": geometry_owners(station.plant)}
+        station = station.diagram
+    return RealtimeStationServer(
+        station, lcm, rates, step, pace, timeouts=timeouts, identity=identity, **simulated
+    ).serve()
 
 
 __all__ = [

@@ -25,7 +25,6 @@ from pydrake.common.value import AbstractValue
 from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator, SimulatorConfig
 from pydrake.systems.framework import (
-    BasicVector,
     Context,
     Diagram,
     DiagramBuilder,
@@ -87,23 +86,11 @@ class CommandHold(LeafSystem):
         self._pending = self.DeclareAbstractState(empty)
         deps = {self.abstract_state_ticket(self._held)}
         for port in (p for c in COMMANDS for p in c.ports):
-
-            def calc(context, output, name=port.name, vector=port.size is not None):
-                value = context.get_abstract_state(self._held).get_value()[name]
-                output.SetFromVector(value) if vector else output.set_value(value)
-
-            if port.size is not None:
-                self.DeclareVectorOutputPort(
-                    port.name, BasicVector(port.size), calc, prerequisites_of_calc=deps
-                )
-            else:
-                self.DeclareAbstractOutputPort(
-                    port.name,
-                    lambda model=port.model: AbstractValue.Make(model()),
-                    calc,
-                    prerequisites_of_calc=deps,
-                )
+            port.declare_output(self, lambda c, name=port.name: self._held_of(c)[name], deps)
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._switch)
+
+    def _held_of(self, context) -> dict[str, object]:
+        return context.get_abstract_state(self._held).get_value()
 
     def _switch(self, context, state) -> None:
         pending = context.get_abstract_state(self._pending).get_value()
@@ -405,7 +392,6 @@ def serve_cell_station(
     step: `exchange_period(scenario)`); the session's report. `identity`: the scenario it
     serves, which the controller must run (`ScenarioMismatch` otherwise)."""
     if isinstance(station, Diagram):
-        server = CellStationServer(station, lcm, period, timeouts=timeouts, identity=identity)
-        return server.serve()
+        return CellStationServer(station, lcm, period, None, timeouts, identity).serve()
     hooks = cell_station_hooks(station)
     return CellStationServer(station.diagram, lcm, period, hooks, timeouts, identity).serve()

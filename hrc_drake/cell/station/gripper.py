@@ -92,6 +92,8 @@ class FingerServo(LeafSystem):
     def __init__(self, kp: float, time_step: float):
         super().__init__()
         self._kp, self._h = kp, time_step
+        # The last commanded opening and its crank angle: the command holds for many steps.
+        self._target = (float("nan"), float("nan"))
         self._opening = self.DeclareVectorInputPort("opening", BasicVector(1))
         self._force = self.DeclareVectorInputPort("force", BasicVector(1))
         self._drive = self.DeclareVectorInputPort("drive_state", BasicVector(2))
@@ -103,7 +105,10 @@ class FingerServo(LeafSystem):
         opening = min(max(float(self._opening.Eval(context)[0]), 0.0), RG2_MAX_OPENING)
         lever = opening_rate(min(max(ahead, 0.0), MAX_ANGLE))
         reach = self._force.Eval(context)[0] * lever / self._kp
-        desired = ahead + np.clip(crank_angle(opening) - ahead, -reach, reach)
+        if opening != self._target[0]:
+            self._target = (opening, crank_angle(opening))
+        # Plain floats: np.clip on one number costs more than the rest of the step's work.
+        desired = ahead + min(max(self._target[1] - ahead, -reach), reach)
         output.SetFromVector([desired, 0.0])
 
 

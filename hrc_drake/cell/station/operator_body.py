@@ -52,6 +52,7 @@ from hrc_drake.scenario.schema import BodyConfig
 
 SKIN = Rgba(0.93, 0.75, 0.62, 1.0)
 SHIRT = Rgba(0.25, 0.40, 0.65, 1.0)
+_PARTS = ("upper_arm", "forearm", "hand", "torso", "head")  # the order _calc_geometry poses them
 
 # (simulated time, the simulated operator's activity, position of the part it works on or None)
 #   -> the hand centre in world [m]
@@ -153,6 +154,10 @@ class OperatorBody(LeafSystem):
             name: int(plant.GetBodyIndices(model)[0]) for name, model in part_instances.items()
         }
         self._period = period
+        # The body at the last hand position posed, by the hand's bytes, and the frames of the
+        # last pose drawn (the hand stands still for much of a run: the same pose, exactly).
+        self._posed: tuple[tuple, BodyPose | None, tuple] = ((), None, ())
+        self._drawn: tuple[BodyPose | None, tuple[RigidTransform, ...]] = (None, ())
         self.source_id = scene_graph.RegisterSource("operator")
         self._frames = {
             name: self._register(scene_graph, name, shape, color)
@@ -198,17 +203,24 @@ class OperatorBody(LeafSystem):
 
     def pose(self, context) -> BodyPose:
         """The body's pose by its script at the context's time."""
+        return self._posed_at(context)[0]
+
+    def _posed_at(self, context) -> tuple[BodyPose, tuple]:
+        """The body's pose by its script at the context's time, and its spheres."""
         activity: OperatorActivity = self._activity.Eval(context)
         part = None
         if activity.part in self._part_body:
             part = self._poses.Eval(context)[self._part_body[activity.part]].translation()
         hand = np.asarray(self._script(context.get_time(), activity, part), dtype=float)
-        return body_pose(self._stance, hand, self._left)
+        key = hand.shape, hand.tobytes()
+        if key != self._posed[0]:
+            posed = body_pose(self._stance, hand, self._left)
+            self._posed = (key, posed, posed.spheres())
+        return self._posed[1], self._posed[2]
 
     def _update(self, context, state) -> None:
         # A tracker's velocities: the change since its last sample.
-        now = self.pose(context)
-        centres, radii, groups = now.spheres()
+        now, (centres, radii, groups) = self._posed_at(context)
         before = context.get_abstract_state(self._spheres).get_value()
         velocities = np.zeros_like(centres)
         if len(before.centres) == len(centres):
@@ -219,13 +231,19 @@ class OperatorBody(LeafSystem):
 
     def _calc_geometry(self, context, output) -> None:
         p: BodyPose = context.get_abstract_state(self._pose).get_value()
+        if p is not self._drawn[0]:
+            frames = (
+                _along(p.shoulder, p.elbow),
+                _along(p.elbow, p.hand),
+                RigidTransform(p.hand),
+                RigidTransform(p.torso),
+                RigidTransform(p.head),
+            )
+            self._drawn = (p, frames)
         poses = output.get_mutable_value()
         poses.clear()
-        poses.set_value(self._frames["upper_arm"], _along(p.shoulder, p.elbow))
-        poses.set_value(self._frames["forearm"], _along(p.elbow, p.hand))
-        poses.set_value(self._frames["hand"], RigidTransform(p.hand))
-        poses.set_value(self._frames["torso"], RigidTransform(p.torso))
-        poses.set_value(self._frames["head"], RigidTransform(p.head))
+        for name, X in zip(_PARTS, self._drawn[1], strict=True):
+            poses.set_value(self._frames[name], X)
 
 
 __all__ = [

@@ -75,8 +75,9 @@ def quantise(values: np.ndarray, quantum: float) -> np.ndarray:
 
 class SampledSensor(LeafSystem):
     """What both sensors share: the events, the state and the stamp (see the module
-    docstring). A subclass declares `input` and the `reading` output with `_declare_reading`,
-    and says how a sample is corrupted (`_corrupt`)."""
+    docstring). A subclass declares its input port `input` (kept as `_input`, which `_measure`
+    reads, unless the subclass reads more) and the `reading` output, and says how a sample is
+    corrupted (`_corrupt`)."""
 
     def __init__(self, model: SensorModel, seed: int):
         super().__init__()
@@ -88,6 +89,10 @@ class SampledSensor(LeafSystem):
         # One generator object, its state set from the context at each sample: making one per
         # sample seeds it from the OS first, about half of what a sample took of its own.
         self._rng = np.random.Generator(np.random.PCG64(0))
+        # The state dict `_rng` was left in by this system's last sample: a context whose
+        # state holds that very dict (not an equal one: the same object, never mutated) finds
+        # the generator where it needs it, without setting it again.
+        self._rng_left: dict | None = None
         self.DeclareVectorOutputPort(
             "stamp", BasicVector(1), self._calc_stamp, prerequisites_of_calc=self._prerequisites
         )
@@ -105,9 +110,9 @@ class SampledSensor(LeafSystem):
         raise NotImplementedError(f"{type(self).__name__} does not say how it reads a value")
 
     def _measure(self, context):
-        """What the sensor samples now: its first input port's value (a subclass that reads
+        """What the sensor samples now: its input port `_input`'s value (a subclass that reads
         more says so)."""
-        return self.get_input_port(0).Eval(context)
+        return self._input.Eval(context)
 
     def _follow(self, previous, value, now: float):
         """The sample kept for a reading `value` taken at `now`, given the `previous` sample's
@@ -119,7 +124,9 @@ class SampledSensor(LeafSystem):
         now = context.get_time()
         old = self.state(context)
         rng = self._rng
-        rng.bit_generator.state = old.rng
+        if old.rng is not self._rng_left:
+            rng.bit_generator.state = old.rng
+        self._rng_left = None  # the draws below move the generator on
         # Every sample draws its dropout and its noise, lost or not: the streams stay aligned.
         lost = rng.random() < self.model.dropout and not first
         value = self._corrupt(self._measure(context), rng)
@@ -129,7 +136,8 @@ class SampledSensor(LeafSystem):
             due = now if first else now + self.model.latency
             previous = old.samples[-1].value if old.samples else None
             kept += (Sample(now, due, self._follow(previous, value, now)),)
-        new = SensorState(rng.bit_generator.state, kept)
+        self._rng_left = rng.bit_generator.state
+        new = SensorState(self._rng_left, kept)
         state.get_mutable_abstract_state(self._state).set_value(new)
 
     def _first(self, context, state) -> None:
@@ -157,7 +165,7 @@ class SampledVector(SampledSensor):
         half = size // 2
         self._std = np.r_[np.full(half, model.noise), np.full(half, model.rate_noise)]
         self._half = half
-        self.DeclareVectorInputPort("input", size)
+        self._input = self.DeclareVectorInputPort("input", size)
         self.DeclareVectorOutputPort(
             "reading", size, self._calc_reading, prerequisites_of_calc=self._prerequisites
         )
@@ -178,7 +186,7 @@ class SampledBody(SampledSensor):
 
     def __init__(self, model: SensorModel, seed: int):
         super().__init__(model, seed)
-        self.DeclareAbstractInputPort("input", AbstractValue.Make(NOBODY))
+        self._input = self.DeclareAbstractInputPort("input", AbstractValue.Make(NOBODY))
         self.DeclareAbstractOutputPort(
             "reading",
             lambda: AbstractValue.Make(NOBODY),

@@ -101,13 +101,12 @@ class _Seat:
 
 def pose_error(X_ref: RigidTransform, X: RigidTransform) -> tuple[float, float, float, float]:
     """(horizontal, vertical, tilt, yaw modulo pi) of X relative to X_ref, in X_ref's frame."""
-    X_rel = X_ref.InvertAndCompose(X)
-    p = X_rel.translation()
-    R = X_rel.rotation().matrix()
-    tilt = math.acos(float(np.clip(R[2, 2], -1.0, 1.0)))
-    yaw = math.atan2(R[1, 0], R[0, 0])
+    # One 3x4 matrix and plain floats: the configuration sensor asks this many times a step.
+    (r00, _, _, px), (r10, _, _, py), (_, _, r22, pz) = X_ref.InvertAndCompose(X).GetAsMatrix34()
+    tilt = math.acos(min(max(float(r22), -1.0), 1.0))
+    yaw = math.atan2(r10, r00)
     yaw_mod = abs((yaw + math.pi / 2) % math.pi - math.pi / 2)
-    return float(math.hypot(p[0], p[1])), abs(float(p[2])), tilt, yaw_mod
+    return float(math.hypot(px, py)), abs(float(pz)), tilt, yaw_mod
 
 
 def rotation_angle(X_ref: RigidTransform, X: RigidTransform) -> tuple[float, float]:
@@ -185,12 +184,17 @@ class SlotMonitor(LeafSystem):
         # The tray is welded: its homes are fixed world poses.
         self._homes = [(self._symbols[part], X_WH) for part, X_WH in frames.homes.items()]
         self._read_gripper(plant)
+        self._index_seats()
         self._obstacle = None
         if plant.HasModelInstanceNamed(OBSTACLE):
             model = plant.GetModelInstanceByName(OBSTACLE)
             self._obstacle = int(plant.GetBodyByName(OBSTACLE, model).index())
-        self.DeclareAbstractInputPort("contact_results", AbstractValue.Make(ContactResults()))
-        self.DeclareAbstractInputPort("body_poses", AbstractValue.Make([RigidTransform()]))
+        self._contacts = self.DeclareAbstractInputPort(
+            "contact_results", AbstractValue.Make(ContactResults())
+        )
+        self._poses = self.DeclareAbstractInputPort(
+            "body_poses", AbstractValue.Make([RigidTransform()])
+        )
         self._query = self.DeclareAbstractInputPort(
             "query_object", AbstractValue.Make(QueryObject())
         )
@@ -242,6 +246,45 @@ class SlotMonitor(LeafSystem):
             for name in host_tags
         }
 
+    def _index_seats(self) -> None:
+        # What every reading asks of the fixed cell, worked out once: the plate's and the
+        # parts' body indices, every seat floor with the host it is on, each span's runs of
+        # consecutive base slots, and the spec's tokens (asked once per placement).
+        self._plate_index = int(next(iter(self._slots.values())).body_index)
+        self._part_index = {part: int(body.index()) for part, body in self._parts.items()}
+        self._floors = [(None, s.floor) for s in self._slots.values()]
+        self._floors += [(host, s.floor) for host, seats in self._host_seats.items() for s in seats]
+        slots = sorted(self._slots)
+        self._runs: dict[int, list[tuple[tuple[int, ...], list[_Seat]]]] = {}
+        for span in set(self._span.values()):
+            runs = (tuple(slots[start : start + span]) for start in range(len(slots) - span + 1))
+            self._runs[span] = [
+                (run, [self._slots[k] for k in run]) for run in runs if run[-1] - run[0] == span - 1
+            ]
+        self._tokens: dict[tuple[str, tuple[int, ...], str | None], str | None] = {}
+        # The seat frames in the world for the last plate pose read (the plate stands still:
+        # its pose is the same to the last bit step after step), by the pose's bytes.
+        self._plate_key = b""
+        self._slot_frames: dict[int, RigidTransform] = {}
+        self._nominal: dict[tuple[int, ...], RigidTransform] = {}
+
+    def _nominal_pose(self, run: tuple[int, ...], X_W_plate: RigidTransform) -> RigidTransform:
+        """`seat_pose` of the base slots `run` on the plate at `X_W_plate`."""
+        frames = self._plate_frames(X_W_plate)
+        X_W_nominal = self._nominal.get(run)
+        if X_W_nominal is None:
+            X_W_nominal = seat_pose({k: frames[k] for k in run}, run)
+            self._nominal[run] = X_W_nominal
+        return X_W_nominal
+
+    def _plate_frames(self, X_W_plate: RigidTransform) -> dict[int, RigidTransform]:
+        """Slot k -> its seat frame in the world, the plate at `X_W_plate`."""
+        key = X_W_plate.GetAsMatrix34().tobytes()
+        if key != self._plate_key:
+            self._plate_key, self._nominal = key, {}
+            self._slot_frames = {k: X_W_plate @ s.X_BS for k, s in self._slots.items()}
+        return self._slot_frames
+
     def _read_gripper(self, plant: MultibodyPlant) -> None:
         self._tcp = None
         self._finger_geometries: list[set[GeometryId]] = []
@@ -263,7 +306,7 @@ class SlotMonitor(LeafSystem):
     def seat_geometry(self) -> SeatGeometry:
         """The cell's seats, homes and grasps as this monitor reads them (see SeatGeometry)."""
         return SeatGeometry(
-            plate_body=int(next(iter(self._slots.values())).body_index),
+            plate_body=self._plate_index,
             slots=tuple((k, seat.X_BS) for k, seat in sorted(self._slots.items())),
             hosts=tuple(
                 (host, tuple((seat.name, seat.X_BS) for seat in seats))
@@ -279,12 +322,15 @@ class SlotMonitor(LeafSystem):
 
     def _touches(self, contacts: ContactResults) -> dict[str, set[GeometryId]]:
         touching: dict[str, set[GeometryId]] = {p: set() for p in self._parts}
+        owner = self._owner.get
         for a, b in contact_pairs(contacts):
             # Either geometry may be the part's (and both, for two parts touching).
-            if a in self._owner:
-                touching[self._owner[a]].add(b)
-            if b in self._owner:
-                touching[self._owner[b]].add(a)
+            part = owner(a)
+            if part is not None:
+                touching[part].add(b)
+            part = owner(b)
+            if part is not None:
+                touching[part].add(a)
         return touching
 
     def _touch_skipped(
@@ -294,11 +340,9 @@ class SlotMonitor(LeafSystem):
         filtered out: within `touch` of each other (a signed-distance query ignores filters);
         for the `parts` named (default: all)."""
         inspector = query.inspector()
-        floors = [(None, s.floor) for s in self._slots.values()]
-        floors += [(host, s.floor) for host, seats in self._host_seats.items() for s in seats]
         for part in self._bosses if parts is None else parts:
             for boss in self._bosses[part]:
-                for host, floor in floors:
+                for host, floor in self._floors:
                     if host == part or floor in touching[part]:
                         continue
                     if not inspector.CollisionFiltered(boss, floor):
@@ -313,17 +357,10 @@ class SlotMonitor(LeafSystem):
         return xy <= t.seat_xy and z <= t.seat_z and tilt <= t.seat_tilt and yaw <= t.seat_yaw
 
     def _base_placement(self, part, X_WP, X_W_plate, touching) -> PartPlacement | None:
-        span = self._span[part]
-        slots = sorted(self._slots)
-        for start in range(len(slots) - span + 1):
-            run = tuple(slots[start : start + span])
-            if run[-1] - run[0] != span - 1:
-                continue
-            seats = [self._slots[k] for k in run]
+        for run, seats in self._runs[self._span[part]]:
             if not all(s.floor in touching for s in seats):
                 continue
-            X_W_nominal = seat_pose({k: X_W_plate @ self._slots[k].X_BS for k in run}, run)
-            if self._within_seat(X_W_nominal, X_WP):
+            if self._within_seat(self._nominal_pose(run, X_W_plate), X_WP):
                 return PartPlacement(
                     PartStatus.SEATED,
                     seats=tuple(s.name for s in seats),
@@ -338,7 +375,7 @@ class SlotMonitor(LeafSystem):
         for host, seats in self._host_seats.items():
             if host == part:
                 continue
-            X_W_host = poses[int(self._parts[host].index())]
+            X_W_host = poses[self._part_index[host]]
             for seat in seats:
                 if seat.floor not in touching:
                     continue
@@ -350,8 +387,8 @@ class SlotMonitor(LeafSystem):
                 host_placement = base.get(host)
                 if host_placement is not None:
                     # The base slot under this row: the host may sit either way round.
-                    for k, slot in self._slots.items():
-                        p_slot = (X_W_plate @ slot.X_BS).translation()
+                    for k, X_W_slot in self._plate_frames(X_W_plate).items():
+                        p_slot = X_W_slot.translation()
                         d = np.linalg.norm((X_W_seat.translation() - p_slot)[:2])
                         if d <= self._tol.host_over_slot:
                             slots = (k,)
@@ -364,11 +401,15 @@ class SlotMonitor(LeafSystem):
     def _token(self, part: str, slots: tuple[int, ...], host: str | None) -> str | None:
         """The spec's token for `part` over `slots` (on the base, or on the instance `host`);
         None when the spec has no such placement."""
-        host_symbol = None if host is None else self._symbols[host]
-        try:
-            return self._spec.placement_of(self._symbols[part], slots, host_symbol).token
-        except SpecError:
-            return None
+        key = (part, slots, host)
+        if key not in self._tokens:
+            host_symbol = None if host is None else self._symbols[host]
+            try:
+                token = self._spec.placement_of(self._symbols[part], slots, host_symbol).token
+            except SpecError:
+                token = None
+            self._tokens[key] = token
+        return self._tokens[key]
 
     def _held(self, part, X_WP, poses, touching) -> bool:
         if self._tcp is None:
@@ -399,7 +440,7 @@ class SlotMonitor(LeafSystem):
     def _touching(self, context) -> dict[str, set[GeometryId]]:
         """What each part touches: its contacts, and the seat floors its bosses stand on
         where that contact is filtered out (`_add_skipped`)."""
-        touching = self._touches(self.get_input_port(0).Eval(context))
+        touching = self._touches(self._contacts.Eval(context))
         self._add_skipped(context, touching)
         return touching
 
@@ -408,23 +449,20 @@ class SlotMonitor(LeafSystem):
         if self._query.HasValue(context):
             self._touch_skipped(self._query.Eval(context), touching, parts)
 
-    def _plate_pose(self, poses) -> RigidTransform:
-        return poses[int(next(iter(self._slots.values())).body_index)]
-
     def _calc_held_part(self, context, output) -> None:
         # The status `_calc_configuration` gives, for the one part it could read as held:
         # in the gripper by `_held` (the fingers' contacts are never filtered out, so the
         # plain contacts tell) and seated neither on the plate nor on a host. A run's safety
         # check samples this at every monitor step, where the whole reading cost a
         # millisecond.
-        poses = self.get_input_port(1).Eval(context)
-        touching = self._touches(self.get_input_port(0).Eval(context))
-        for part, body in self._parts.items():
-            X_WP = poses[int(body.index())]
+        poses = self._poses.Eval(context)
+        touching = self._touches(self._contacts.Eval(context))
+        for part, index in self._part_index.items():
+            X_WP = poses[index]
             if not self._held(part, X_WP, poses, touching[part]):
                 continue
             self._add_skipped(context, touching, (part,))
-            X_W_plate = self._plate_pose(poses)
+            X_W_plate = poses[self._plate_index]
             mine = touching[part]
             if self._base_placement(part, X_WP, X_W_plate, mine) is None and (
                 self._host_placement(part, X_WP, poses, X_W_plate, mine, {}) is None
@@ -434,18 +472,18 @@ class SlotMonitor(LeafSystem):
         output.set_value("")
 
     def _calc_configuration(self, context, output) -> None:
-        poses = self.get_input_port(1).Eval(context)
+        poses = self._poses.Eval(context)
         touching = self._touching(context)
-        X_W_plate = self._plate_pose(poses)
+        X_W_plate = poses[self._plate_index]
         placements: dict[str, PartPlacement] = {}
-        for part, body in self._parts.items():
-            found = self._base_placement(part, poses[int(body.index())], X_W_plate, touching[part])
+        for part, index in self._part_index.items():
+            found = self._base_placement(part, poses[index], X_W_plate, touching[part])
             if found is not None:
                 placements[part] = found
-        for part, body in self._parts.items():
+        for part, index in self._part_index.items():
             if part in placements:
                 continue
-            X_WP = poses[int(body.index())]
+            X_WP = poses[index]
             mine = touching[part]
             found = self._host_placement(part, X_WP, poses, X_W_plate, mine, placements)
             if found is not None:
@@ -462,7 +500,7 @@ class SlotMonitor(LeafSystem):
                 placements[part] = PartPlacement(PartStatus.TRANSIT)
         # Wherever a part is, the sensor reports where: the body pose, whatever the status.
         measured = {
-            part: replace(placement, pose=pose_tuple(poses[int(self._parts[part].index())]))
+            part: replace(placement, pose=pose_tuple(poses[self._part_index[part]]))
             for part, placement in placements.items()
         }
         output.set_value(CellConfiguration(tuple(sorted(measured.items())), self._seen(poses)))

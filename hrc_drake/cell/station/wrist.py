@@ -62,7 +62,8 @@ class TcpForce(LeafSystem):
         # weld's frame, in that frame; the tool meets its opposite.
         F_J = self._reactions.Eval(context)[self._joint]
         X_WB = self._poses.Eval(context)[self._base]
-        X_WJ = X_WB @ self._X_BJ
+        # `multiply`: pydrake's `@` goes through a Python wrapper first.
+        X_WJ = X_WB.multiply(self._X_BJ)
         F_W = F_J.Rotate(X_WJ.rotation())
         p_JT_W = X_WB.multiply(self._p_BT) - X_WJ.translation()
         load = F_W.Shift(p_JT_W)
