@@ -1,19 +1,21 @@
-"""The cell's speed against a baseline commit, side by side -> benchmarks/reports/speed.md.
+"""The cell's speed against baseline commits, side by side -> benchmarks/reports/speed.md.
 
 Runs `hrc-drake simulate --json` at full settings on the cases of `CASES` (row 5 with the
-default sensors; `shared-desk` with `sensors: realistic`) with the code of a baseline commit
+default sensors; `shared-desk` with `sensors: realistic`) with the code of each baseline commit
 (default 2ccda38, the code issue 51 was filed on, unpacked by `git archive` into a temporary
 directory: the repository's state is not touched) and with the working tree, alternating the
-two run by run, `--rounds` times each, one run at a time. Per case it reports every run's real-time
-factor (simulated / wall seconds of the run's loop, `real_time_factor` in the JSON), the best
-of each side and their ratio, and checks that both sides visited the same states in the same
-simulated time (to 1e-6 s). Wall times depend on the machine and its load: compare the ratio,
-measured on a quiet machine.
+sides run by run, `--rounds` times each, one run at a time. Per case and baseline it reports
+every run's real-time factor (simulated / wall seconds of the run's loop, `real_time_factor` in
+the JSON), the best of each side and their ratio, and whether both sides visited the same states
+in the same simulated time (to 1e-6 s; an older baseline may not, and is then compared per
+simulated second). Wall times depend on the machine and its load: compare the ratio, measured
+on a quiet machine.
 
-Usage: ``python benchmarks/bench_speed.py [--baseline 2ccda38] [--rounds 2] [--lean]
-[--tree PATH] [--out benchmarks/reports/speed.md]`` (with ``--lean``, 0.5 s holds, a quick look:
-the report is printed, not written; ``--tree``: another checkout to time instead of the working
-tree).
+Usage: ``python benchmarks/bench_speed.py [--baseline 2ccda38 ...] [--case NAME ...]
+[--rounds 2] [--lean] [--tree PATH] [--out benchmarks/reports/speed.md]`` (a baseline or a case
+repeated adds one; a baseline older than `sensors:` runs only ``--case row5-forces-5``; with
+``--lean``, 0.5 s holds, a quick look: the report is printed, not written; ``--tree``: another
+checkout to time instead of the working tree).
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 BASELINE = "2ccda38"
+TREE = "working tree"
 # name -> (scenario, --scenario-text or None)
 CASES = {
     "row5-forces-5": ("row5-forces-5", None),
@@ -41,6 +44,7 @@ def unpack(commit: str, into: Path) -> Path:
     archive = subprocess.run(
         ["git", "-C", str(ROOT), "archive", commit], check=True, capture_output=True
     ).stdout
+    into.mkdir(parents=True, exist_ok=True)
     subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
     return into
 
@@ -78,11 +82,12 @@ def same_run(a: dict, b: dict) -> bool:
     return a["states"] == b["states"] and abs(a["sim_time"] - b["sim_time"]) <= 1e-6
 
 
-def measure(trees: dict[str, Path], rounds: int, lean: bool) -> dict[str, dict[str, list]]:
+def measure(trees: dict[str, Path], cases: list[str], rounds: int, lean: bool) -> dict:
     """case -> side -> runs, the sides alternating run by run."""
-    runs: dict[str, dict[str, list]] = {case: {side: [] for side in trees} for case in CASES}
+    runs: dict[str, dict[str, list]] = {case: {side: [] for side in trees} for case in cases}
     for k in range(rounds):
-        for case, (scenario, text) in CASES.items():
+        for case in cases:
+            scenario, text = CASES[case]
             for side, tree in trees.items():
                 run = simulate(tree, scenario, text, lean)
                 runs[case][side].append(run)
@@ -91,39 +96,48 @@ def measure(trees: dict[str, Path], rounds: int, lean: bool) -> dict[str, dict[s
     return runs
 
 
-def report(runs: dict[str, dict[str, list]], baseline: str, tree: Path, lean: bool) -> str:
-    """The report's Markdown."""
+def report(runs: dict[str, dict[str, list]], command: str, tree: Path) -> str:
+    """The report's Markdown: per case, each baseline against the working tree."""
     lines = [
-        "# Speed: the cell against its baseline, side by side",
+        "# Speed: the cell against its baselines, side by side",
         "",
-        f"`python benchmarks/bench_speed.py --baseline {baseline}"
-        + (" --lean`" if lean else "`")
-        + f" on {platform.node()} ({os.cpu_count()} cores; load average before the last run "
-        f"{os.getloadavg()[0]:.2f}). Real-time factor = simulated / wall seconds of the run's "
-        f"loop; the sides alternate run by run; best of each. Baseline: {baseline}; working "
-        f"tree: {tree}.",
+        f"`{command}` on {platform.node()} ({os.cpu_count()} cores; load average before the "
+        f"last run {os.getloadavg()[0]:.2f}). Real-time factor = simulated / wall seconds of "
+        "the run's loop; the sides alternate run by run; best of each. Working tree: "
+        f"{tree}. A baseline whose runs differ from the tree's (states or simulated time) is "
+        "compared per simulated second.",
         "",
-        "| case | baseline runs | working tree runs | best baseline | best working tree | "
-        "ratio | same states and time |",
-        "|---|---|---|---|---|---|---|",
+        "| case | baseline | baseline runs | working tree runs | best baseline | "
+        "best working tree | ratio | same states and time |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for case, sides in runs.items():
-        base, new = sides["baseline"], sides["working tree"]
-        best_base = max(r["real_time_factor"] for r in base)
+        new = sides[TREE]
         best_new = max(r["real_time_factor"] for r in new)
-        same = all(same_run(base[0], r) for r in base + new)
-        listed = [", ".join(f"{r['real_time_factor']:.3f}" for r in side) for side in (base, new)]
-        lines.append(
-            f"| {case} | {listed[0]} | {listed[1]} | {best_base:.3f} | {best_new:.3f} | "
-            f"{best_new / best_base:.3f} | {'yes' if same else 'NO'} |"
-        )
+        for side, base in sides.items():
+            if side == TREE:
+                continue
+            best_base = max(r["real_time_factor"] for r in base)
+            same = all(same_run(base[0], r) for r in base + new)
+            listed = [", ".join(f"{r['real_time_factor']:.3f}" for r in x) for x in (base, new)]
+            lines.append(
+                f"| {case} | {side} | {listed[0]} | {listed[1]} | {best_base:.3f} | "
+                f"{best_new:.3f} | {best_new / best_base:.3f} | {'yes' if same else 'no'} |"
+            )
     return "\n".join(lines) + "\n"
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run the comparison and write (or, with --lean, print) its report."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--baseline", default=BASELINE, help="baseline commit (default 2ccda38)")
+    parser.add_argument(
+        "--baseline",
+        action="append",
+        help=f"a baseline commit; repeat for several (default {BASELINE})",
+    )
+    parser.add_argument(
+        "--case", action="append", choices=sorted(CASES), help="a case; repeat (default: all)"
+    )
     parser.add_argument("--rounds", type=int, default=2, help="runs of each side per case")
     parser.add_argument("--lean", action="store_true", help="0.5 s holds; print the report")
     parser.add_argument("--tree", default=str(ROOT), help="the checkout to time (default: this)")
@@ -131,12 +145,20 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.rounds < 1:
         parser.error(f"--rounds must be a whole number >= 1, not {args.rounds}")
+    baselines = args.baseline or [BASELINE]
+    cases = args.case or list(CASES)
+    command = "python benchmarks/bench_speed.py " + " ".join(
+        [*(f"--baseline {b}" for b in baselines), *(f"--case '{c}'" for c in args.case or [])]
+        + [f"--rounds {args.rounds}"]
+        + (["--lean"] if args.lean else [])
+    )
     with tempfile.TemporaryDirectory(prefix="bench_speed_") as tmp:
-        trees = {"baseline": unpack(args.baseline, Path(tmp)), "working tree": Path(args.tree)}
+        trees = {b: unpack(b, Path(tmp) / b) for b in baselines}
+        trees[TREE] = Path(args.tree)
         for side, tree in trees.items():
             print(f"{side}: {code_of(tree)}", file=sys.stderr)
-        runs = measure(trees, args.rounds, args.lean)
-        text = report(runs, args.baseline, trees["working tree"], args.lean)
+        runs = measure(trees, cases, args.rounds, args.lean)
+        text = report(runs, command, trees[TREE])
     if args.lean:
         print(text)
         return 0
