@@ -20,12 +20,16 @@ from hrc_drake.hri.faults import (
     ProtectiveStop,
     Pushed,
     Stuck,
+    TrackerLoss,
 )
 from hrc_drake.scenario.load import load_scenario
 from hrc_drake.scenario.schema import Scenario, ScenarioError
 from hrc_drake.typed_yaml import TypedYamlError, dump_flow, load_tagged, load_typed
 
-TAGS = "!GripLost, !NoSeat, !GripperStuck, !NoPath, !OperatorSilent, !ProtectiveStop, !Pushed"
+TAGS = (
+    "!GripLost, !NoSeat, !GripperStuck, !NoPath, !OperatorSilent, !ProtectiveStop, !Pushed, "
+    "!TrackerLoss"
+)
 
 FAULT_TEXTS = [
     "{faults: [!GripLost {task: 2}, !Pushed {task: 1, torque: 150}]}",
@@ -34,6 +38,7 @@ FAULT_TEXTS = [
     "{faults: [!NoPath {task: 2, duration: 9}, !OperatorSilent {task: 1}]}",
     "faults:\n  - !ProtectiveStop {task: 2, after: 1.5}\n  - !Pushed\n    task: 1\n"
     "    joint: elbow_joint\n    duration: 0.5\n",
+    "{faults: [!TrackerLoss {task: 2, after: 3.5, duration: 1}]}",
     "{faults: []}",
 ]
 
@@ -47,11 +52,12 @@ def test_each_kind_has_its_tag_and_its_own_defaults():
         FaultKind.OPERATOR_SILENT: "OperatorSilent",
         FaultKind.PROTECTIVE_STOP: "ProtectiveStop",
         FaultKind.PUSHED: "Pushed",
+        FaultKind.TRACKER_LOSS: "TrackerLoss",
     }
     text = (
         "{faults: [!GripLost {task: 1}, !NoSeat {task: 1}, !GripperStuck {task: 1}, "
         "!NoPath {task: 1}, !OperatorSilent {task: 1}, !ProtectiveStop {task: 1}, "
-        "!Pushed {task: 1}]}"
+        "!Pushed {task: 1}, !TrackerLoss {task: 1}]}"
     )
     assert load_scenario("row1-optimal", text).faults == [
         GripLost(task=1, force=1.0, after=1.0),
@@ -61,6 +67,7 @@ def test_each_kind_has_its_tag_and_its_own_defaults():
         OperatorSilent(task=1, duration=15.0),
         ProtectiveStop(task=1, after=4.0, duration=2.0),
         Pushed(task=1, torque=80.0, joint="shoulder_pan_joint", after=4.0, duration=0.3),
+        TrackerLoss(task=1, after=4.0, duration=1.0),
     ]
     assert GripperStuck().stuck == Stuck.CLOSE and {s.value for s in Stuck} == {"close", "open"}
 
@@ -106,6 +113,11 @@ def test_untagged_and_unknown_entries_name_the_entry_and_the_tags(entry, words):
         ("{motion: !MotionConfig {hold_time: 1}}", r"motion: a tag \(!MotionConfig\) chooses"),
         ("{faults: [!NoSeat {task: 1, after: -1}]}", r"faults\[0\] \(no-seat\): after -1\.0"),
         ("{faults: [!GripperStuck {task: 1, stuck: sideways}]}", "stuck 'sideways': give close"),
+        (
+            "{faults: [!TrackerLoss {task: 1, duration: -1}]}",
+            r"faults\[0\] \(tracker-loss\): duration -1\.0 must be >= 0",
+        ),
+        ("{faults: [!TrackerLoss {task: 1, torque: 1}]}", r"faults\[0\]\.torque: unknown key"),
     ],
 )
 def test_a_kind_takes_only_its_own_parameters(text, message):

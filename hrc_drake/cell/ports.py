@@ -136,13 +136,17 @@ class BodySpheres:
     arm, torso, head), each part within the sphere `bound(group)`. `stamp` is when the tracker
     took this reading [s, station time], set by a sensor model (`sensors:`); None: now (an
     exact tracker, or a reading over the lockstep link, whose message carries the exchange's
-    time; the real-time link carries it, `hrc_drake.cell.link.realtime`)."""
+    time; the real-time link carries it, `hrc_drake.cell.link.realtime`). `lost_for` is set by
+    the controller only: the seconds since the person was last seen, for a body it remembers and
+    grows while the tracker sees nobody (`hrc_drake.cell.controller.body_memory`); None for a
+    reading."""
 
     centres: np.ndarray
     radii: np.ndarray
     velocities: np.ndarray
     groups: tuple[tuple[int, int], ...] = ()
     stamp: float | None = None
+    lost_for: float | None = None
 
     def bound(self, group: int) -> tuple[np.ndarray, float]:
         """(centre, radius) of a sphere that holds every sphere of `group`."""

@@ -32,6 +32,11 @@ Kinds, their tags and their parameters (defaults in brackets):
   for `duration` s [2.0].
 - `pushed` (`!Pushed`): a torque of `torque` N·m [80] on `joint` [shoulder_pan_joint] `after` s
   [4.0] into the task, for `duration` s [0.3].
+- `tracker-loss` (`!TrackerLoss`): the body tracker (`operator.body`, what the controller reads)
+  loses the person `after` s [4.0] into the task, for `duration` s [1.0]: it reports nobody (an
+  empty reading, current, not stale); the person, the station's safety function and the run's
+  check are unchanged. The controller takes the person to be anywhere they could have reached
+  since last seen (`hrc_drake.cell.controller.body_memory`); it has no detection to report.
 """
 
 import dataclasses
@@ -52,6 +57,7 @@ class FaultKind(StrEnum):
     OPERATOR_SILENT = "operator-silent"
     PROTECTIVE_STOP = "protective-stop"
     PUSHED = "pushed"
+    TRACKER_LOSS = "tracker-loss"
 
 
 class Stuck(StrEnum):
@@ -138,8 +144,33 @@ class Pushed:
     duration: float = 0.3
 
 
+# A fault, not a figure of `sensors.body`: the `sensors:` section models how a device reads
+# (rate, latency, noise, random dropouts) the same at every step, while a loss is one event the
+# station injects at a scripted moment and the controller must cope with unaided, as with every
+# entry here; and timed like `!ProtectiveStop` (`after` s into the `task`-th task) so that it
+# strikes the same moment of the task (say, the hand's reach toward the arm) whatever came before.
+@dataclass
+class TrackerLoss:
+    """`tracker-loss`: the body tracker reports nobody `after` s into the task, for `duration` s
+    (the person is there all along)."""
+
+    kind: ClassVar[FaultKind] = FaultKind.TRACKER_LOSS
+    task: int = 0
+    after: float = 4.0
+    duration: float = 1.0
+
+
 # One entry of a scenario's `faults:` list: the YAML tag (`!GripLost`) chooses the member.
-FaultConfig = GripLost | NoSeat | GripperStuck | NoPath | OperatorSilent | ProtectiveStop | Pushed
+FaultConfig = (
+    GripLost
+    | NoSeat
+    | GripperStuck
+    | NoPath
+    | OperatorSilent
+    | ProtectiveStop
+    | Pushed
+    | TrackerLoss
+)
 
 # The entry's class of each kind (its YAML tag is the class's name: `!GripLost`).
 FAULT_CLASSES: dict[FaultKind, type] = {cls.kind: cls for cls in typing.get_args(FaultConfig)}
@@ -153,6 +184,7 @@ SIMULATED = (
     FaultKind.OPERATOR_SILENT,
     FaultKind.PROTECTIVE_STOP,
     FaultKind.PUSHED,
+    FaultKind.TRACKER_LOSS,
 )
 
 
@@ -273,6 +305,7 @@ __all__ = [
     "ProtectiveStop",
     "Pushed",
     "Stuck",
+    "TrackerLoss",
     "check_faults",
     "check_faults_within_run",
 ]

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
+from hrc_drake.cell.controller.body_memory import BodyMemory
 from hrc_drake.cell.controller.forecast import OperatorForecast, forecast_body
 from hrc_drake.cell.controller.guard import GuardSettings
 from hrc_drake.cell.controller.keep_clear import KeepClearSettings
@@ -232,8 +233,9 @@ def make_controller(
     on_task: Callable[[TaskRecord], None] | None = None,
 ) -> Controller:
     """The controller of `scenario`'s cell: the Supervisor (proposals from `policy`, plans from
-    `plans`, starting and ending at `home`) and, with an operator body, the separation monitor.
-    `on_task(record)` hears every task as the cell observed it."""
+    `plans`, starting and ending at `home`) and, with an operator body, the separation monitor,
+    both reading the tracked body through the memory that never takes a lost person for nobody
+    (`BodyMemory`). `on_task(record)` hears every task as the cell observed it."""
     builder = DiagramBuilder()
     limits = supervisor_limits(scenario, options)
     opening = scenario.station.rg2.initial_opening
@@ -267,8 +269,15 @@ def make_controller(
         )
         builder.ConnectInput("ur3.state_estimated", monitor.GetInputPort("ur3.state_estimated"))
         builder.ConnectInput("rg2.state_measured", monitor.GetInputPort("rg2.state_measured"))
-        builder.ExportInput(monitor.GetInputPort("operator.body"), "operator.body")
-        builder.ConnectInput("operator.body", supervisor.GetInputPort("operator.body"))
+        # Every part reads the tracked body through the one memory that never takes a lost
+        # person for nobody (`hrc_drake.cell.controller.body_memory`).
+        memory = builder.AddNamedSystem(
+            "body_memory", BodyMemory(scenario.run.period, scenario.safety)
+        )
+        builder.ExportInput(memory.GetInputPort("tracked"), "operator.body")
+        body = memory.GetOutputPort("operator.body")
+        builder.Connect(body, monitor.GetInputPort("operator.body"))
+        builder.Connect(body, supervisor.GetInputPort("operator.body"))
         builder.Connect(supervisor.GetOutputPort("intent"), monitor.GetInputPort("intent"))
         builder.Connect(
             monitor.GetOutputPort("speed_limit"), supervisor.GetInputPort("speed_limit")

@@ -126,6 +126,11 @@ class SeparationReading:
             moved by an outside force (a push), not by its servo.
         stale: the body reading is older than the tracker's bound (`BodyAge.stale_after`):
             no body is seen, and the plan stops (`limit` 0).
+        lost: the body is the controller's memory of a person the tracker lost, grown to
+            where they could be (`BodySpheres.lost_for`,
+            `hrc_drake.cell.controller.body_memory`): it limits the plan, but its distances are
+            to where the person could be, so the log counts no separation, contact or violation
+            from it.
     """
 
     separation: float = float("inf")
@@ -135,6 +140,7 @@ class SeparationReading:
     moving: bool = False
     imposed: bool = False
     stale: bool = False
+    lost: bool = False
 
     def __deepcopy__(self, memo) -> SeparationReading:
         return self  # immutable once made (Drake copies abstract values often)
@@ -198,7 +204,9 @@ def band_creep_step(
 ) -> BandCreep:
     """`creep` a monitor period later, after `reading` (made with `creep`) of `body`."""
     speeds = np.linalg.norm(np.asarray(body.velocities, dtype=float).reshape(-1, 3), axis=1)
-    still = len(speeds) > 0 and not reading.stale and float(speeds.max()) < STILL_SPEED
+    # A person the tracker lost (`reading.lost`) is not known to stand still.
+    seen = not (reading.stale or reading.lost)
+    still = len(speeds) > 0 and seen and float(speeds.max()) < STILL_SPEED
     if not (still and plan_moves(intent)):
         return BandCreep()
     if creep.on:
@@ -370,6 +378,7 @@ def assess(
         limit=limit,
         moving=moving,
         imposed=imposed,
+        lost=body.lost_for is not None,
     )
 
 
@@ -422,14 +431,16 @@ def log_step(
     """`log` with one more monitor period: the reading's figures, the time slowed or stopped
     while the plan moves the arm (`plan_moves`) at a rate below 1 or at 0, and the delay that
     monitoring added: (1 − rate) × period from the moment it limits the speed until the rate is
-    back at 1 (the ramp back counts; a stop to turn, or the protective stop, does not)."""
+    back at 1 (the ramp back counts; a stop to turn, or the protective stop, does not). The
+    distances of a `lost` reading (a person the tracker lost, remembered) are not logged."""
+    seen = not reading.lost
     log = replace(
         log,
         steps=log.steps + 1,
-        min_separation=min(log.min_separation, reading.separation),
-        body_contacts=log.body_contacts + int(reading.separation <= 0.0),
+        min_separation=min(log.min_separation, reading.separation if seen else np.inf),
+        body_contacts=log.body_contacts + int(seen and reading.separation <= 0.0),
     )
-    if reading.moving:
+    if reading.moving and seen:
         short = int(reading.short)
         commanded = plan_moves(intent) and not reading.imposed
         log = replace(

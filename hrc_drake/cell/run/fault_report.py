@@ -26,6 +26,10 @@ CAUSES = {
     # Let go off its seat; pushed out of the fingers on the pocket's rim; or the arm blocked by
     # the part landing on the rim.
     FaultKind.NO_SEAT: {Cause.SEAT, Cause.GRIP, Cause.TRACKING},
+    # None: the controller detects no fault; in every period it takes the person to be
+    # anywhere they could have reached (`hrc_drake.cell.controller.body_memory`), and the time
+    # that costs is monitoring's (`safety.ssm_delay`), not the fault's.
+    FaultKind.TRACKER_LOSS: set(),
 }
 # A detection in the same Supervisor update as the injection may carry a time a period earlier.
 SLACK = 0.05  # s
@@ -39,7 +43,8 @@ def fault_records(
 ) -> list[FaultRecord]:
     """One record per scenario fault. `seconds_lost` runs from the injection to the recovery
     (the cell's, or the operator's when the task was handed over and done by hand), or to the
-    end of the run when nothing resolved it (0 for a fault never injected)."""
+    end of the run when nothing resolved it (0 for a fault never injected, and for a kind with
+    no cause to detect: a tracker loss)."""
     records = []
     if not injections:  # a station that does not say
         injections = [Injection(f.kind.value, f.task) for f in faults]
@@ -56,7 +61,7 @@ def fault_records(
             ),
             None,
         )
-        if injected is None:
+        if injected is None or not CAUSES[fault.kind]:
             lost = 0.0
         elif found is not None and found.resolved_at is not None:
             # Recovered by the cell, or by the operator's hands (a task handed over, done).

@@ -268,9 +268,12 @@ def body_script_of(scenario: Scenario, frames: CellFrames, body_script=None):
     return desk_script(scenario.body, scenario.operator.seed, desk)
 
 
-def _add_operator(builder, plant, scene_graph, parts, scenario: Scenario, operator, body_script):
+def _add_operator(
+    builder, plant, scene_graph, parts, scenario: Scenario, operator, body_script, injector=None
+):
     """The simulated operator and its body (a tracker that sees nobody without one); returns
-    the simulated operator."""
+    the simulated operator. With a `tracker-loss` fault the body reaches the tracker's port
+    through the fault `injector`, and its exact spheres are `sim.operator.body`."""
     run = scenario.run
     busy = body_script.busy_until if isinstance(body_script, KnowsWhenFree) else None
     person = builder.AddNamedSystem(
@@ -294,7 +297,13 @@ def _add_operator(builder, plant, scene_graph, parts, scenario: Scenario, operat
     )
     builder.Connect(plant.get_body_poses_output_port(), body.GetInputPort("body_poses"))
     builder.Connect(person.GetOutputPort("activity"), body.GetInputPort("activity"))
-    export_measured(builder, body.GetOutputPort("spheres"), "operator.body", scenario)
+    spheres = body.GetOutputPort("spheres")
+    if injector is not None and injector.has_tracker_loss:
+        builder.Connect(spheres, injector.GetInputPort("operator.body"))
+        tracked = injector.GetOutputPort("operator.body")
+        export_measured(builder, tracked, "operator.body", scenario, truth=spheres)
+    else:
+        export_measured(builder, spheres, "operator.body", scenario)
     return person
 
 
@@ -450,7 +459,9 @@ def make_cell_station(
     if scenario.body.enabled:
         add_bins(scene_graph, design.layout)
     body_script = body_script_of(scenario, frames, body_script)
-    person = _add_operator(builder, plant, scene_graph, parts, scenario, operator, body_script)
+    person = _add_operator(
+        builder, plant, scene_graph, parts, scenario, operator, body_script, injector
+    )
     if injector is not None:  # it counts tasks from the prompts the station shows
         builder.ConnectInput("hri.prompt", injector.GetInputPort("hri.prompt"))
     _add_part_sensors(builder, plant, scene_graph, frames, parts, person, scenario)

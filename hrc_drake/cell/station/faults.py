@@ -13,6 +13,8 @@ or do not open again, in the task), `no-seat` (the part slides `offset` along th
 s into the carry: the station moves it, `CellStation.apply_welds`, so the robot places it
 that far off its seat), `protective-stop` (`safety.stop` is 1 from `after` s into the task for
 `duration` s), `pushed` (a torque on `joint` from `after` s into the task for `duration` s),
+`tracker-loss` (the body tracker sees nobody from `after` s into the task for `duration` s: the
+injector sits between the simulated body and the tracker's port, `operator.body`),
 `no-path` (when the task's prompt appears, a box is set down over the seat the robot proposes,
 `hrc_drake.cell.station.obstacle`, and taken away `duration` s later), `no-seat` with `obstacle:
 true` (when the task's prompt appears, debris drops into the pocket of the seat the robot proposes,
@@ -30,6 +32,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import BasicVector, LeafSystem
 
+from hrc_drake.cell.ports import NOBODY
 from hrc_drake.cell.station.gripper import STALL_GAP, stopped_short
 from hrc_drake.cell.station.obstacle import SeatPositions
 from hrc_drake.hri.faults import (
@@ -43,6 +46,7 @@ from hrc_drake.hri.faults import (
     ProtectiveStop,
     Pushed,
     Stuck,
+    TrackerLoss,
 )
 from hrc_drake.hri.messages import Prompt, PromptKind
 from hrc_drake.obstacle_models import DEBRIS_PARK, OBSTACLE_PARK, obstacle_pose_over
@@ -96,8 +100,8 @@ class Injection:
         return cls(**{**data, "target": tuple(float(v) for v in data["target"])})
 
 
-def _window(fault: ProtectiveStop | Pushed, injection: Injection, now: float) -> bool:
-    """Whether a timed fault (stop, push) acts at `now`."""
+def _window(fault: ProtectiveStop | Pushed | TrackerLoss, injection: Injection, now: float) -> bool:
+    """Whether a timed fault (stop, push, tracker loss) acts at `now`."""
     if injection.task_start is None:
         return False
     start = injection.task_start + fault.after
@@ -128,7 +132,9 @@ class FaultInjector(LeafSystem):
     range clip, 1 each), `measured` (the gripper's opening and rate, 2). Output ports: `opening`,
     `force` (the command the fingers' servo obeys), `safety.stop` (1), `torque` (the plant's
     generalized forces), `obstacle` and `debris` (their carriages' desired states: x, y, z,
-    then three zero rates), `injected` (tuple of Injection). Updated every `period` seconds.
+    then three zero rates), `injected` (tuple of Injection). With a `tracker-loss` fault also
+    an input and an output `operator.body` (BodySpheres): the body as the tracker sees it, NOBODY
+    while a loss acts (`has_tracker_loss`). Updated every `period` seconds.
     `seat_position` (a `hrc_drake.cell.station.obstacle.SeatPositions`) places a no-path fault's box
     and a no-seat fault's debris."""
 
@@ -160,6 +166,19 @@ class FaultInjector(LeafSystem):
         self.DeclareVectorOutputPort("obstacle", BasicVector(6), self._calc_obstacle)
         self.DeclareVectorOutputPort("debris", BasicVector(6), self._calc_debris)
         self.DeclareStateOutputPort("injected", self._state)
+        self.has_tracker_loss = any(isinstance(f, TrackerLoss) for f in self._faults)
+        if self.has_tracker_loss:  # only then: every other station's diagram is as it was
+            self._body = self.DeclareAbstractInputPort("operator.body", AbstractValue.Make(NOBODY))
+            self.DeclareAbstractOutputPort(
+                "operator.body",
+                lambda: AbstractValue.Make(NOBODY),
+                self._calc_body,
+                prerequisites_of_calc={
+                    self.time_ticket(),
+                    self.abstract_state_ticket(self._state),
+                    self.input_port_ticket(self._body.get_index()),
+                },
+            )
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
 
     def _injections(self, context) -> tuple[Injection, ...]:
@@ -222,6 +241,12 @@ class FaultInjector(LeafSystem):
         )
         output.SetFromVector(_carriage_state(DEBRIS_PARK, debris, context.get_time()))
 
+    def _calc_body(self, context, output) -> None:
+        # Lost: nobody, current (no stamp: now; a sensor model after it stamps its samples).
+        now = context.get_time()
+        lost = any(_window(f, i, now) for f, i in self._active(context, TrackerLoss))
+        output.set_value(NOBODY if lost else self._body.Eval(context))
+
     # --- what happened -------------------------------------------------------------------
     def _update(self, context, state) -> None:
         now = context.get_time()
@@ -244,7 +269,7 @@ class FaultInjector(LeafSystem):
 
     def _inject(self, context, fault: FaultConfig, injection: Injection, now: float):
         """The moment a fault of the running task takes effect, if it is now."""
-        if isinstance(fault, ProtectiveStop | Pushed):
+        if isinstance(fault, ProtectiveStop | Pushed | TrackerLoss):
             if now >= injection.task_start + fault.after:
                 return replace(injection, injected_at=now)
             return injection

@@ -211,16 +211,25 @@ class SampledBody(SampledSensor):
         output.set_value(dataclasses.replace(sample.value, stamp=sample.time))
 
 
-def export_measured(builder: DiagramBuilder, source: OutputPort, name: str, scenario) -> None:
+def export_measured(
+    builder: DiagramBuilder,
+    source: OutputPort,
+    name: str,
+    scenario,
+    truth: OutputPort | None = None,
+) -> None:
     """Export `source` as the station's measured port `name`: as it is when the `scenario`'s
     `sensors:` has no model for it (`ideal`), else through a sensor (`sensor.<name>`, seeded
     with the operator's seed, which an evaluation draws per run), exported with its stamp as
     `<name>.stamp` and the exact value as `sim.<name>` (the run's safety check scores the
-    truth)."""
+    truth). `truth`: the exact value, where the device's input is not (a fault between them,
+    `tracker-loss`); then `sim.<name>` is exported under `ideal` too."""
     models, seed = sensor_models(scenario.sensors), scenario.operator.seed
     model = models.get(name)
     if model is None:
         builder.ExportOutput(source, name)
+        if truth is not None:
+            builder.ExportOutput(truth, f"sim.{name}")
         return
     if name == "operator.body":
         sensor = SampledBody(model, seed)
@@ -230,7 +239,7 @@ def export_measured(builder: DiagramBuilder, source: OutputPort, name: str, scen
     builder.Connect(source, sensor.GetInputPort("input"))
     builder.ExportOutput(sensor.GetOutputPort("reading"), name)
     builder.ExportOutput(sensor.GetOutputPort("stamp"), f"{name}.stamp")
-    builder.ExportOutput(source, f"sim.{name}")
+    builder.ExportOutput(source if truth is None else truth, f"sim.{name}")
 
 
 __all__ = [
