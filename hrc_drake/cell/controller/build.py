@@ -233,9 +233,8 @@ def make_controller(
     on_task: Callable[[TaskRecord], None] | None = None,
 ) -> Controller:
     """The controller of `scenario`'s cell: the Supervisor (proposals from `policy`, plans from
-    `plans`, starting and ending at `home`) and, with an operator body, the separation monitor,
-    both reading the tracked body through the memory that never takes a lost person for nobody
-    (`BodyMemory`). `on_task(record)` hears every task as the cell observed it."""
+    `plans`, from and to `home`) and, with an operator body, the separation monitor, both
+    reading the tracked body through `BodyMemory`. `on_task(record)` hears every task."""
     builder = DiagramBuilder()
     limits = supervisor_limits(scenario, options)
     opening = scenario.station.rg2.initial_opening
@@ -269,8 +268,6 @@ def make_controller(
         )
         builder.ConnectInput("ur3.state_estimated", monitor.GetInputPort("ur3.state_estimated"))
         builder.ConnectInput("rg2.state_measured", monitor.GetInputPort("rg2.state_measured"))
-        # Every part reads the tracked body through the one memory that never takes a lost
-        # person for nobody (`hrc_drake.cell.controller.body_memory`).
         memory = builder.AddNamedSystem(
             "body_memory", BodyMemory(scenario.run.period, scenario.safety)
         )

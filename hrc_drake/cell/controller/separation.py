@@ -3,42 +3,39 @@ measures.
 
 The monitor belongs to the controller and serves its planning: it slows the plan so that the
 station's safety function (`hrc_drake.cell.station.safety_function`), which executes the stops,
-need not. It reads what a real cell offers: the arm's measured joint
-state (`ur3.state_estimated`), optionally the gripper's measured opening (`rg2.state_measured`),
-the tracked operator body (`operator.body`, world-frame spheres with velocities), and what the
-Supervisor is about to do (`intent`: the plan's joint velocities at full speed, the part it
-carries). Nothing comes from the simulator's SceneGraph or plant state.
+need not. It reads what a real cell offers: the arm's measured joint state (`ur3.state_estimated`),
+optionally the gripper's measured opening (`rg2.state_measured`), the tracked operator body
+(`operator.body`, world-frame spheres with velocities), and what the Supervisor is about to do
+(`intent`: the plan's joint velocities at full speed, the part it carries). Nothing comes from the
+simulator's SceneGraph or plant state.
 
 Like a real controller it has its own kinematic model of the robot (`RobotEnvelope`,
-`hrc_drake.cell.robot_envelope`): the UR3, the gripper and the part it carries as
-convex primitives posed from the measured joint state, never farther from a point than the true
-shapes.
+`hrc_drake.cell.robot_envelope`): the UR3, the gripper and the part it carries as convex primitives
+posed from the measured joint state, never farther from a point than the true shapes.
 
-Each step is one forward-kinematics pass (the measured q on the monitor's own context), the
-distance from every body sphere to every robot shape at once in numpy (the distance of the
-sphere's centre minus its radius; a chain of spheres is thinner than its capsule between spheres,
-so the radius counts `1 + CHAIN_GAP` times), and for every such pair the robot's velocity toward
-the sphere at the shape's nearest point, from its link's spatial velocity (the link's spatial
-velocity Jacobian, from the posed joint axes of the serial arm, times the measured v and times
-the plan's q̇ at full speed). Every pair is assessed, not only each sphere's nearest shape: a
-farther shape moving fast toward the sphere can need more room. With them it evaluates the
-protective separation distance of `hrc_drake.cell.ssm` with S_h = v_h (T_r + T_s) (or the
-hand's bounded travel, `SafetyConfig.hand_acceleration`).
+Each step is one forward-kinematics pass at the measured q, the distance from every body sphere to
+every robot shape at once in numpy (the distance of the sphere's centre minus its radius; a chain
+of spheres is thinner than its capsule between spheres, so the radius counts `1 + CHAIN_GAP`
+times), and for every such pair the robot's velocity toward the sphere at the shape's nearest
+point, from its link's spatial velocity (the link's spatial velocity Jacobian, from the posed joint
+axes of the serial arm, times the measured v and times the plan's q̇ at full speed). Every pair is
+assessed, not only each sphere's nearest shape: a farther shape moving fast toward the sphere can
+need more room. With them it evaluates the protective separation distance of `hrc_drake.cell.ssm`
+with S_h = v_h (T_r + T_s) (or the hand's bounded travel, `SafetyConfig.hand_acceleration`).
 
 `speed_limit` (the Supervisor's input) is the largest speed scale s ∈ [0, 1] of the plan at which
-every pair keeps at least S_p(s) + `slow_band`, with the plan's own velocities scaled by s (S_p
-is quadratic in s): 1 is full speed, 0 a stop. The band keeps room for the monitor's lag and
-for a hand that starts to move; but once the plan has stood in it for `STAND_BEFORE_CREEP`
-beside a body that stands still, it creeps on at `BAND_CREEP` at most, at a share
-(`CREEP_SHARE`) of the speed that keeps S_p(s) itself, for as long as the body stays still
-(`BandCreep`): else a person who waits beside the path held the robot for as long as they
-waited. The monitor's update logs each period
-(`SafetyLog`): least separation, least margin (separation − S_p with the measured velocities)
-while the robot moves, violations (steps where the robot moved with separation < S_p under its
-own command: its plan moving it, or stopping it from a move), steps moved closer than S_p by an
-outside force (`imposed`: a standstill commanded, or a joint IMPOSED_SPEED faster than
-commanded: the arm pushed; counted apart, never hidden), body contacts, and the time spent
-slowed and stopped while the plan moves the arm.
+every pair keeps at least S_p(s) + `slow_band`, with the plan's own velocities scaled by s (S_p is
+quadratic in s): 1 is full speed, 0 a stop. The band keeps room for the monitor's lag and for a
+hand that starts to move; but once the plan has stood in it for `STAND_BEFORE_CREEP` beside a body
+that stands still, it creeps on at `BAND_CREEP` at most, at a share (`CREEP_SHARE`) of the speed
+that keeps S_p(s) itself, for as long as the body stays still (`BandCreep`): else a person who
+waits beside the path held the robot for as long as they waited. The monitor's update logs each
+period (`SafetyLog`): least separation, least margin (separation − S_p with the measured
+velocities) while the robot moves, violations (steps where the robot moved with separation < S_p
+under its own command: its plan moving it, or stopping it from a move), steps moved closer than S_p
+by an outside force (`imposed`: a standstill commanded, or a joint IMPOSED_SPEED faster than
+commanded: the arm pushed; counted apart, never hidden), body contacts, and the time spent slowed
+and stopped while the plan moves the arm.
 """
 
 from __future__ import annotations
@@ -126,11 +123,8 @@ class SeparationReading:
             moved by an outside force (a push), not by its servo.
         stale: the body reading is older than the tracker's bound (`BodyAge.stale_after`):
             no body is seen, and the plan stops (`limit` 0).
-        lost: the body is the controller's memory of a person the tracker lost, grown to
-            where they could be (`BodySpheres.lost_for`,
-            `hrc_drake.cell.controller.body_memory`): it limits the plan, but its distances are
-            to where the person could be, so the log counts no separation, contact or violation
-            from it.
+        lost: the body is a person the tracker lost, grown to where they could be
+            (`body_memory`): it limits the plan; the log counts no distance of it.
     """
 
     separation: float = float("inf")
@@ -204,8 +198,7 @@ def band_creep_step(
 ) -> BandCreep:
     """`creep` a monitor period later, after `reading` (made with `creep`) of `body`."""
     speeds = np.linalg.norm(np.asarray(body.velocities, dtype=float).reshape(-1, 3), axis=1)
-    # A person the tracker lost (`reading.lost`) is not known to stand still.
-    seen = not (reading.stale or reading.lost)
+    seen = not (reading.stale or reading.lost)  # a lost person is not known to stand still
     still = len(speeds) > 0 and seen and float(speeds.max()) < STILL_SPEED
     if not (still and plan_moves(intent)):
         return BandCreep()
@@ -431,8 +424,8 @@ def log_step(
     """`log` with one more monitor period: the reading's figures, the time slowed or stopped
     while the plan moves the arm (`plan_moves`) at a rate below 1 or at 0, and the delay that
     monitoring added: (1 − rate) × period from the moment it limits the speed until the rate is
-    back at 1 (the ramp back counts; a stop to turn, or the protective stop, does not). The
-    distances of a `lost` reading (a person the tracker lost, remembered) are not logged."""
+    back at 1 (the ramp back counts; a stop to turn, or the protective stop, does not); not
+    the distances of a `lost` reading."""
     seen = not reading.lost
     log = replace(
         log,
