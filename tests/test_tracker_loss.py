@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
+from test_safety import _tcp_motion
 
 import hrc_drake.cell.controller.body_memory as body_memory
 from hrc_drake.cell.controller.body_memory import (
@@ -126,12 +127,7 @@ def test_during_a_loss_the_monitor_limits_the_arm_by_the_grown_body(envelope):
     builder.ExportOutput(monitor.GetOutputPort("reading"), "reading")
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
-    plant, fk = envelope.plant, envelope.context
-    plant.SetPositions(fk, plant.GetModelInstanceByName("ur3"), POSTURE)
-    plant.SetVelocities(fk, plant.GetModelInstanceByName("ur3"), QDOT)
-    tcp = plant.GetFrameByName("tcp")
-    p = tcp.CalcPoseInWorld(fk).translation()
-    v = tcp.CalcSpatialVelocityInWorld(fk).translational()
+    p, v = _tcp_motion(envelope, POSTURE, QDOT)
     hand = _body([p + 0.3 * v / np.linalg.norm(v)], [0.05])
     intent = MotionIntent(qdot=QDOT, moving=True, rate=1.0)
     diagram.GetInputPort("state").FixValue(context, np.concatenate([POSTURE, QDOT]))
