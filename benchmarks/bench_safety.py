@@ -111,7 +111,7 @@ def main() -> None:
         "## Assembly time added by slowing and stopping",
         "",
         "| scenario | states | ok | simulated off [s] | on [s] | added | slowed [s] | "
-        "stopped [s] | least separation [m] | least margin moving [m] | violations | "
+        "stopped [s] | least separation [m] | least margin moving [m] | steps inside S_p | "
         "body contacts |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
@@ -124,12 +124,13 @@ def main() -> None:
         a, b = runs["on"], runs["off"]
         added = (a.sim_time - b.sim_time) / b.sim_time
         worst = max(worst, added)
-        s = a.to_json()["safety"]  # the run's own check, then the monitor's figures
+        safety = a.to_json()["safety"]
+        s, check = safety["monitor"], safety["check"]  # the monitor's figures, the run's check
         lines.append(
             f"| {name} | {' '.join(a.names)} | {'yes' if a.done and a.states == b.states else 'NO'}"
             f" | {b.sim_time:.1f} | {a.sim_time:.1f} | {100 * added:+.1f} % | "
             f"{s['slowed_time']:.2f} | {s['stopped_time']:.2f} | {s['min_separation']} | "
-            f"{s['min_margin']} | {s['violations']} | {s['body_contacts']} |"
+            f"{s['min_margin']} | {check['steps_inside_sp']} | {check['body_contacts']} |"
         )
         for label, r in runs.items():
             if r.error:
@@ -138,14 +139,15 @@ def main() -> None:
 
     # 3. Untracked person speed, for contrast.
     untracked = run_scenario(names[0], scenario_text=_texts(args.lean, UNTRACKED))
-    s = untracked.to_json()["safety"]
+    s = untracked.to_json()["safety"]["monitor"]
+    inside = untracked.to_json()["safety"]["check"]["steps_inside_sp"]
     lines += [
         "## The person's speed not tracked (v_h = 1.6 m/s throughout)",
         "",
         f"{names[0]} with `{UNTRACKED}`: {untracked.sim_time:.1f} s simulated "
         f"({100 * (untracked.sim_time - off.sim_time) / off.sim_time:+.1f} % over the run "
         f"without the body), slowed {s['slowed_time']:.1f} s, stopped "
-        f"{s['stopped_time']:.1f} s, {s['violations']} violations"
+        f"{s['stopped_time']:.1f} s, {inside} steps inside S_p"
         + (f"; error: {untracked.error}" if untracked.error else "; reaches its terminal state")
         + ".",
         "",

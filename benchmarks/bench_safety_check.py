@@ -10,7 +10,9 @@ benchmark runs `shared-desk` (the operator points and fetches beside the carry p
 `CONFIGURATIONS`: monitoring off, the controller's planning monitor without the station's safety
 function, and monitoring alone and predictive with the tracked speed (bounded by the hand's
 acceleration) and with ISO 13855's constant speeds. Per configuration: the assembly's simulated
-seconds, `ssm_delay`, both counts and both least margins, body contacts.
+seconds, `ssm_delay`, both counts and both least margins, body contacts, and the check's
+judgement by ISO/TS 15066 Annex A: steps inside S_p faster than the body region permits, contacts
+beyond its permissible force, and the approach nearest its permissible speed.
 
 Full settings (5 s holds). Usage:
 ``python benchmarks/bench_safety_check.py [--seeds 3] [--workers 2] [--lean]`` (with ``--lean``
@@ -66,6 +68,9 @@ def one_run(job: tuple) -> dict:
         "violations": check.violations,
         "least_margin": check.least_margin,
         "body_contacts": check.body_contacts,
+        "beyond": check.beyond_permissible,
+        "contacts_beyond": check.contacts_beyond,
+        "nearest": None if check.worst is None else check.worst.to_json(),
         "error": result.error,
     }
 
@@ -73,6 +78,20 @@ def one_run(job: tuple) -> dict:
 def _range(values, form: str = ".1f") -> str:
     low, high = min(values), max(values)
     return f"{low:{form}}" if f"{low:{form}}" == f"{high:{form}}" else f"{low:{form}}–{high:{form}}"
+
+
+def _nearest(rows: list[dict]) -> str:
+    """The approach inside S_p nearest (or furthest beyond) its permissible speed, of `rows`:
+    speed of permitted, toward which region."""
+    judged = [r["nearest"] for r in rows if r["nearest"] is not None]
+    if not judged:
+        return "—"
+
+    def over(j):
+        return j["speed"] / j["permissible_speed"] if j["permissible_speed"] else float("inf")
+
+    j = max(judged, key=over)
+    return f"{j['speed']:.2f} of {j['permissible_speed']:.2f} ({j['region']})"
 
 
 def report(runs: list[dict], seeds: int, wall: float, lean: bool) -> str:
@@ -85,8 +104,9 @@ def report(runs: list[dict], seeds: int, wall: float, lean: bool) -> str:
         f"--seeds {seeds}` on {platform.machine()}, {wall:.0f} s wall.",
         "",
         "| configuration | time [s] | ssm_delay [s] | violations: monitor / check | least "
-        "margin [m]: monitor / check | body contacts | terminal |",
-        "|---|---|---|---|---|---|---|",
+        "margin [m]: monitor / check | body contacts | beyond ISO/TS 15066: steps / contacts | "
+        "nearest its limit [m/s] | terminal |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for configuration in CONFIGURATIONS:
         rows = [r for r in runs if r["job"][0] == configuration]
@@ -98,7 +118,8 @@ def report(runs: list[dict], seeds: int, wall: float, lean: bool) -> str:
             f"{min(r['monitor_margin'] for r in rows):+.3f} / "
             f"{min(r['least_margin'] for r in rows):+.3f} | "
             f"{sum(r['body_contacts'] for r in rows)} | "
-            f"{sum(r['terminal'] for r in rows)}/{len(rows)} |"
+            f"{sum(r['beyond'] for r in rows)} / {sum(r['contacts_beyond'] for r in rows)} | "
+            f"{_nearest(rows)} | {sum(r['terminal'] for r in rows)}/{len(rows)} |"
         )
     return "\n".join(lines) + "\n"
 

@@ -147,7 +147,7 @@ def one_run(job: Job) -> dict:
         "in_states": in_states,
         "seconds": result.sim_time,
         "violations": check.violations,
-        "beyond": check.beyond_contact_speed,
+        "beyond": check.beyond_permissible,
         "contacts": check.body_contacts,
         "least_margin": check.least_margin,
         "stops": 0 if function is None else function.safeguard_stops + function.protective_stops,

@@ -6,7 +6,9 @@ interaction modes, the same operator seeds (each seed its own person: `body.spre
 monitoring alone (`reactive`) and once with the robot timing its moves around its forecast of the
 operator (`predictive`). Per run: the assembly's simulated seconds, `ssm_delay` (what slowing and
 stopping added), the planned waits, least separation and margin, violations (by the run's own
-check, `hrc_drake.cell.run.safety_check`), body contacts.
+check, `hrc_drake.cell.run.safety_check`), body contacts, what the check finds beyond ISO/TS
+15066 (steps faster than the body region permits, contacts beyond its force) and the seconds in
+each of the station's safety modes (normal, reduced, stopped).
 
 Section 2: the regression cells — Table 2's nine rows and the 4-slot and 5-slot cells — in both
 separation modes: the states of `react`, terminal, collisions, violations, body contacts.
@@ -99,7 +101,7 @@ def one_run(job: tuple) -> dict:
         space, scenario_policy(scenario, space), scenario.operator_for(space).operator
     )
     result = pooled_loop(scenario, scenario.assembly).run()
-    safety = result.safety
+    safety, function = result.safety, result.safety_function
     return {
         "job": job,
         "terminal": result.done,
@@ -114,6 +116,12 @@ def one_run(job: tuple) -> dict:
         "violations": result.safety_check.violations,
         "monitor_violations": safety.violations,
         "body_contacts": result.safety_check.body_contacts,
+        # Judged by ISO/TS 15066 Annex A: steps inside S_p faster than the region permits,
+        # contacts beyond its force; the station's function: seconds reduced and stopped.
+        "beyond": result.safety_check.beyond_permissible,
+        "contacts_beyond": result.safety_check.contacts_beyond,
+        "reduced": function.reduced_time if function is not None else 0.0,
+        "stopped": function.stopped_time if function is not None else 0.0,
         "collisions": len(result.collisions),
         "error": result.error,
         "robot_late": robot_late(scenario, result) if job[0] != "regression" else 0.0,
@@ -153,8 +161,9 @@ def desk_rows(runs: list[dict]) -> list[str]:
         "| population | interaction | time reactive [s] | time predictive [s] | predictive / "
         "reactive | ssm_delay reactive [s] (% of time) | ssm_delay predictive [s] | planned "
         "wait [s] | robot late r / p [s/task] | least sep. r / p [m] | least margin r / p [m] "
-        "| violations r / p | body contacts r / p | terminal, react |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| violations r / p | body contacts r / p | beyond ISO/TS 15066 r / p | normal / "
+        "reduced / stopped r [s] | normal / reduced / stopped p [s] | terminal, react |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for population in POPULATIONS:
         for interaction in INTERACTIONS:
@@ -182,9 +191,21 @@ def desk_rows(runs: list[dict]) -> list[str]:
                 f"{min(r['min_margin'] for r in re):.3f} / {min(r['min_margin'] for r in pr):.3f} "
                 f"| {sum(r['violations'] for r in re)} / {sum(r['violations'] for r in pr)} | "
                 f"{sum(r['body_contacts'] for r in re)} / {sum(r['body_contacts'] for r in pr)} "
+                f"| {_beyond(re)} / {_beyond(pr)} | {_modes(re)} | {_modes(pr)} "
                 f"| {'yes' if ok else 'NO'} |"
             )
     return lines
+
+
+def _beyond(runs: list[dict]) -> int:
+    """Steps beyond the permissible speed and contacts beyond the permissible force, summed."""
+    return sum(r["beyond"] + r["contacts_beyond"] for r in runs)
+
+
+def _modes(runs: list[dict]) -> str:
+    """Mean seconds in the station's safety modes: normal, reduced, stopped."""
+    reduced, stopped = _mean(runs, "reduced"), _mean(runs, "stopped")
+    return f"{_mean(runs, 'seconds') - reduced - stopped:.1f} / {reduced:.1f} / {stopped:.1f}"
 
 
 def regression_rows(runs: list[dict]) -> list[str]:

@@ -226,7 +226,8 @@ class CellDesign:
         return _pose(p_W, yaw)
 
 
-TABLE_POSITION = (0.25, 0.0, 0.0)
+TABLE_POSITION = (0.25, 0.0, 0.0)  # the table's top face, at its centre (models/cell/table.sdf)
+TABLE_HALF = 0.5  # m: the table is 1 m x 1 m (models/cell/table.sdf)
 
 
 def _pose(position, yaw_deg: float) -> RigidTransform:

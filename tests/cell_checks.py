@@ -17,16 +17,17 @@ def check_catalogue_run(name: str, result) -> None:
     if result.safety is not None:
         assert result.safety.violations == 0 and result.safety.body_contacts == 0
         # The run's own check, the same for every mode (`hrc_drake.cell.run.safety_check`):
-        # inside S_p only at the contact speed, which power and force limiting permits.
-        assert (
-            result.safety_check.beyond_contact_speed == 0 and result.safety_check.body_contacts == 0
-        )
-        # `simulate --json`'s `safety` is the check's, the monitor's own count apart.
+        # inside S_p only at a speed ISO/TS 15066 permits toward that body region.
+        assert result.safety_check.passed and result.safety_check.body_contacts == 0
+        # `simulate --json`'s `safety`: the check's, the function's and the monitor's apart.
         data = json.loads(json.dumps(result.to_json()))["safety"]
-        assert data["violations"] == result.safety_check.violations
-        assert data["violations_beyond_contact_speed"] == 0 and data["body_contacts"] == 0
-        assert data["monitor_violations"] == result.safety.violations
-        assert data["checked_steps"] == pytest.approx(result.sim_time / 0.02, abs=2)
+        check = data["check"]
+        assert check["steps_inside_sp"] == result.safety_check.violations
+        assert check["passed"] and check["steps_beyond_permissible_speed"] == 0
+        assert check["body_contacts"] == 0 and check["contacts"] == []
+        assert data["summary"] == result.safety_check.summary()
+        assert data["monitor"]["violations"] == result.safety.violations
+        assert check["checked_steps"] == pytest.approx(result.sim_time / 0.02, abs=2)
     expected = load_scenario(name).minimum_effort
     if expected:
         assert result.names == list(expected)

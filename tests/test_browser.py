@@ -453,7 +453,7 @@ def test_a_shared_desk_recording_shows_the_bins_and_the_robots_forecast(chromium
     args = ["simulate", "--scenario", "shared-desk", "--lean", "--record", str(record), "--json"]
     assert main(args) == 0
     data = json.loads(capsys.readouterr().out)
-    assert data["separation"] == "predictive" and data["safety"]["planned_wait"] > 0
+    assert data["separation"] == "predictive" and data["safety"]["monitor"]["planned_wait"] > 0
     page = Page(chromium)
     page.page.goto(record.as_uri())
     page.page.wait_for_function("() => viewer.animator.duration > 0", timeout=30_000)

@@ -396,7 +396,7 @@ def test_the_shared_desk_timed_along_its_paths_keeps_separation_and_stands_on_it
     assert result.done and not result.collisions
     assert result.safety.stopped_time > 1.0
     assert result.safety.body_contacts == 0 and result.safety.violations == 0
-    assert result.safety_check.beyond_contact_speed == 0 and result.safety_check.body_contacts == 0
+    assert result.safety_check.beyond_permissible == 0 and result.safety_check.body_contacts == 0
 
 
 def test_a_remembered_scale_answers_a_question_asked_before_without_asking_again():

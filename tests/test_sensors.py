@@ -236,6 +236,10 @@ def test_row_1_runs_to_its_end_with_realistic_sensors_and_the_camera():
     assert result.collisions == []
     assert result.names == list(load_scenario("row1-optimal").minimum_effort)
     assert result.safety.violations == 0 and result.safety.body_contacts == 0
+    # The run's check allows for the tracker's response: T_r 0.1 s and its 1/30 s period and
+    # 0.1 s latency bound.
+    assert result.safety_check.reaction_time == pytest.approx(0.1 + 1 / 30 + 0.1)
+    assert result.safety_check.passed
     camera = result.camera
     assert camera["detections"] == 3 and camera["frames"] > 100
     assert (camera["false_detections"], camera["missed_detections"]) == (0, 0), camera["events"]

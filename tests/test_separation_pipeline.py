@@ -6,6 +6,7 @@ controller's monitor would, through the controller's one pipeline."""
 import numpy as np
 import pytest
 
+from hrc_drake.cell.contact_limits import touchable
 from hrc_drake.cell.controller.build import keep_clear_settings
 from hrc_drake.cell.controller.intent import MotionIntent
 from hrc_drake.cell.controller.separation import (
@@ -17,7 +18,7 @@ from hrc_drake.cell.controller.separation import (
     planned_limit,
     planned_scales,
 )
-from hrc_drake.cell.person import BODY_GROUPS, BODY_RADII, CHAIN_GAP, touchable
+from hrc_drake.cell.person import BODY_GROUPS, BODY_RADII, CHAIN_GAP
 from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.robot_envelope import RobotEnvelope, nearest_points
 from hrc_drake.cell.scenario import cell_design, load_cell_scenario, motion_options

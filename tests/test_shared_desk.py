@@ -279,7 +279,7 @@ def test_both_separation_modes_keep_s_p_by_the_runs_check_and_predictive_plans_w
         assert function.safeguard_stops == 0 and function.protective_stops == 0
     assert reactive.waited == 0.0 and predictive.waited > 0.0
     assert predictive.to_json()["separation"] == "predictive"
-    assert predictive.to_json()["safety"]["ssm_delay"] == pytest.approx(
+    assert predictive.to_json()["safety"]["monitor"]["ssm_delay"] == pytest.approx(
         predictive.safety.ssm_delay, abs=1e-3
     )
     assert predictive.to_json()["safety"]["function"]["protective_stops"] == 0
@@ -304,7 +304,7 @@ def test_a_person_unlike_the_forecast_makes_the_robot_retime_and_keeps_separatio
     assert result.done and not result.collisions
     assert result.replans > 0
     assert result.safety.body_contacts == 0
-    assert result.safety_check.beyond_contact_speed == 0 and result.safety_check.body_contacts == 0
+    assert result.safety_check.beyond_permissible == 0 and result.safety_check.body_contacts == 0
 
 
 def test_a_part_put_back_is_timed_around_the_operator_too():
@@ -319,7 +319,7 @@ def test_a_part_put_back_is_timed_around_the_operator_too():
     assert result.done and result.tasks[0].swapped
     assert result.safety.body_contacts == 0
     # By the run's own check (timed only to its release: 9 violations).
-    assert result.safety_check.beyond_contact_speed == 0 and result.safety_check.body_contacts == 0
+    assert result.safety_check.beyond_permissible == 0 and result.safety_check.body_contacts == 0
 
 
 def test_the_robot_keeps_clear_of_the_desks_bins_in_every_placement_plan():

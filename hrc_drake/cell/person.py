@@ -12,7 +12,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.hri.activity import SHOULDER, Desk, DeskBin, HandTimeline, Person
 from hrc_drake.layout import CellLayout
 from hrc_drake.motion.clearance import Occupancy
@@ -166,17 +165,6 @@ BODY_RADII, BODY_GROUPS = _RADII, _GROUPS
 ARM_SPHERES = body_pose(np.zeros(2), np.array([0.5, 0.0, 0.1])).spheres()[2][2][1]
 
 
-def touchable(body: BodySpheres) -> np.ndarray:
-    """Per sphere of `body`, whether power and force limiting permits a contact there: all but
-    the head (the last part of `BodyPose.spheres`), as ISO/TS 15066 Annex A permits none with
-    the face or skull. A body without the parts (a test's lone sphere) is all touchable."""
-    mask = np.ones(len(body.radii), dtype=bool)
-    if len(body.groups) == len(_GROUPS):
-        start, end = body.groups[-1]
-        mask[start:end] = False
-    return mask
-
-
 __all__ = [
     "ARM_SPHERES",
     "BODY_GROUPS",
@@ -187,5 +175,4 @@ __all__ = [
     "body_samples",
     "desk_of",
     "elbow",
-    "touchable",
 ]

@@ -134,7 +134,7 @@ class RobotEnvelope:
         inspector = scene_graph.model_inspector()
         arm, gripper = plant.GetModelInstanceByName(UR3), plant.GetModelInstanceByName(GRIPPER)
         self._arm = arm
-        self._arm_v = np.array(
+        self.arm_velocities = np.array(
             [plant.GetJointByName(name, arm).velocity_start() for name in UR3_JOINTS]
         )
         self._gripper = gripper
@@ -151,23 +151,26 @@ class RobotEnvelope:
         self._row = {b.index(): i for i, b in enumerate(self.bodies)}
         self._link_rows = np.array([self._row[b.index()] for b in self.links])
         self._tcp = plant.GetFrameByName(TCP, gripper)
+        self.tcp_body = self._tcp.body()
         self._robot = {
             swept: Primitives.join([self._body_shapes(inspector, body, swept) for body in robot])
             for swept in (False, True)
         }
         held = read_cell_frames(plant, scene_graph, self.context, design).grasps
+        X_B_tcp = self._tcp.GetFixedPoseInBodyFrame()
+        # Each part's pose on the tcp's body as the gripper holds it (its pads at the part's
+        # grasp frame): its shapes (`shapes`) and its inertia (`effective_mass`) ride there.
+        self.held_poses = {p.name: X_B_tcp @ held[p.name].inverse() for p in design.parts}
         self._parts = {
-            part.name: self._part_shapes(
-                inspector, plant.GetModelInstanceByName(part.name), held[part.name]
-            )
-            for part in design.parts
+            name: self._part_shapes(inspector, plant.GetModelInstanceByName(name), X_B_part)
+            for name, X_B_part in self.held_poses.items()
         }
         self._sets: dict[tuple[str | None, bool], Primitives] = {}
         self._axes, self._points = self._chain()
         self._opening: float | None = None  # the gripper's opening `pose` last set (None: unset)
         self._posed: tuple = (None, None)  # ((q's bytes, opening), (R_WB, p_WB)) `pose` last gave
 
-    def _link_of(self, body) -> int:
+    def link_of(self, body) -> int:
         """Row in `links` of the arm link whose motion `body` shares; len(links): fixed."""
         plant, names = self.plant, set(UR3_JOINTS)
         while body.index() != plant.world_body().index():
@@ -211,14 +214,13 @@ class RobotEnvelope:
                 )
                 X_BC, disc, rounding = X_BC @ X_CS, 0.0, 0.0
             rows.append((name, X_BC, half, disc, rounding))
-        return self._primitives(rows, self._row[body.index()], self._link_of(body))
+        return self._primitives(rows, self._row[body.index()], self.link_of(body))
 
-    def _part_shapes(self, inspector, model, X_part_tcp: RigidTransform) -> Primitives:
+    def _part_shapes(self, inspector, model, X_B_part: RigidTransform) -> Primitives:
         """A part's collision shapes as the gripper holds it: on the body of the `tcp` frame,
-        with the tcp at `X_part_tcp` (`CellFrames.grasps`)."""
+        the part at `X_B_part` there (`held_poses`)."""
         plant = self.plant
         (index,) = plant.GetBodyIndices(model)
-        X_B_part = self._tcp.GetFixedPoseInBodyFrame() @ X_part_tcp.inverse()
         rows = []
         for gid in plant.GetCollisionGeometriesForBody(plant.get_body(index)):
             name = inspector.GetName(gid)
@@ -226,7 +228,7 @@ class RobotEnvelope:
             X_BC = X_B_part @ inspector.GetPoseInFrame(gid) @ X_GC
             rows.append((name, X_BC, half, disc, rounding))
         body = self._tcp.body()
-        return self._primitives(rows, self._row[body.index()], self._link_of(body))
+        return self._primitives(rows, self._row[body.index()], self.link_of(body))
 
     @staticmethod
     def _primitives(rows, body: int, link: int) -> Primitives:
@@ -287,7 +289,7 @@ class RobotEnvelope:
         axes, points = [], []
         for row, name in enumerate(UR3_JOINTS):
             joint = self.plant.GetJointByName(name, self._arm)
-            parent = self._link_of(joint.parent_body())
+            parent = self.link_of(joint.parent_body())
             if parent != (row - 1 if row > 0 else len(self.links)):
                 raise ValueError(f"the arm's joints are not one serial chain at {name}")
             X_BM = joint.frame_on_child().CalcPoseInBodyFrame(self.context)

@@ -15,17 +15,17 @@ joint acceleration limit a and the fastest one sets the time, T_s = max_j |q̇_j
 speed then falls linearly to zero, S_s = v_r T_s / 2.
 
 Separation and contact combine as ISO/TS 15066 allows: falling short of S_p counts only where
-the robot moves toward the person faster than `safety.contact_speed`, a speed at which a contact
-stays within power and force limiting's permissible transient contact (`beyond_contact_speed`;
-the default 0.25 m/s is ISO 10218-1's reduced speed, well below the ≈1.4 m/s that Annex A's
-figures give for the hand against a UR3-class arm, shared/reference/collaboration.md).
+the robot moves toward the person faster than `safety.contact_speed` or than the body region's
+permissible transient contact (`contact_speeds`, `hrc_drake.cell.contact_limits`; the default
+0.25 m/s is ISO 10218-1's reduced speed, below every region's figure at any effective mass:
+0.28 m/s for the chest, ≈1.3 m/s for the hand).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from hrc_drake.cell.person import touchable
+from hrc_drake.cell.contact_limits import least_permissible_speeds, touchable
 from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.scenario.safety import HumanSpeed, SafetyConfig
 
@@ -95,12 +95,20 @@ def person_travel(
 
 def beyond_contact_speed(v_r, speed: float, body: BodySpheres):
     """Per (shape, sphere) pair, where the robot moves toward the person faster than `speed`
-    [m/s], or toward the head at all: where falling short of S_p is not a contact that power
-    and force limiting permits (ISO/TS 15066 §5.5.5 with Annex A, which permits none with the
-    face or skull, `touchable`). A speed of 0 is separation alone: every pair."""
+    [m/s] or than the sphere's body region permits (`contact_speeds`), or toward the head at
+    all: where falling short of S_p is not a contact that power and force limiting permits
+    (ISO/TS 15066 §5.5.5 with Annex A, which permits none with the face or skull,
+    `touchable`). A speed of 0 is separation alone: every pair."""
     if speed <= 0.0:
         return np.ones(np.shape(v_r), dtype=bool)
-    return (np.asarray(v_r) > speed) | ~touchable(body)[None, :]
+    return (np.asarray(v_r) > contact_speeds(speed, body)[None, :]) | ~touchable(body)[None, :]
+
+
+def contact_speeds(speed: float, body: BodySpheres) -> np.ndarray:
+    """Per sphere of `body`, how fast [m/s] the robot may move toward it inside S_p:
+    `speed` (`safety.contact_speed`), never above what Annex A permits its body region against
+    a robot of any effective mass (`least_permissible_speeds`; 0 at the head)."""
+    return np.minimum(speed, least_permissible_speeds(body))
 
 
 def stopping_time(v: np.ndarray, joint_acceleration: float) -> float:
@@ -131,6 +139,7 @@ __all__ = [
     "allowed_scale",
     "beyond_contact_speed",
     "bounded_travel",
+    "contact_speeds",
     "entry_scales",
     "person_travel",
     "protective_distance",

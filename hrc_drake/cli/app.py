@@ -331,6 +331,12 @@ def _add_simulate(p) -> None:
         "--still-time", type=float, default=None, help="simulated time of --still (default 10)"
     )
     p.add_argument(
+        "--strict",
+        action="store_true",
+        help="exit 3 when the run's safety check fails: the arm inside S_p faster than ISO/TS "
+        "15066 permits toward that body region, or a contact beyond its permissible force",
+    )
+    p.add_argument(
         "--live",
         nargs="?",
         const=1.0,

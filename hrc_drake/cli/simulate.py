@@ -22,6 +22,7 @@ from hrc_drake.tasks.spec import load_spec
 from hrc_drake.tasks.tokens import UNDO
 
 EXIT_INTERRUPTED = 130  # the shell's status for a command ended by SIGINT (128 + 2)
+EXIT_UNSAFE = 3  # --strict: the run's safety check failed (1: not done, 2: usage)
 DEFAULT_STILL_TIME = 10.0  # s, simulated: `--still` without `--still-time`
 
 
@@ -304,7 +305,21 @@ def _simulate(args) -> int:
         return 1
     if problems:
         return 2
-    return 0 if result.done else 1
+    if not result.done:
+        return 1
+    if getattr(args, "strict", False) and not _check_passed(result):
+        print(
+            "hrc-drake simulate: --strict: the run's safety check failed: "
+            f"the arm {result.safety_check.summary()}",
+            file=sys.stderr,
+        )
+        return EXIT_UNSAFE
+    return 0
+
+
+def _check_passed(result) -> bool:
+    """Whether the run's own safety check (if it had one: a run with a body) passed."""
+    return result.safety_check is None or result.safety_check.passed
 
 
 def operator_summary(tasks) -> str:
@@ -334,17 +349,15 @@ def _print_summary(result, scenario) -> None:
         f"(real-time factor {result.real_time_factor or 0:.2f})"
     )
     if result.safety is not None:
-        # The run's own check's violations (`hrc_drake.cell.run.safety_check`), then the
+        # The run's own check in words (`hrc_drake.cell.run.safety_check`), then the
         # monitor's figures.
-        figures = result.to_json()["safety"]
-        pushed = figures.get("imposed_violations", 0)
+        monitor = result.safety.to_json()
+        if result.safety_check is not None:
+            print(f"  safety: the arm {result.safety_check.summary()}")
         print(
-            f"  safety: least separation {figures['min_separation']} m, "
-            f"{figures.get('violations', 0)} violation(s) by the run's check"
-            + (f" (+{pushed} moved from outside)" if pushed else "")
-            + f", slowed {figures['slowed_time']} s, "
-            f"stopped {figures['stopped_time']} s (added {figures['ssm_delay']} s); "
-            f"separation {result.separation}"
+            f"  separation {result.separation}: least {monitor['min_separation']} m, "
+            f"slowed {monitor['slowed_time']} s, stopped {monitor['stopped_time']} s "
+            f"(added {monitor['ssm_delay']} s)"
             + (f", waited {result.waited:.1f} s where it planned to" if result.waited else "")
         )
     if result.realtime is not None:

@@ -264,7 +264,8 @@ def _check_values(fault: FaultConfig, where: str) -> None:
 class FaultRecord:
     """What a run reports of one fault (`simulate --json` `faults`), times in simulated
     seconds. `recovered` is true only when the cell itself recovered and the assembly went on;
-    `recovery` is a short word (`regrasp`, `replace`, `retry`, `operator`, `resume`, `ask`)."""
+    `recovery` is a short word (`regrasp`, `replace`, `retry`, `operator`, `resume`, `ask`;
+    `monitoring` for a fault no measurement shows, which the run rode through)."""
 
     kind: str
     task: int

@@ -24,7 +24,7 @@ from collections.abc import Callable, Iterable
 
 import numpy as np
 
-from hrc_drake.cell_models import TABLE_POSITION, CellDesign
+from hrc_drake.cell_models import TABLE_HALF, TABLE_POSITION, CellDesign
 from hrc_drake.layout import CellLayout
 from hrc_drake.workpiece_sdf import PLATE_END, PLATE_WIDTH, slot_offsets
 
@@ -36,7 +36,6 @@ REACH = 0.49
 NEAR = 0.15
 BASE_CLEARANCE = 0.10
 GAP = 0.015  # between the tray and the plate (the default `tray_gap`)
-TABLE_HALF = 0.5  # the table is 1 m x 1 m (models/cell/table.sdf) centred at TABLE_POSITION
 # Reach checks tried at most (each builds a planner, about 0.4 s).
 BUDGET = 12
 # Occupancy screens tried at most (each reads a cell's geometry, about 0.35 s).

@@ -172,7 +172,7 @@ def forecast_body(centres: np.ndarray, radii: np.ndarray, velocities: np.ndarray
     body: each repeated sphere once (`distinct_spheres`) and, where the sample begins with a
     whole body (`OperatorForecast.occupancy`'s first timeline, which `distinct_spheres` keeps
     in place), that body's parts, so that the monitor permits no approach to the head
-    (`hrc_drake.cell.person.touchable`) against the forecast as against the tracked body."""
+    (`hrc_drake.cell.contact_limits.touchable`) against the forecast as against the tracked body."""
     centres, radii, velocities = distinct_spheres(centres, radii, velocities)
     whole = len(BODY_RADII)
     begins_whole = len(radii) >= whole and np.array_equal(radii[:whole], BODY_RADII)

@@ -177,7 +177,9 @@ class KeepClear:
             return self._retime(s, key, now, None)
         body = tracked_body()
         anchor = self._anchor(s)
-        if len(body.radii) == 0 or anchor is None:
+        if len(body.radii) == 0 or body.lost_for is not None or anchor is None:
+            # A remembered body (`body_memory`: the person lost) says nothing of where they
+            # went: no progress or departure is read from it; the monitor holds the arm for it.
             return s
         hand = body.centres[0]
         progress = self._progress(s, hand, now)

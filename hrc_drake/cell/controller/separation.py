@@ -9,9 +9,8 @@ optionally the gripper's measured opening (`rg2.state_measured`), the tracked op
 (`intent`: the plan's joint velocities at full speed, the part it carries). Nothing comes from the
 simulator's SceneGraph or plant state.
 
-Like a real controller it has its own kinematic model of the robot (`RobotEnvelope`,
-`hrc_drake.cell.robot_envelope`): the UR3, the gripper and the part it carries as convex primitives
-posed from the measured joint state, never farther from a point than the true shapes.
+Like a real controller it has its own kinematic model of the robot (`RobotEnvelope`): the UR3,
+the gripper and the part it carries as convex primitives posed from the measured joint state.
 
 Each step is one forward-kinematics pass at the measured q, the distance from every body sphere to
 every robot shape at once in numpy (the distance of the sphere's centre minus its radius; a chain
@@ -46,8 +45,8 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
+from hrc_drake.cell.contact_limits import touchable
 from hrc_drake.cell.controller.intent import MotionIntent
-from hrc_drake.cell.person import touchable
 from hrc_drake.cell.ports import NOBODY, BodySpheres
 from hrc_drake.cell.robot_envelope import RobotEnvelope
 from hrc_drake.cell.separation_pipeline import (
@@ -62,6 +61,7 @@ from hrc_drake.cell.ssm import (
     NEAR_DISTANCE,
     NEAR_SPEED,
     beyond_contact_speed,
+    contact_speeds,
     entry_scales,
     person_travel,
     separation_constant,
@@ -404,11 +404,11 @@ def planned_limit(
         return 1.0
     gap, v_h, v_r1 = gap[near], v_h[near], v_r1[near]
     touch = np.broadcast_to(touchable(geometry.body)[None, :], near.shape)[near]
-    # Planned: the plan at scale s keeps S_p(s) + slow_band, or moves no faster than the
-    # contact speed toward the person.
-    # None of them keeps S_p(1) + slow_band (`near`): `full` nowhere.
+    # Planned: the plan at scale s keeps S_p(s) + slow_band (none of them keeps S_p(1) +
+    # slow_band, `near`: `full` nowhere), or moves no faster than the region's contact speed.
     separated = banded_scales(v_h, gap, v_r1, t_rp, t_s1, config, band_creep, full=False)
-    slow = CONTACT_SHARE * config.contact_speed / np.maximum(v_r1, _SLOWEST)
+    contact = np.broadcast_to(contact_speeds(config.contact_speed, geometry.body), near.shape)
+    slow = CONTACT_SHARE * contact[near] / np.maximum(v_r1, _SLOWEST)
     # ... and only as fast as lets it stop short of the person where they are now: power and
     # force limiting permits a person coming into the robot, not the robot driving into them.
     reaction = t_r + sampling + lag

@@ -28,9 +28,11 @@ CAUSES = {
     FaultKind.NO_SEAT: {Cause.SEAT, Cause.GRIP, Cause.TRACKING},
     # None: the controller detects no fault; in every period it takes the person to be
     # anywhere they could have reached (`hrc_drake.cell.controller.body_memory`), and the time
-    # that costs is monitoring's (`safety.ssm_delay`), not the fault's.
+    # that costs is monitoring's (`safety.monitor.ssm_delay`), not the fault's.
     FaultKind.TRACKER_LOSS: set(),
 }
+# The recovery of a fault no cause shows (a tracker loss): the run went on under monitoring.
+RIDDEN_THROUGH = "monitoring"
 # A detection in the same Supervisor update as the injection may carry a time a period earlier.
 SLACK = 0.05  # s
 
@@ -68,14 +70,20 @@ def fault_records(
             lost = found.resolved_at - injected
         else:
             lost = end_time - injected
+        recovered = found is not None and found.recovered
+        recovery = found.recovery.value if found is not None and found.resolved_at else ""
+        if not CAUSES[fault.kind] and injected is not None:
+            # Ridden through by monitoring, not detected: over once the fault's time is up.
+            recovered = injected + fault.duration <= end_time
+            recovery = RIDDEN_THROUGH if recovered else ""
         records.append(
             FaultRecord(
                 kind=fault.kind.value,
                 task=fault.task,
                 injected_at=injected,
                 detected_at=None if found is None else found.at,
-                recovered=found is not None and found.recovered,
-                recovery=found.recovery.value if found is not None and found.resolved_at else "",
+                recovered=recovered,
+                recovery=recovery,
                 seconds_lost=max(lost, 0.0),
             )
         )

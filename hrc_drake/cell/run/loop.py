@@ -21,7 +21,7 @@ import sys
 import threading
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
@@ -57,6 +57,7 @@ from hrc_drake.progress import ProgressLine
 from hrc_drake.robot_names import GRIPPER, UR3
 from hrc_drake.scenario.safety import Separation
 from hrc_drake.scenario.schema import Scenario
+from hrc_drake.scenario.sensors import PORTS, sensor_models
 from hrc_drake.tasks.graph import StateKind, StateSpace
 from hrc_drake.tasks.policy import Policy
 
@@ -483,10 +484,15 @@ def _safety_check(loop: ClosedLoop) -> SafetyCheck | None:
     if sampler is None:
         return None
     setup = loop.setup
+    config = setup.scenario.safety
+    # T_r is the robot's reaction and the sensor's response both: a tracker under `sensors:`
+    # reports the body up to a period and its latency bound late.
+    body = sensor_models(setup.scenario.sensors).get(PORTS["body"])
+    response = 0.0 if body is None else body.stale_after
     return check_separation(
         sampler.trace.samples,
         RobotEnvelope(setup.design),
-        setup.scenario.safety,
+        replace(config, reaction_time=config.reaction_time + response),
         setup.options.joint_acceleration_limit,
     )
 

@@ -129,22 +129,20 @@ class RunResult:
         return {"sensor": "camera", "camera": self.camera}
 
     def _safety_json(self) -> dict | None:
-        """The run's own check (`violations`, `least_margin`, `body_contacts`), then the
-        monitor's figures (its own count of violations as `monitor_violations`), and the planned
-        waits and re-timings of predictive mode."""
+        """The run's safety in three: `check` (the run's own, `SafetyCheck`, and its `summary`
+        in words at the top), `function` (the station's safety function) and `monitor` (the
+        controller's planning figures, with predictive mode's planned waits and re-timings)."""
         if self.safety is None:
             return None
-        monitor = self.safety.to_json()
-        monitor["monitor_violations"] = monitor.pop("violations")
-        monitor["monitor_body_contacts"] = monitor.pop("body_contacts")
-        check = self.safety_check.to_json() if self.safety_check is not None else {}
+        check = self.safety_check
         function = self.safety_function
+        monitor = self.safety.to_json()
+        monitor.update(planned_wait=round(self.waited, 3), replans=self.replans)
         return {
-            **check,
-            **monitor,
-            "planned_wait": round(self.waited, 3),
-            "replans": self.replans,
+            "summary": None if check is None else check.summary(),
+            "check": None if check is None else check.to_json(),
             "function": None if function is None else function.to_json(),
+            "monitor": monitor,
         }
 
 

@@ -17,20 +17,41 @@ commanded by more than `IMPOSED_SPEED`: a push is the person's doing and is coun
 some robot shape was closer to some body sphere than S_p. The robot's shapes are the
 controller's conservative envelope (`RobotEnvelope`: never farther from a point than the true
 geometry) posed from the measured joints and gripper opening, with the part the configuration
-sensor reads as held. Of the violations, those where the robot also moved toward the person
-faster than ISO 10218-1's reduced speed (0.25 m/s, `REDUCED_SPEED`), or toward the head at all,
-are counted apart (`beyond_contact_speed`): the ones power and force limiting would not permit
-either (`hrc_drake.cell.ssm`). A mode can change what the robot does, never this arithmetic: the
-check reads `safety`'s constants (T_r, C, Z_d, Z_r) and no setting of the monitor's or the
-safety function's (not `safety.contact_speed`).
+sensor reads as held.
+
+Inside S_p power and force limiting may still permit the approach (ISO/TS 15066 §5.5.5), so each
+violation is judged by Annex A (`hrc_drake.cell.contact_limits`): of the pairs inside S_p where
+the robot moves toward the body, the one furthest beyond (or nearest) the speed its body region
+permits, with the robot's effective mass along that direction at that point of its shapes from
+the check's own plant (`hrc_drake.cell.effective_mass`), transient or, where the region could be
+clamped against the table, quasi-static; never toward the head. Every sample where a robot shape
+touches a body sphere is judged the same way, with the force the speed implies. The run passes
+(`SafetyCheck.passed`) when no violation is beyond the permissible speed and no contact beyond the
+permissible force. A mode can change what the robot does, never this arithmetic: the check reads
+`safety`'s constants (T_r, C, Z_d, Z_r) and no setting of the monitor's or the safety function's
+(not `safety.contact_speed`). Its T_r is the robot's reaction and the body sensor's response
+together: the run adds a tracker's period and latency bound under `sensors:`
+(`hrc_drake.cell.run.loop`).
 """
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from hrc_drake.cell.contact_limits import (
+    REGIONS,
+    TRANSIENT_FACTOR,
+    ContactJudgement,
+    clamped,
+    judge,
+    least_permissible_speeds,
+    region_rows,
+    touchable,
+)
+from hrc_drake.cell.effective_mass import EffectiveMass
 from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.robot_envelope import RobotEnvelope
 from hrc_drake.cell.separation_pipeline import (
@@ -38,7 +59,7 @@ from hrc_drake.cell.separation_pipeline import (
     pipeline_of,
     protective_separation,
 )
-from hrc_drake.cell.ssm import IMPOSED_SPEED, REDUCED_SPEED, beyond_contact_speed, stopping_time
+from hrc_drake.cell.ssm import IMPOSED_SPEED, stopping_time
 from hrc_drake.scenario.safety import SafetyConfig
 
 
@@ -57,10 +78,13 @@ class SafetySample:
     body: BodySpheres
 
 
+CONTACTS_LISTED = 20  # contact judgements the JSON lists (the count has them all)
+AWAY = "moving away from the person"  # a violation where the arm approached no body sphere
+
+
 @dataclass(frozen=True)
 class SafetyCheck:
-    """The check's figures over a run (`simulate --json` `safety`: `violations`,
-    `least_margin`, `body_contacts`)."""
+    """The check's figures over a run (`simulate --json` `safety.check`)."""
 
     steps: int = 0
     violations: int = 0  # samples where the robot moved under its own command inside S_p
@@ -68,21 +92,76 @@ class SafetyCheck:
     body_contacts: int = 0  # samples where a robot shape touched a body sphere
     imposed: int = 0  # samples inside S_p while the arm was moved from outside (a push)
     worst_time: float | None = None  # when the least margin was reached [s]
-    # violations where the robot also moved toward the person faster than REDUCED_SPEED (or
-    # toward the head): what power and force limiting would not permit either
-    beyond_contact_speed: int = 0
+    # violations where the robot moved toward a body region faster than Annex A permits it
+    beyond_permissible: int = 0
+    contacts_beyond: int = 0  # contacts at a force beyond the region's permissible one
+    # the approach inside S_p nearest (or most beyond) its permissible speed, and the contacts
+    worst: ContactJudgement | None = None
+    contacts: tuple[ContactJudgement, ...] = ()
+    regions: tuple[tuple[str, int], ...] = ()  # the region approached at each violation
+    reaction_time: float = 0.0  # the T_r judged by [s]
+
+    @property
+    def passed(self) -> bool:
+        """Whether the standard permits all the run did: nothing inside S_p faster than its
+        body region permits, no contact beyond its permissible force."""
+        return self.beyond_permissible == 0 and self.contacts_beyond == 0
+
+    def summary(self) -> str:
+        """In words: whether the arm kept S_p and, where it was inside it, whether at a speed
+        the body region it approached permits (`simulate`'s safety line)."""
+        steps = f"{self.steps:,} checked step(s)"
+        if self.violations == 0:
+            text = f"kept S_p at every one of {steps}"
+        else:
+            parts = [
+                f"approaching the {region} at {n:,}" if region != AWAY else f"{AWAY} at {n:,}"
+                for region, n in self.regions
+            ]
+            text = f"came inside S_p at {self.violations:,} of {steps} ({', '.join(parts)})"
+            if self.beyond_permissible:
+                text += (
+                    f"; at {self.beyond_permissible:,} FASTER than ISO/TS 15066 permits toward "
+                    "that body region"
+                )
+            elif any(region != AWAY for region, _ in self.regions):
+                text += ", every approach at a speed ISO/TS 15066 permits there"
+        w = self.worst
+        if w is not None and w.force_limit == 0.0:  # a region that permits no contact
+            text += f"; beside the {w.region} at {w.time:.2f} s, where no contact is permitted"
+        elif w is not None:
+            text += (
+                f"; nearest the limit {w.speed:.2f} m/s toward the {w.region}"
+                f"{' (could be clamped)' if w.clamped else ''} at {w.time:.2f} s, "
+                f"{w.permissible_speed:.2f} permitted"
+            )
+        if self.body_contacts:
+            text += f"; touched the person at {self.body_contacts:,} step(s), " + (
+                f"{self.contacts_beyond:,} BEYOND the permissible force"
+                if self.contacts_beyond
+                else "each within the permissible force"
+            )
+        if self.imposed:
+            text += f"; pushed inside S_p from outside at {self.imposed:,}"
+        return text
 
     def to_json(self) -> dict:
-        """The JSON-able figures (distances in m, rounded to 0.1 mm; None: the robot never
-        moved beside a body)."""
+        """The JSON-able figures (m, m/s, N; rounded; None: never reached)."""
         finite = np.isfinite(self.least_margin)
         return {
-            "violations": self.violations,
-            "least_margin": round(float(self.least_margin), 4) if finite else None,
-            "body_contacts": self.body_contacts,
-            "imposed_violations": self.imposed,
-            "violations_beyond_contact_speed": self.beyond_contact_speed,
+            "passed": self.passed,
             "checked_steps": self.steps,
+            "reaction_time": round(self.reaction_time, 4),
+            "steps_inside_sp": self.violations,
+            "steps_beyond_permissible_speed": self.beyond_permissible,
+            "regions_inside_sp": dict(self.regions),
+            "least_margin": round(float(self.least_margin), 4) if finite else None,
+            "worst_time": None if self.worst_time is None else round(self.worst_time, 3),
+            "nearest_the_limit": None if self.worst is None else self.worst.to_json(),
+            "pushed_inside_sp": self.imposed,
+            "body_contacts": self.body_contacts,
+            "contacts_beyond_limits": self.contacts_beyond,
+            "contacts": [c.to_json() for c in self.contacts[:CONTACTS_LISTED]],
         }
 
 
@@ -122,6 +201,73 @@ def _travel_toward(
     return travel
 
 
+class _Judge:
+    """Judges the pairs of one sample by Annex A (`hrc_drake.cell.contact_limits`): the robot's
+    effective mass at each pair's nearest point, from the check's own plant."""
+
+    def __init__(self, envelope: RobotEnvelope):
+        self.masses = EffectiveMass(envelope)
+
+    def worst(
+        self, sample: SafetySample, geometry, v_r, mask, beside_head: bool
+    ) -> ContactJudgement | None:
+        """The judgement of the pair in `mask` (m×n) the furthest beyond, or nearest, its
+        permissible speed; None for no pair. At the head any pair is beyond with
+        `beside_head` (inside S_p while the arm moves: a contact there is never permitted),
+        else one the arm moves toward. Only the pairs that the bound at any effective mass
+        (`least_permissible_speeds`) does not clear are weighed with the pose's own mass, and
+        the bound's worst pair with them."""
+        shape, sphere = np.nonzero(mask)
+        if len(shape) == 0:
+            return None
+        body, pairs = sample.body, geometry.pairs
+        direction = pairs.direction[shape, sphere]
+        clamp = clamped(body, sphere, direction)
+        bound = least_permissible_speeds(body)[sphere] / np.where(clamp, TRANSIENT_FACTOR, 1.0)
+        speed = v_r[shape, sphere]
+        head = ~touchable(body)[sphere] & (beside_head | (speed > 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(head, np.inf, np.where(bound > 0.0, speed / bound, 0.0))
+        weigh = np.union1d(np.flatnonzero(ratio > 1.0), [int(np.argmax(ratio))])
+        masses = self.masses.along(
+            sample.q,
+            sample.opening,
+            sample.carrying,
+            geometry.robot.shapes,
+            shape[weigh],
+            pairs.witness[shape[weigh], sphere[weigh]],
+            direction[weigh],
+        )
+        rows = region_rows(body)[sphere[weigh]]
+        found = None
+        for k, pick in enumerate(weigh):
+            region = REGIONS[rows[k]]
+            permissible, force, limit = judge(region, bool(clamp[pick]), speed[pick], masses[k])
+            over = np.inf if head[pick] else speed[pick] / permissible
+            if found is None or over > found.ratio:
+                found = ContactJudgement(
+                    time=sample.time,
+                    region=region.name,
+                    clamped=bool(clamp[pick]),
+                    speed=float(speed[pick]),
+                    robot_mass=float(masses[k]),
+                    permissible_speed=permissible,
+                    force=force,
+                    force_limit=limit,
+                    gap=float(geometry.gap[shape[pick], sphere[pick]]),
+                    shape=geometry.robot.shapes.names[shape[pick]],
+                    ratio=float(over),
+                )
+        return found
+
+
+def _further(a: ContactJudgement | None, b: ContactJudgement | None) -> ContactJudgement | None:
+    """Of two judgements, the one further beyond (or nearer) its permissible speed."""
+    if a is None or b is None:
+        return a or b
+    return b if b.ratio > a.ratio else a
+
+
 def check_separation(
     samples: list[SafetySample],
     envelope: RobotEnvelope | SeparationPipeline,
@@ -131,39 +277,53 @@ def check_separation(
     """The check of the module docstring over a run's `samples`; `envelope`: the check's own
     model of the robot, or a `SeparationPipeline` of one."""
     pipeline = pipeline_of(envelope)
-    violations = imposed = contacts = beyond = 0
-    least, worst = float("inf"), None
+    judge_pairs = _Judge(pipeline.envelope)
+    violations = imposed = beyond = 0
+    least, worst_time, worst = float("inf"), None, None
+    touches: list[ContactJudgement] = []
+    regions: Counter[str] = Counter()
     for k, sample in enumerate(samples):
         body = sample.body
         if len(body.radii) == 0:
             continue
         geometry = pipeline.pairs(sample.q, sample.opening, sample.carrying, body)
         gap = geometry.gap
-        contacts += int(gap.min() <= 0.0)
+        v_r = np.maximum(0.0, geometry.robot_speeds(sample.v[None, :])[0])
+        if gap.min() <= 0.0:
+            touches.append(judge_pairs.worst(sample, geometry, v_r, gap <= 0.0, beside_head=False))
         speed = float(np.abs(sample.v).max(initial=0.0))
         if speed <= config.moving_speed:
             continue
         t_s = stopping_time(sample.v, joint_acceleration)
-        v_r = np.maximum(0.0, geometry.robot_speeds(sample.v[None, :])[0])
         s_h = _travel_toward(samples, k, config.reaction_time + t_s, geometry.pairs.direction)
         s_p = protective_separation(geometry, v_r, t_s, config, travel=s_h)
         margin = float((gap - s_p).min())
-        fast = bool(((gap < s_p) & beyond_contact_speed(v_r, REDUCED_SPEED, body)).any())
         if np.abs(sample.v - sample.commanded).max(initial=0.0) > IMPOSED_SPEED:
             imposed += int(margin < 0.0)
             continue
-        violations += int(margin < 0.0)
-        beyond += int(fast)
         if margin < least:
-            least, worst = margin, sample.time
+            least, worst_time = margin, sample.time
+        if margin >= 0.0:
+            continue
+        violations += 1
+        toward = (gap < s_p) & ((v_r > 0.0) | ~touchable(body)[None, :])
+        approach = judge_pairs.worst(sample, geometry, v_r, toward, beside_head=True)
+        regions[approach.region if approach is not None else AWAY] += 1
+        beyond += int(approach is not None and not approach.within)
+        worst = _further(worst, approach)
     return SafetyCheck(
         steps=len(samples),
         violations=violations,
         least_margin=least,
-        body_contacts=contacts,
+        body_contacts=len(touches),
         imposed=imposed,
-        worst_time=worst,
-        beyond_contact_speed=beyond,
+        worst_time=worst_time,
+        beyond_permissible=beyond,
+        contacts_beyond=sum(not touch.within for touch in touches),
+        worst=worst,
+        contacts=tuple(touches),
+        regions=tuple(regions.most_common()),
+        reaction_time=config.reaction_time,
     )
 
 
