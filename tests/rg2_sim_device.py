@@ -8,8 +8,9 @@ contact materials and finger gains, and, if asked, a block between its pads that
 (docs/hardware.md) as unit 65, and a task in the server's event loop steps the diagram paced to
 the wall clock: while register 2 says grip it takes registers 0-1 as the target (stop: where the
 fingers are), and it writes the measured width to 267 and the status (busy while the fingers
-move, grip detected) to 268. It takes a new target at once, busy or not (what a real Compute Box
-does with a target sent while busy is not known here)."""
+move and for `ACCEPT_BUSY` after a new target, grip detected) to 268. It takes a new target at
+once, busy or not (what a real Compute Box does with a target sent while busy is not known
+here)."""
 
 from __future__ import annotations
 
@@ -47,6 +48,11 @@ from hrc_drake.robot_models import make_parser, set_rg2_opening
 from hrc_drake.scenario.schema import Scenario
 
 UNIT = 65
+# Busy from taking a new target until the fingers have had this long to set off [s] (our choice:
+# a Compute Box flags busy as it accepts a grip command, before its fingers move; without it a
+# poll right after the command, while this server lags under load, read the fingers still at
+# their start and not busy: "done", with a grip detected at the old width).
+ACCEPT_BUSY = 0.1
 READ_HOLDING, WRITE_MULTIPLE = 3, 16  # Modbus function codes
 
 
@@ -164,7 +170,7 @@ class Rg2ModbusServer:
     async def _run(self) -> None:
         server, start = self._server, time.monotonic()
         opening, force = self.device.initial
-        measured = opening
+        measured, accepted = opening, -ACCEPT_BUSY
         while True:
             register_force, width, control = await server.async_getValues(
                 UNIT, READ_HOLDING, TARGET_FORCE, 3
@@ -174,11 +180,14 @@ class Rg2ModbusServer:
                 target = width / WIDTH_PER_METRE, register_force / FORCE_PER_NEWTON
             elif control == STOP:
                 target = measured, force
+            now = time.monotonic() - start
             if target != (opening, force) or not self.targets:
                 self.targets.append(target)
+                accepted = now
             opening, force = target
-            measured, rate, grip = self.device.advance(opening, force, time.monotonic() - start)
-            status = (BUSY if abs(rate) > STILL_RATE else 0) | (GRIP_DETECTED if grip else 0)
+            measured, rate, grip = self.device.advance(opening, force, now)
+            busy = abs(rate) > STILL_RATE or now - accepted < ACCEPT_BUSY
+            status = (BUSY if busy else 0) | (GRIP_DETECTED if grip else 0)
             width_now = int(np.clip(round(measured * WIDTH_PER_METRE), 0, 0xFFFF))
             await server.async_setValues(UNIT, WRITE_MULTIPLE, ACTUAL_WIDTH, [width_now, status])
             await asyncio.sleep(self.period)

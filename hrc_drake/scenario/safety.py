@@ -67,9 +67,10 @@ class SafetyConfig:
         hand_acceleration: m/s², the bound of `tracked` (the simulated hands reach 24-29 m/s²,
             `benchmarks/reports/safety_check.md`).
         contact_speed: m/s; closer than S_p the robot may still move toward the person this
-            fast, as power and force limiting permits a contact (ISO/TS 15066 §5.5.5, Annex A);
-            0.25 m/s is ISO 10218-1's reduced speed; 0: separation alone; at most 7.5 m/s,
-            the fastest the UR3's joints move its TCP.
+            fast, as power and force limiting permits a contact (ISO/TS 15066 §5.5.5, Annex A),
+            never faster than the body region permits (0.28 m/s at the chest, none at the head:
+            `hrc_drake.cell.contact_limits`); 0.25 m/s is ISO 10218-1's reduced speed; 0:
+            separation alone; at most 7.5 m/s, the fastest the UR3's joints move its TCP.
         reaction_time: T_r [s], the robot's reaction time (0.1 s is a common assumption).
         intrusion: C [m]; 0 when the distance is taken to the body itself.
         human_uncertainty: Z_d [m], the body's position uncertainty (a tracked hand).
