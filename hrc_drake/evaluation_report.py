@@ -129,18 +129,19 @@ def stop_reason(result: RunResult) -> str:
     problems = []
     if result.collisions:
         problems.append(f"{result.collisions} robot collision(s)")
-    if result.violations:
-        problems.append(f"{result.violations} separation violation(s)")
+    if result.unsafe:
+        problems.append(f"{result.unsafe} step(s) or contact(s) beyond ISO/TS 15066")
     return ", ".join(problems)
 
 
 def failures(setup: Setup, results: list[RunResult], runs: list[int]) -> list[dict[str, Any]]:
-    """The cell runs that did not complete or had robot collisions or separation violations,
-    each with what replays it alone (`CellRuns.replay`): its index, the operator's seed, model
-    and parameters, the stop reason, the states it went through and the command."""
+    """The cell runs that did not complete, had robot collisions or broke the run's safety check
+    (beyond ISO/TS 15066), each with what replays it alone (`CellRuns.replay`): its index, the
+    operator's seed, model and parameters, the stop reason, the states it went through and the
+    command."""
     out = []
     for run, r in zip(runs, results, strict=True):
-        if (r.completed or r.capped) and not r.collisions and not r.violations:
+        if (r.completed or r.capped) and not r.collisions and not r.unsafe:
             continue
         out.append(
             {
@@ -153,6 +154,7 @@ def failures(setup: Setup, results: list[RunResult], runs: list[int]) -> list[di
                 "states": list(r.states),
                 "collisions": r.collisions,
                 "separation_violations": r.violations,
+                "beyond_iso_15066": r.unsafe,
                 "replay": setup.cell.replay(setup, run),
             }
         )

@@ -48,8 +48,11 @@ class RunResult:
     states: tuple[str, ...] = ()
     """Cell only: the states the run went through (their names)."""
     violations: int = 0
-    """Cell only: separation violations by the run's own check (`hrc_drake.cell.run.safety_check`;
-    0 without the operator's body)."""
+    """Cell only: steps inside S_p by the run's own check (`hrc_drake.cell.run.safety_check`; 0
+    without the operator's body): power and force limiting may permit them."""
+    unsafe: int = 0
+    """Cell only: what the run's check finds beyond ISO/TS 15066: steps inside S_p faster than
+    the body region permits, and contacts beyond its permissible force (a failure)."""
     handovers: int = 0
     """Cell only: tasks the robot handed over and the operator did by hand."""
     capped: bool = False

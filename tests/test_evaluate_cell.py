@@ -215,3 +215,22 @@ def test_a_failing_cell_run_is_listed_and_replays_alone(tmp_path, toy_costs, cap
     text = capsys.readouterr().out
     assert f"run 1 (mistake-prone p=0.5, seed {failure['seed']}): {failure['stop']}" in text
     assert f"replay: {failure['replay']}" in text
+
+
+def test_a_run_fails_on_the_safety_check_not_on_a_permitted_approach(flange_space, toy_costs):
+    """Steps inside S_p that power and force limiting permits are reported, not a failure; a
+    step or contact beyond ISO/TS 15066 (the run's check failed) is one, with why."""
+    from hrc_drake.evaluation_report import failures, stop_reason
+    from hrc_drake.evaluation_runs import RunResult
+
+    class Replays:
+        def replay(self, setup, run):
+            return f"hrc-drake simulate --run {run}"
+
+    setup = Setup(flange_space, toy_costs, "exact", "follows", {}, 0, cell=Replays())
+    permitted = RunResult(True, 40.0, 3, 0, 0, violations=12)
+    beyond = dataclasses.replace(permitted, unsafe=2)
+    listed = failures(setup, [permitted, beyond], [0, 1])
+    assert [f["run"] for f in listed] == [1]
+    assert listed[0]["separation_violations"] == 12 and listed[0]["beyond_iso_15066"] == 2
+    assert stop_reason(beyond) == "2 step(s) or contact(s) beyond ISO/TS 15066"

@@ -346,7 +346,7 @@ def play_cell_run(scenario, space: StateSpace, decider, operator):
     if result.interrupted:
         # Ctrl-C in the middle of a run: the evaluation reports the runs done, not this one.
         raise KeyboardInterrupt
-    tasks = result.tasks
+    tasks, check = result.tasks, result.safety_check
     return RunResult(
         completed=bool(result.done),
         seconds=float(result.sim_time),
@@ -363,7 +363,8 @@ def play_cell_run(scenario, space: StateSpace, decider, operator):
         swaps=sum(bool(t.swapped) for t in tasks),
         indication_delay=float(operator.total_delay() if isinstance(operator, TotalDelay) else 0.0),
         states=tuple(result.names),
-        violations=0 if result.safety_check is None else int(result.safety_check.violations),
+        violations=0 if check is None else int(check.violations),
+        unsafe=0 if check is None else int(check.beyond_permissible + check.contacts_beyond),
         handovers=result.handovers,
         capped=result.capped,
     )
