@@ -11,8 +11,10 @@ at most
     v_max = F / √(μ k),   μ = (1/m_H + 1/m_R)⁻¹   (Annex A's energy-transfer model)
 
 with F twice the quasi-static limit for a transient contact, the quasi-static limit itself where
-the region could be clamped (`clamped`: pushed down toward the table within `CLAMP_REACH` of it);
-the force a speed v implies is F = v √(μ k). The head permits none. m_R comes from the robot's
+the region could be clamped (`clamped`: over the table, pushed down toward it within
+`CLAMP_REACH`): there the impact's peak may not exceed what the region bears held, and the force
+a stopped robot then holds is its own force limit's, not judged here. The force a speed v
+implies is F = v √(μ k). The head permits none. m_R comes from the robot's
 model at the pose (`hrc_drake.cell.effective_mass`); where it is not at hand (the safety function
 and the monitor, every step) m_R → ∞ bounds it from below: μ = m_H, a speed the region permits
 at any pose (`least_permissible_speeds`).
