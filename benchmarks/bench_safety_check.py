@@ -26,7 +26,7 @@ import platform
 import sys
 from pathlib import Path
 
-from cell_pool import pooled_loop, publish, run_pool
+from cell_pool import desk_run, publish, run_pool
 
 CONFIGURATIONS = {
     # The controller's monitor and the station's safety function both off.
@@ -48,15 +48,8 @@ REPORT = Path(__file__).parent / "reports" / "safety_check.md"
 
 def one_run(job: tuple) -> dict:
     """One run of (configuration, seed, lean): its figures."""
-    from hrc_drake.cell.scenario import LEAN, load_cell_scenario
-
     configuration, seed, lean = job
-    operator = (
-        f"{{operator: {{model: {POPULATION}, seed: {seed}}}, interaction: {{mode: {INTERACTION}}}}}"
-    )
-    texts = [operator, CONFIGURATIONS[configuration], *([LEAN] if lean else [])]
-    scenario = load_cell_scenario("shared-desk", texts)
-    result = pooled_loop(scenario, scenario.assembly).run()
+    result = desk_run(POPULATION, INTERACTION, seed, CONFIGURATIONS[configuration], lean)
     monitor, check = result.safety, result.safety_check
     return {
         "job": job,

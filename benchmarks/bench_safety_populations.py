@@ -25,7 +25,7 @@ import statistics
 import sys
 from pathlib import Path
 
-from cell_pool import pooled_loop, publish, run_pool
+from cell_pool import desk_run, publish, run_pool
 
 POPULATIONS = ("follows", "habitual", "mistake-prone", "change-of-mind")
 INTERACTIONS = ("anticipate", "wait")
@@ -45,15 +45,8 @@ REPORT = Path(__file__).parent / "reports" / "safety_populations.md"
 
 def one_run(job: tuple) -> dict:
     """One run of (population, interaction, seed, configuration, lean): its figures."""
-    from hrc_drake.cell.scenario import LEAN, load_cell_scenario
-
     population, interaction, seed, configuration, lean = job
-    operator = (
-        f"{{operator: {{model: {population}, seed: {seed}}}, interaction: {{mode: {interaction}}}}}"
-    )
-    texts = [operator, CONFIGURATIONS[configuration], *([LEAN] if lean else [])]
-    scenario = load_cell_scenario("shared-desk", texts)
-    result = pooled_loop(scenario, scenario.assembly).run()
+    result = desk_run(population, interaction, seed, CONFIGURATIONS[configuration], lean)
     check, function = result.safety_check, result.safety_function
     return {
         "job": job,

@@ -27,6 +27,19 @@ def pooled_loop(scenario, key: str):
     return build_closed_loop(scenario, motion_planner=_PLANNERS[key])
 
 
+def desk_run(population: str, interaction: str, seed: int, setting: str, lean: bool):
+    """The closed-loop run (`RunResult`) of `shared-desk` with an operator of `population`
+    (its `seed`) in `interaction` mode, under the scenario text `setting`, lean or not."""
+    from hrc_drake.cell.scenario import LEAN, load_cell_scenario
+
+    operator = (
+        f"{{operator: {{model: {population}, seed: {seed}}}, interaction: {{mode: {interaction}}}}}"
+    )
+    texts = [operator, setting, *([LEAN] if lean else [])]
+    scenario = load_cell_scenario("shared-desk", texts)
+    return pooled_loop(scenario, scenario.assembly).run()
+
+
 def publish(text: str, report, lean: bool) -> None:
     """Print a benchmark's report; unless it ran `lean` (a quick look), also write it to the
     `report` path (atomically)."""

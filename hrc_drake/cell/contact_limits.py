@@ -120,6 +120,12 @@ def least_permissible_speeds(body: BodySpheres) -> np.ndarray:
     return _least_speeds(tuple(body.groups), len(body.radii))
 
 
+def least_speeds_at(body: BodySpheres, spheres: np.ndarray, clamp: np.ndarray) -> np.ndarray:
+    """`least_permissible_speeds` of `spheres` (indices into `body`), quasi-static where
+    `clamp`: half the transient speed, as the force limit is half (`BodyRegion.force_limit`)."""
+    return least_permissible_speeds(body)[spheres] / np.where(clamp, TRANSIENT_FACTOR, 1.0)
+
+
 def clamped(body: BodySpheres, spheres: np.ndarray, direction: np.ndarray) -> np.ndarray:
     """Whether each of `spheres` (indices into `body`) could be clamped against the table by a
     robot approaching along `direction` (k×3, unit, from the robot toward the sphere)."""
@@ -194,6 +200,7 @@ __all__ = [
     "clamped",
     "judge",
     "least_permissible_speeds",
+    "least_speeds_at",
     "region_rows",
     "touchable",
 ]

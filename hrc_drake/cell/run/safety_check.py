@@ -43,11 +43,10 @@ import numpy as np
 
 from hrc_drake.cell.contact_limits import (
     REGIONS,
-    TRANSIENT_FACTOR,
     ContactJudgement,
     clamped,
     judge,
-    least_permissible_speeds,
+    least_speeds_at,
     region_rows,
     touchable,
 )
@@ -223,7 +222,7 @@ class _Judge:
         body, pairs = sample.body, geometry.pairs
         direction = pairs.direction[shape, sphere]
         clamp = clamped(body, sphere, direction)
-        bound = least_permissible_speeds(body)[sphere] / np.where(clamp, TRANSIENT_FACTOR, 1.0)
+        bound = least_speeds_at(body, sphere, clamp)
         speed = v_r[shape, sphere]
         head = ~touchable(body)[sphere] & (beside_head | (speed > 0.0))
         with np.errstate(divide="ignore", invalid="ignore"):
