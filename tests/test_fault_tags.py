@@ -28,7 +28,7 @@ from hrc_drake.typed_yaml import TypedYamlError, dump_flow, load_tagged, load_ty
 
 TAGS = (
     "!GripLost, !NoSeat, !GripperStuck, !NoPath, !OperatorSilent, !ProtectiveStop, !Pushed, "
-    "!TrackerLoss"
+    "!TrackerLoss, !SafetySensorSilent"
 )
 
 FAULT_TEXTS = [
@@ -53,6 +53,7 @@ def test_each_kind_has_its_tag_and_its_own_defaults():
         FaultKind.PROTECTIVE_STOP: "ProtectiveStop",
         FaultKind.PUSHED: "Pushed",
         FaultKind.TRACKER_LOSS: "TrackerLoss",
+        FaultKind.SAFETY_SENSOR_SILENT: "SafetySensorSilent",
     }
     text = (
         "{faults: [!GripLost {task: 1}, !NoSeat {task: 1}, !GripperStuck {task: 1}, "

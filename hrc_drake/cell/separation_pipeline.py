@@ -75,6 +75,22 @@ class PosedRobot:
             )
         return found
 
+    def within(self, velocities: np.ndarray, body: BodySpheres, reach) -> np.ndarray:
+        """Indices of the spheres of `body` that may lie nearer the robot than `reach` [m]
+        (a function of the fastest any robot point moves, m/s, at joint `velocities`), by
+        bounds: each shape within its bounding sphere, each shape's points no faster than its
+        link's motion allows there. Cheap beside the pairs: a sensor's hundreds of voxels are
+        cut to the few that can matter."""
+        shapes = self.shapes
+        bound = np.linalg.norm(shapes.half, axis=1) + shapes.disc + shapes.round
+        link = self.links(np.asarray(velocities, dtype=float)[None, :])[0][shapes.link]
+        omega, origin = link[:, 0], link[:, 1]
+        centre_speed = np.linalg.norm(origin + np.cross(omega, self.p_WC), axis=1)
+        fastest = float((centre_speed + np.linalg.norm(omega, axis=1) * bound).max(initial=0.0))
+        gaps = body.centres[:, None, :] - self.p_WC[None, :, :]
+        lower = (np.sqrt((gaps * gaps).sum(axis=2)) - bound[None, :]).min(axis=1) - body.radii
+        return np.flatnonzero(lower < reach(fastest))
+
     def nearest(self, points: np.ndarray) -> Pairs:
         """`hrc_drake.cell.robot_envelope.nearest_points` from the shapes as posed here."""
         return nearest_to_posed(self.shapes, self.R_WC, self.p_WC, points)

@@ -23,6 +23,8 @@ permissible transient contact (`contact_speeds`, `hrc_drake.cell.contact_limits`
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from hrc_drake.cell.contact_limits import least_permissible_speeds, touchable
@@ -130,6 +132,33 @@ def protective_distance(s_h, v_r, t_s: float, config: SafetyConfig, sampling: fl
     return s_h + v_r * reaction + v_r * t_s / 2 + separation_constant(config)
 
 
+def function_settings(safety: SafetyConfig) -> SafetyConfig:
+    """The settings the station's safety function keeps separation by: with the safety-rated
+    sensor (`safety.sensor`), ISO 13855's constant speeds (a volumetric sensor measures no
+    one's speed) and T_r lengthened by its slowest unit's response time; without it, `safety`
+    as given."""
+    sensor = safety.sensor
+    if not sensor.enabled:
+        return safety
+    return replace(
+        safety,
+        human_speed=HumanSpeed.CONSTANT.value,
+        reaction_time=safety.reaction_time + max(u.response_time for u in sensor.units),
+    )
+
+
+def planning_settings(safety: SafetyConfig) -> SafetyConfig:
+    """The settings the controller plans and monitors by: the safety function's
+    (`function_settings`), its Z_d grown by how far the sensor's voxels may stand out of the
+    body (a voxel's diagonal), so that the function seldom has to stop what the controller
+    commands. Without the sensor, `safety` as given."""
+    if not safety.sensor.enabled:
+        return safety
+    settings = function_settings(safety)
+    bloat = 0.0 * safety.sensor.voxel * np.sqrt(3.0)
+    return replace(settings, human_uncertainty=settings.human_uncertainty + bloat)
+
+
 __all__ = [
     "FAR_SPEED",
     "IMPOSED_SPEED",
@@ -141,7 +170,9 @@ __all__ = [
     "bounded_travel",
     "contact_speeds",
     "entry_scales",
+    "function_settings",
     "person_travel",
+    "planning_settings",
     "protective_distance",
     "separation_constant",
     "stopping_time",

@@ -37,6 +37,10 @@ Kinds, their tags and their parameters (defaults in brackets):
   empty reading, current, not stale); the person, the station's safety function and the run's
   check are unchanged. The controller takes the person to be anywhere they could have reached
   since last seen (`hrc_drake.cell.controller.body_memory`); it has no detection to report.
+- `safety-sensor-silent` (`!SafetySensorSilent`): a unit of the safety-rated sensor (`unit`, by
+  name [every unit]) sends no frames `after` s [4.0] into the task, for `duration` s [1.0]
+  (needs `safety.sensor.enabled`); the safety function takes a safeguard stop within the
+  unit's response time and a period, which the controller sees as a stop.
 """
 
 import dataclasses
@@ -58,6 +62,7 @@ class FaultKind(StrEnum):
     PROTECTIVE_STOP = "protective-stop"
     PUSHED = "pushed"
     TRACKER_LOSS = "tracker-loss"
+    SAFETY_SENSOR_SILENT = "safety-sensor-silent"
 
 
 class Stuck(StrEnum):
@@ -160,6 +165,18 @@ class TrackerLoss:
     duration: float = 1.0
 
 
+@dataclass
+class SafetySensorSilent:
+    """`safety-sensor-silent`: a unit of the safety-rated sensor (`unit`, by name; "": every
+    unit) sends no frames `after` s into the task, for `duration` s."""
+
+    kind: ClassVar[FaultKind] = FaultKind.SAFETY_SENSOR_SILENT
+    task: int = 0
+    after: float = 4.0
+    duration: float = 1.0
+    unit: str = ""
+
+
 # One entry of a scenario's `faults:` list: the YAML tag (`!GripLost`) chooses the member.
 FaultConfig = (
     GripLost
@@ -170,6 +187,7 @@ FaultConfig = (
     | ProtectiveStop
     | Pushed
     | TrackerLoss
+    | SafetySensorSilent
 )
 
 # The entry's class of each kind (its YAML tag is the class's name: `!GripLost`).
@@ -185,6 +203,7 @@ SIMULATED = (
     FaultKind.PROTECTIVE_STOP,
     FaultKind.PUSHED,
     FaultKind.TRACKER_LOSS,
+    FaultKind.SAFETY_SENSOR_SILENT,
 )
 
 
@@ -305,6 +324,7 @@ __all__ = [
     "OperatorSilent",
     "ProtectiveStop",
     "Pushed",
+    "SafetySensorSilent",
     "Stuck",
     "TrackerLoss",
     "check_faults",

@@ -5,12 +5,15 @@ where the value came from (a file, or `--scenario-text`)."""
 import dataclasses
 import math
 
-from hrc_drake.hri.faults import FaultError, check_faults
+import numpy as np
+
+from hrc_drake.hri.faults import FaultError, SafetySensorSilent, check_faults
 from hrc_drake.robot_names import UR3_JOINTS, UR3_VELOCITY_LIMITS
 from hrc_drake.scenario.safety import (
     HumanSpeed,
     SafetyConfig,
     SafetyFunctionConfig,
+    SafetySensorConfig,
     Separation,
     Timing,
 )
@@ -127,6 +130,7 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
             raise ScenarioError(f"{where}: {err}") from err
     _check_body(scenario, fail)
     _check_separation(scenario.safety, fail)
+    _check_safety_sensor(scenario.safety.sensor, fail, scenario.faults)
     _check_interaction(scenario.interaction, fail)
     try:
         scenario.drivers.check("drivers")
@@ -287,6 +291,55 @@ def _check_safety_function(function: SafetyFunctionConfig, fail) -> None:
     for key in ("resume_clearance", "reduced_band"):
         if getattr(function, key) < 0:
             raise fail(f"safety.function.{key}", f"give metres >= 0, got {getattr(function, key)}")
+
+
+def _check_safety_sensor(sensor: SafetySensorConfig, fail, faults=()) -> None:
+    """The safety sensor: units that see something, a monitored space with voxels in it; a
+    silent-unit fault names one of its units."""
+    for k, fault in enumerate(faults):
+        if not isinstance(fault, SafetySensorSilent):
+            continue
+        if not sensor.enabled:
+            raise fail(f"faults[{k}]", "!SafetySensorSilent needs `safety.sensor.enabled: true`")
+        names = [u.name for u in sensor.units]
+        if fault.unit and fault.unit not in names:
+            raise fail(f"faults[{k}].unit", f"no unit {fault.unit!r}; the units are {names}")
+    if not sensor.enabled:
+        return
+    if not sensor.units:
+        raise fail("safety.sensor.units", "give at least one unit (or `enabled: false`)")
+    names = [u.name for u in sensor.units]
+    if len(set(names)) != len(names):
+        raise fail("safety.sensor.units", f"give each unit its own name, got {names}")
+    for k, unit in enumerate(sensor.units):
+        key = f"safety.sensor.units[{k}]"
+        for name in ("position", "target"):
+            if len(getattr(unit, name)) != 3:
+                raise fail(f"{key}.{name}", "give [x, y, z] in metres")
+        if np.allclose(unit.position, unit.target):
+            raise fail(f"{key}.target", "give a point the unit looks at, away from its position")
+        if len(unit.field_of_view) != 2 or not all(0 < a < 180 for a in unit.field_of_view):
+            raise fail(f"{key}.field_of_view", "give [wide, narrow] degrees, each in (0, 180)")
+        for name in ("reach", "frame_rate", "response_time", "detection"):
+            if getattr(unit, name) <= 0:
+                raise fail(f"{key}.{name}", f"give a value > 0, got {getattr(unit, name)}")
+        if unit.response_time < 1.0 / unit.frame_rate:
+            raise fail(
+                f"{key}.response_time",
+                f"give at least one frame period ({1.0 / unit.frame_rate:.3f} s at "
+                f"{unit.frame_rate} Hz), got {unit.response_time}",
+            )
+    space = np.asarray(sensor.space, dtype=float)
+    if space.shape != (2, 3) or np.any(space[1] <= space[0]):
+        raise fail("safety.sensor.space", "give [[x, y, z], [x, y, z]], lower then upper corner")
+    if not 0 < sensor.voxel <= 0.2:
+        raise fail("safety.sensor.voxel", f"give an edge in (0, 0.2] m, got {sensor.voxel}")
+    if sensor.margin < 0:
+        raise fail("safety.sensor.margin", f"give metres >= 0, got {sensor.margin}")
+    if len({u.frame_rate for u in sensor.units}) > 1:
+        raise fail("safety.sensor.units", "give every unit one frame rate (they are synchronised)")
+    if sensor.performance_level not in ("a", "b", "c", "d", "e"):
+        raise fail("safety.sensor.performance_level", "give one of a, b, c, d, e")
 
 
 def _check_body(scenario: Scenario, fail) -> None:

@@ -51,6 +51,81 @@ class SafetyFunctionConfig:
 
 
 @dataclass
+class SensorUnitConfig:
+    """One unit of the safety-rated sensor (`safety.sensor.units`): a 3D time-of-flight safety
+    camera mounted over the desk. The defaults are SICK's safeVisionary2
+    (`shared/reference/safety-and-devices.md`).
+
+    Attributes:
+        name: the unit's name (a fault names it; the events say it).
+        position: [x, y, z] of the unit in world [m] (the table's top is z = 0).
+        target: [x, y, z] its optical axis points at [m].
+        field_of_view: [wide, narrow] degrees; the wide angle lies level (swap them to mount
+            the unit on its side).
+        reach: m the unit measures to (safeVisionary2: 2 m, 4 m extended).
+        frame_rate: frames per second [Hz].
+        response_time: s from the scene to the unit's output, its frame period included; a
+            frame older than this is no frame (a safeguard stop).
+        detection: the detection capability [m]: anything this wide is seen (the twin spaces
+            its rays for it at the monitored space's far end).
+    """
+
+    name: str = "overhead"
+    position: list[float] = field(default_factory=lambda: [0.40, 0.0, 2.4])
+    target: list[float] = field(default_factory=lambda: [0.40, 0.0, 0.0])
+    field_of_view: list[float] = field(default_factory=lambda: [68.0, 42.0])
+    reach: float = 4.0
+    frame_rate: float = 30.0
+    response_time: float = 0.055
+    detection: float = 0.07
+
+
+def _default_units() -> list[SensorUnitConfig]:
+    # Three units: one over the desk and one at each side looking under the arm, so that what
+    # the arm hides from one another sees (our layout; `docs/cell.md`, "The safety sensor").
+    side = {"position": [0.30, 1.10, 1.10], "target": [0.35, 0.0, 0.15]}
+    return [
+        SensorUnitConfig(),
+        SensorUnitConfig(name="left", **{**side, "position": [0.30, -1.10, 1.10]}),
+        SensorUnitConfig(name="right", **side),
+    ]
+
+
+@dataclass
+class SafetySensorConfig:
+    """The safety-rated sensor the station's safety function reads (`safety.sensor`;
+    `hrc_drake.cell.station.safety_sensor`): volumetric, it sees occupied volume, not a person,
+    and counts what no unit sees as occupied. The model assumes the function it feeds meets
+    `performance_level` (ISO 13849-1): a claim for the real cell's assessor to verify, as one
+    safeVisionary2 alone is PL c.
+
+    Attributes:
+        enabled: the safety function reads this sensor, and the controller plans by the
+            function's settings (`hrc_drake.cell.ssm.planning_settings`); off (the default),
+            the function reads the simulated body itself, exactly and at once, which no real
+            device gives: the price of the sensor is in `docs/cell.md`, "The safety sensor".
+        units: the mounted units (`SensorUnitConfig`).
+        space: [[x, y, z], [x, y, z]], the monitored space's lower and upper corners [m].
+        voxel: the edge of the monitored space's voxels [m].
+        margin: m round the robot's shapes (posed from its encoders) within which unseen volume
+            is the robot's (its shadow and the sensor's noise): the function is blind there.
+        head_above: m over the table above which seen volume may be a head (no contact
+            permitted); below, the torso's limits (the standing operator's head is higher).
+        performance_level: the performance level the safety function is taken to meet.
+    """
+
+    enabled: bool = False
+    units: list[SensorUnitConfig] = field(default_factory=_default_units)
+    space: list[list[float]] = field(
+        default_factory=lambda: [[-0.30, -0.55, 0.0], [1.15, 0.55, 0.80]]
+    )
+    voxel: float = 0.05
+    margin: float = 0.05
+    head_above: float = 0.64
+    performance_level: str = "d"
+
+
+@dataclass
 class SafetyConfig:
     """Speed and separation monitoring (ISO/TS 15066 5.5.4): S_p = v_h (T_r + T_s) + v_r T_r +
     S_s + C + Z_d + Z_r, at every Supervisor update.
@@ -92,6 +167,9 @@ class SafetyConfig:
             `hrc_drake.cell.controller.forecast.OperatorForecast`).
         function: the station's safety function (`SafetyFunctionConfig`); the settings above
             but T_r, C, Z_d and Z_r, which it shares, are the controller's.
+        sensor: the safety-rated sensor the function reads (`SafetySensorConfig`); with it,
+            the function takes ISO 13855's constant speeds (it measures none) and adds the
+            slowest unit's response time to T_r.
     """
 
     enabled: bool = True
@@ -110,6 +188,15 @@ class SafetyConfig:
     timing: str = Timing.WAIT.value
     forecast_spread: float = 1.0
     function: SafetyFunctionConfig = field(default_factory=SafetyFunctionConfig)
+    sensor: SafetySensorConfig = field(default_factory=SafetySensorConfig)
 
 
-__all__ = ["HumanSpeed", "SafetyConfig", "SafetyFunctionConfig", "Separation", "Timing"]
+__all__ = [
+    "HumanSpeed",
+    "SafetyConfig",
+    "SafetyFunctionConfig",
+    "SafetySensorConfig",
+    "SensorUnitConfig",
+    "Separation",
+    "Timing",
+]

@@ -43,7 +43,7 @@ from hrc_drake.cell.separation_pipeline import (
     SeparationPipeline,
     pipeline_of,
 )
-from hrc_drake.cell.ssm import NEAR_SPEED, stopping_time
+from hrc_drake.cell.ssm import NEAR_SPEED, planning_settings, stopping_time
 from hrc_drake.cell_models import CellDesign
 from hrc_drake.motion.clearance import ScaleFn, remembered
 from hrc_drake.motion.options import MotionOptions
@@ -189,7 +189,7 @@ def keep_clear_settings(
     not the one each operator seed draws: the controller does not know who stands there.
     `envelope`: the controller's model of the robot, or its `SeparationPipeline` (shared with
     its monitor)."""
-    safety, body = scenario.safety, scenario.body
+    safety, body = planning_settings(scenario.safety), scenario.body
     predictive = safety.separation == Separation.PREDICTIVE
     if not predictive or envelope is None or body.activity != Activity.DESK:
         return KeepClearSettings(max_wait=safety.max_wait, departure=safety.departure)
@@ -259,7 +259,7 @@ def make_controller(
             "separation_monitor",
             ControllerSeparationMonitor(
                 design,
-                scenario.safety,
+                planning_settings(scenario.safety),
                 options.joint_acceleration_limit,
                 scenario.run.period,
                 pipeline,
@@ -269,7 +269,7 @@ def make_controller(
         builder.ConnectInput("ur3.state_estimated", monitor.GetInputPort("ur3.state_estimated"))
         builder.ConnectInput("rg2.state_measured", monitor.GetInputPort("rg2.state_measured"))
         memory = builder.AddNamedSystem(
-            "body_memory", BodyMemory(scenario.run.period, scenario.safety)
+            "body_memory", BodyMemory(scenario.run.period, planning_settings(scenario.safety))
         )
         builder.ExportInput(memory.GetInputPort("tracked"), "operator.body")
         body = memory.GetOutputPort("operator.body")

@@ -30,9 +30,16 @@ CAUSES = {
     # anywhere they could have reached (`hrc_drake.cell.controller.body_memory`), and the time
     # that costs is monitoring's (`safety.monitor.ssm_delay`), not the fault's.
     FaultKind.TRACKER_LOSS: set(),
+    # None either: the station's safety function takes a safeguard stop, which clears by
+    # itself and which the controller does not name (`FaultRecovery.note_stop`).
+    FaultKind.SAFETY_SENSOR_SILENT: set(),
 }
-# The recovery of a fault no cause shows (a tracker loss): the run went on under monitoring.
-RIDDEN_THROUGH = "monitoring"
+# The recovery of a fault no cause shows: a tracker loss, ridden through under monitoring; a
+# silent safety sensor, through the safety function's safeguard stop.
+RIDDEN_THROUGH = {
+    FaultKind.TRACKER_LOSS: "monitoring",
+    FaultKind.SAFETY_SENSOR_SILENT: "safeguard stop",
+}
 # A detection in the same Supervisor update as the injection may carry a time a period earlier.
 SLACK = 0.05  # s
 
@@ -75,7 +82,7 @@ def fault_records(
         if not CAUSES[fault.kind] and injected is not None:
             # Ridden through by monitoring, not detected: over once the fault's time is up.
             recovered = injected + fault.duration <= end_time
-            recovery = RIDDEN_THROUGH if recovered else ""
+            recovery = RIDDEN_THROUGH[fault.kind] if recovered else ""
         records.append(
             FaultRecord(
                 kind=fault.kind.value,

@@ -485,10 +485,13 @@ def _safety_check(loop: ClosedLoop) -> SafetyCheck | None:
         return None
     setup = loop.setup
     config = setup.scenario.safety
-    # T_r is the robot's reaction and the sensor's response both: a tracker under `sensors:`
-    # reports the body up to a period and its latency bound late.
+    # T_r is the robot's reaction and the sensors' response both: a tracker under `sensors:`
+    # reports the body up to a period and its latency bound late; the safety sensor, which
+    # the safety function reads, up to its slowest unit's response time.
     body = sensor_models(setup.scenario.sensors).get(PORTS["body"])
     response = 0.0 if body is None else body.stale_after
+    if config.sensor.enabled:
+        response = max([response, *(u.response_time for u in config.sensor.units)])
     return check_separation(
         sampler.trace.samples,
         RobotEnvelope(setup.design),

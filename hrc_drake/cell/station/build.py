@@ -67,6 +67,7 @@ from hrc_drake.cell.scenario import (
     plant_config,
     scene_graph_config,
 )
+from hrc_drake.cell.ssm import function_settings
 from hrc_drake.cell.station.arm_servo import GravityCompensation, servo_actuators
 from hrc_drake.cell.station.camera import export_configuration
 from hrc_drake.cell.station.camera_verdicts import check_camera_noise
@@ -83,6 +84,7 @@ from hrc_drake.cell.station.obstacle import (
 )
 from hrc_drake.cell.station.operator_body import BodyScript, KnowsWhenFree, OperatorBody
 from hrc_drake.cell.station.safety_function import SafetyFunction
+from hrc_drake.cell.station.safety_sensor import add_safety_sensor
 from hrc_drake.cell.station.sensors import export_measured
 from hrc_drake.cell.station.sim_operator import SimulatedOperator
 from hrc_drake.cell.station.slot_monitor import SlotMonitor
@@ -224,7 +226,7 @@ def _add_arm(
         "safety_function",
         SafetyFunction(
             RobotEnvelope(frames.design),
-            scenario.safety,
+            function_settings(scenario.safety),
             motion_options(scenario).joint_acceleration_limit,
             scenario.run.period,
             frames.widths,
@@ -369,7 +371,14 @@ def _add_faults(builder: DiagramBuilder, plant: MultibodyPlant, scenario: Scenar
     `safety.stop` out, the pushes on the plant's joints, the obstacle's servo target (when the
     plant has the obstacle), `sim.faults` (what it injected). `seats`: a SeatPositions."""
     faults = builder.AddNamedSystem(
-        "fault_injector", FaultInjector(plant, scenario.faults, scenario.run.period, seats)
+        "fault_injector",
+        FaultInjector(
+            plant,
+            scenario.faults,
+            scenario.run.period,
+            seats,
+            [u.name for u in scenario.safety.sensor.units],
+        ),
     )
     for name in (OBSTACLE, DEBRIS):
         if plant.HasModelInstanceNamed(name):
@@ -466,7 +475,7 @@ def make_cell_station(
         builder.ConnectInput("hri.prompt", injector.GetInputPort("hri.prompt"))
     _add_part_sensors(builder, plant, scene_graph, frames, parts, person, scenario)
     if scenario.station.robot:
-        _connect_safety_function(builder)
+        _connect_safety_function(builder, plant, scene_graph, instances, scenario, frames)
     builder.ExportOutput(person.GetOutputPort("bolts"), "sim.welds")
     _export_sim_ports(builder, plant, scene_graph)
     visualizer = _add_viewers(builder, scene_graph, scenario, camera, meshcat)
@@ -499,17 +508,28 @@ def _add_robot(builder, plant, instances, scenario: Scenario, frames, space: Sta
     return injector
 
 
-def _connect_safety_function(builder: DiagramBuilder) -> None:
-    """The safety function's measurements: the gripper's opening and the tracked body, as the
-    station measures them."""
+def _connect_safety_function(builder, plant, scene_graph, instances, scenario, frames) -> None:
+    """The safety function's measurements: the gripper's opening and the body as its safety
+    sensor sees it (`safety.sensor`; off, the simulated body itself)."""
     function = builder.GetSubsystemByName("safety_function")
     gripper = builder.GetSubsystemByName("rg2_measure").get_output_port(0)
     builder.Connect(gripper, function.GetInputPort("rg2.state"))
-    tracker = (
+    person = (
         builder.GetSubsystemByName("operator_body").GetOutputPort("spheres")
         if builder.HasSubsystemNamed("operator_body")
-        else builder.GetSubsystemByName("body_tracker").get_output_port()
+        else None
     )
+    sensor = add_safety_sensor(builder, plant, scene_graph, instances, scenario, frames, person)
+    if sensor is not None:
+        silent = sensor.GetInputPort("safety_sensor.silent")
+        injector = builder.GetSubsystemByName("fault_injector")
+        if injector.has_silent_sensor:
+            builder.Connect(injector.GetOutputPort("safety_sensor.silent"), silent)
+        else:  # a test may silence a unit
+            builder.ExportInput(silent, "sim.safety_sensor.silent")
+        builder.ExportOutput(sensor.GetOutputPort("safety_sensor.body"), "sim.safety_sensor.body")
+        return
+    tracker = person or builder.GetSubsystemByName("body_tracker").get_output_port()
     builder.Connect(tracker, function.GetInputPort("operator.body"))
 
 

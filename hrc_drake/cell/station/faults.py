@@ -45,6 +45,7 @@ from hrc_drake.hri.faults import (
     OperatorSilent,
     ProtectiveStop,
     Pushed,
+    SafetySensorSilent,
     Stuck,
     TrackerLoss,
 )
@@ -52,6 +53,8 @@ from hrc_drake.hri.messages import Prompt, PromptKind
 from hrc_drake.obstacle_models import DEBRIS_PARK, OBSTACLE_PARK, obstacle_pose_over
 from hrc_drake.tasks.protocols import DelaysIndications
 
+# The faults that act for `duration` s from `after` s into their task.
+TimedFault = ProtectiveStop | Pushed | TrackerLoss | SafetySensorSilent
 # The fingers count as standing still below this rate (they close at about 0.5 m/s).
 STILL_RATE = 0.005  # m/s
 # The box of a no-path fault moves under the table to below its seat, then rises into place
@@ -100,8 +103,8 @@ class Injection:
         return cls(**{**data, "target": tuple(float(v) for v in data["target"])})
 
 
-def _window(fault: ProtectiveStop | Pushed | TrackerLoss, injection: Injection, now: float) -> bool:
-    """Whether a timed fault (stop, push, tracker loss) acts at `now`."""
+def _window(fault: TimedFault, injection: Injection, now: float) -> bool:
+    """Whether a timed fault (stop, push, tracker loss, silent sensor) acts at `now`."""
     if injection.task_start is None:
         return False
     start = injection.task_start + fault.after
@@ -144,6 +147,7 @@ class FaultInjector(LeafSystem):
         faults: Sequence[FaultConfig],
         period: float,
         seat_position: SeatPositions | None = None,
+        units: Sequence[str] = (),
     ):
         super().__init__()
         self._faults = tuple(faults)
@@ -178,6 +182,15 @@ class FaultInjector(LeafSystem):
                     self.abstract_state_ticket(self._state),
                     self.input_port_ticket(self._body.get_index()),
                 },
+            )
+        self._units = tuple(units)
+        self.has_silent_sensor = any(isinstance(f, SafetySensorSilent) for f in self._faults)
+        if self.has_silent_sensor:
+            self.DeclareVectorOutputPort(
+                "safety_sensor.silent",
+                BasicVector(len(self._units)),
+                self._calc_silent,
+                prerequisites_of_calc={self.time_ticket(), self.abstract_state_ticket(self._state)},
             )
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
 
@@ -247,6 +260,14 @@ class FaultInjector(LeafSystem):
         lost = any(_window(f, i, now) for f, i in self._active(context, TrackerLoss))
         output.set_value(NOBODY if lost else self._body.Eval(context))
 
+    def _calc_silent(self, context, output) -> None:
+        now = context.get_time()
+        silent = np.zeros(len(self._units))
+        for fault, injection in self._active(context, SafetySensorSilent):
+            if _window(fault, injection, now):
+                silent[[not fault.unit or fault.unit == u for u in self._units]] = 1.0
+        output.SetFromVector(silent)
+
     # --- what happened -------------------------------------------------------------------
     def _update(self, context, state) -> None:
         now = context.get_time()
@@ -269,7 +290,7 @@ class FaultInjector(LeafSystem):
 
     def _inject(self, context, fault: FaultConfig, injection: Injection, now: float):
         """The moment a fault of the running task takes effect, if it is now."""
-        if isinstance(fault, ProtectiveStop | Pushed | TrackerLoss):
+        if isinstance(fault, TimedFault):
             if now >= injection.task_start + fault.after:
                 return replace(injection, injected_at=now)
             return injection

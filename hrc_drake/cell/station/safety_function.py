@@ -2,7 +2,8 @@
 controller do on a real cell, apart from the controller and whatever it believes.
 
 Every `period` it reads what the station measures — the arm's joint state, the gripper's opening,
-the tracked body — and judges the separation with its own robot model (`RobotEnvelope`, with the
+and the body its safety-rated sensor sees (`safety.sensor`; switched off, the simulated body
+itself) — and judges the separation with its own robot model (`RobotEnvelope`, with the
 payload the gripper's opening says it holds, `payload`) and the protective separation distance of
 `hrc_drake.cell.ssm`, with the person's travel S_h bounded as `safety.human_speed` says (the
 tracked speed toward the robot bounded by a hand's acceleration, or ISO 13855's constant
@@ -29,6 +30,9 @@ It acts through the robot's stop, by gating the arm's command between the contro
   stopped coming, `hrc_drake.cell.link.realtime`): the same brake, a safeguard stop, held while
   the input is on; it resumes `RESTART_DELAY` after fresh commands come again, as a UR's
   controller stops an arm whose servo targets stop coming.
+- **No fresh safety sensor frame** (the `sensor_ok` input off: a unit of the safety-rated
+  sensor sent no frame within its response time, `hrc_drake.cell.station.safety_sensor`): the
+  same, held while the input is off.
 - **Reduced**: nothing stopped, a body sphere within `reduced_band` of S_p.
 
 After a stop the command reaches the servo through a blend from the held posture, no faster than
@@ -46,6 +50,7 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
+from hrc_drake.cell.contact_limits import REGIONS, region_rows
 from hrc_drake.cell.ports import NOBODY, BodySpheres, SafetyMode
 from hrc_drake.cell.robot_envelope import RobotEnvelope
 from hrc_drake.cell.separation_pipeline import (
@@ -54,6 +59,7 @@ from hrc_drake.cell.separation_pipeline import (
     protective_separation,
 )
 from hrc_drake.cell.ssm import (
+    NEAR_SPEED,
     beyond_contact_speed,
     person_travel,
     protective_distance,
@@ -78,6 +84,9 @@ MIN_BLEND = 0.2  # s: the shortest blend back to the command (our choice)
 # and a pick opens the fingers 16 mm wider than the part (`finger_gap` each side).
 PAYLOAD_TOLERANCE = 0.002  # m
 _N = len(UR3_JOINTS)
+# Above this many spheres (a volumetric sensor's voxels) the function first keeps those that can
+# matter (`_nearby`); the person model has 27.
+PRUNE_ABOVE = 64
 
 
 def payload(opening: float, widths: Mapping[str, float]) -> tuple[str, ...]:
@@ -96,10 +105,11 @@ class StopCause(enum.StrEnum):
     CONTACT = "contact"  # protective stop: a robot shape touched the body while moving
     EXTERNAL = "external input"  # protective stop: the robot's protective-stop input
     STALE_COMMAND = "no fresh command"  # safeguard stop: the commands stopped coming
+    STALE_SENSOR = "no fresh safety sensor frame"  # safeguard stop: a unit stopped sending
 
 
 # The causes of a safeguard stop, which clears by itself; the others are protective stops.
-SAFEGUARD_CAUSES = (StopCause.SEPARATION, StopCause.STALE_COMMAND)
+SAFEGUARD_CAUSES = (StopCause.SEPARATION, StopCause.STALE_COMMAND, StopCause.STALE_SENSOR)
 
 
 @dataclass(frozen=True)
@@ -141,10 +151,15 @@ def judge_separation(
     if len(body.radii) == 0:
         return SeparationVerdict(moving=moving)
     function = config.function
-    geometry = pipeline_of(envelope).pairs(q, opening, carrying, body)
+    pipeline = pipeline_of(envelope)
+    t_s = stopping_time(v, joint_acceleration)
+    if len(body.radii) > PRUNE_ABOVE:
+        body = _nearby(pipeline.robot(q, opening, carrying), v, body, config, period, t_s)
+        if len(body.radii) == 0:
+            return SeparationVerdict(moving=moving)
+    geometry = pipeline.pairs(q, opening, carrying, body)
     gap = geometry.gap
     v_r = np.maximum(0.0, geometry.robot_speeds(np.asarray(v, dtype=float)[None, :])[0])
-    t_s = stopping_time(v, joint_acceleration)
     s_p = protective_separation(geometry, v_r, t_s, config, period)
     travel = person_travel(geometry.person_speed(), gap, config.reaction_time + period, config)
     at_rest = travel + separation_constant(config)
@@ -159,6 +174,35 @@ def judge_separation(
         reduced=bool(short.min() < function.reduced_band),
         contact=bool((beyond & (gap <= 0.0)).any()),
         moving=moving,
+    )
+
+
+def _nearby(robot, v, body: BodySpheres, config: SafetyConfig, period: float, t_s: float):
+    """The spheres of `body` that can bear on the verdict: those that may lie within S_p and
+    the wider of the reduced band and the resume clearance, S_p bounded above by the person's
+    fastest travel and the robot's fastest point (`PosedRobot.within`). The rest are farther
+    than any S_p, band or clearance the verdict compares them with."""
+    person = max(NEAR_SPEED, float(np.linalg.norm(body.velocities, axis=1).max(initial=0.0)))
+    s_h = person * (config.reaction_time + t_s + period)
+    band = max(config.function.reduced_band, config.function.resume_clearance)
+
+    def reach(fastest: float) -> float:
+        return float(protective_distance(s_h, fastest, t_s, config, period)) + band
+
+    keep = robot.within(v, body, reach)
+    if len(keep) == len(body.radii):
+        return body
+    rows = region_rows(body)[keep]
+    order = np.argsort(rows, kind="stable")
+    keep, rows = keep[order], rows[order]
+    ends = np.searchsorted(rows, np.arange(len(REGIONS) + 1))
+    groups = tuple((int(ends[g]), int(ends[g + 1])) for g in range(len(REGIONS)))
+    return replace(
+        body,
+        centres=body.centres[keep],
+        radii=body.radii[keep],
+        velocities=body.velocities[keep],
+        groups=groups if len(body.groups) == len(REGIONS) else body.groups,
     )
 
 
@@ -275,7 +319,7 @@ def _stop(state: SafetyFunctionState, cause: StopCause, brake: Brake, now: float
 def _words(cause: StopCause) -> str:
     if cause == StopCause.SEPARATION:
         return "safeguard stop: the separation fell short"
-    if cause == StopCause.STALE_COMMAND:
+    if cause in (StopCause.STALE_COMMAND, StopCause.STALE_SENSOR):
         return f"safeguard stop: {cause.value}"
     return f"protective stop: {cause.value}"
 
@@ -291,10 +335,12 @@ def step(
     period: float,
     simulated_unlock: bool = True,
     stale: bool = False,
+    blind: bool = False,
 ) -> SafetyFunctionState:
     """One period of the function (see the module docstring): the next state from the
     separation `verdict`, the `external` protective-stop input, the `unlock` input, the
-    `stale` command input, and the `brake` the arm would follow if it stopped now; with
+    `stale` command input, the `blind` input (the safety sensor's frames stopped coming) and
+    the `brake` the arm would follow if it stopped now; with
     `simulated_unlock` the simulated operator also unlocks, `safety.function.unlock_delay`
     after the cause clears."""
     function = config.function
@@ -308,9 +354,10 @@ def step(
         if state.cause != StopCause.EXTERNAL:
             state = _stop(state, StopCause.EXTERNAL, brake, now)
         return replace(state, cleared_at=None)
-    if stale:
+    if stale or blind:
         if not state.mode.stopped:
-            return _stop(state, StopCause.STALE_COMMAND, brake, now)
+            cause = StopCause.STALE_COMMAND if stale else StopCause.STALE_SENSOR
+            return _stop(state, cause, brake, now)
         # Held, whatever stopped it: a protective stop is not unlocked meanwhile.
         stopped = state.mode == SafetyMode.SAFEGUARD_STOP
         return replace(state, cleared_at=None) if stopped else state
@@ -373,7 +420,8 @@ class SafetyFunction(LeafSystem):
     `external_stop` (1: the robot's protective-stop input), `safety.unlock` (1: unlock a
     protective stop; connected, a person unlocks there and only there; unconnected, the
     simulated operator does), `command_stale` (1 while the arm's commands have stopped coming;
-    unconnected, never).
+    unconnected, never), `sensor_ok` (0 while the safety sensor's frames are stale;
+    unconnected, always 1).
     Output ports: `desired_state` (12, for the arm's servo), `safety.stop` (1), `safety.mode`
     (1, the `SafetyMode` code). Updated every `period`."""
 
@@ -396,6 +444,7 @@ class SafetyFunction(LeafSystem):
         self._external = self.DeclareVectorInputPort("external_stop", 1)
         self._unlock = self.DeclareVectorInputPort("safety.unlock", 1)
         self._stale = self.DeclareVectorInputPort("command_stale", 1)
+        self._sensor_ok = self.DeclareVectorInputPort("sensor_ok", 1)
         self._state = self.DeclareAbstractState(AbstractValue.Make(SafetyFunctionState()))
         command = {self._position.ticket(), self._velocity.ticket()}
         ticket = {self.abstract_state_ticket(self._state), self.time_ticket()}
@@ -454,6 +503,7 @@ class SafetyFunction(LeafSystem):
         unlock = pendant and self._unlock.Eval(context)[0] > 0.5
         now = context.get_time()
         stale = self._stale.HasValue(context) and self._stale.Eval(context)[0] > 0.5
+        blind = self._sensor_ok.HasValue(context) and self._sensor_ok.Eval(context)[0] < 0.5
         new = step(
             self.state(context),
             verdict,
@@ -465,6 +515,7 @@ class SafetyFunction(LeafSystem):
             self._period,
             simulated_unlock=not pendant,
             stale=stale,
+            blind=blind,
         )
         if new.blend is not None and new.blend.start == now:
             # The smoothstep's peak rate is 1.5 times its mean.
