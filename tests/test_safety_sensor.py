@@ -255,3 +255,11 @@ def test_a_sensor_s_many_spheres_are_cut_to_those_that_can_matter(monkeypatch):
             assert cut.margin == pytest.approx(whole.margin)
         decided.append(whole.margin < 0 or whole.reduced)
     assert any(decided) and not all(decided)  # the draws test both answers
+
+
+def test_a_monitored_space_no_unit_sees_is_refused_with_the_fix():
+    from hrc_drake.cell_models import CellModelError
+
+    away = "{safety: {sensor: {enabled: true, units: [{target: [3, 0, 2]}]}}}"
+    with pytest.raises(CellModelError, match=r"outside every unit's view.*aim the units"):
+        make_cell_station(load_cell_scenario("row1-optimal", [LEAN, away]))

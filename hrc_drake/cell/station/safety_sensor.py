@@ -30,7 +30,7 @@ from hrc_drake.cell.ports import NOBODY, BodySpheres
 from hrc_drake.cell.robot_envelope import RobotEnvelope, primitive
 from hrc_drake.cell.ssm import NEAR_SPEED
 from hrc_drake.cell.station.safety_function import payload
-from hrc_drake.cell_models import TABLE_HALF, TABLE_POSITION
+from hrc_drake.cell_models import TABLE_HALF, TABLE_POSITION, CellModelError
 from hrc_drake.robot_names import UR3_JOINTS
 from hrc_drake.scenario.safety import SafetySensorConfig
 
@@ -150,6 +150,7 @@ class SafetySensor(LeafSystem):
             )
             for u in self._units
         ]
+        self._check_coverage()
         self._covers: dict = {}
         self._truth = self.DeclareAbstractInputPort("body.truth", AbstractValue.Make(NOBODY))
         self._arm = self.DeclareVectorInputPort("ur3.state", 2 * _N)
@@ -173,6 +174,23 @@ class SafetySensor(LeafSystem):
         self.DeclareInitializationUnrestrictedUpdateEvent(self._power_on)
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._take)
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, self._latency, self._deliver)
+
+    def _check_coverage(self) -> None:
+        """CellModelError if some of the monitored space lies outside every unit's view of the
+        empty cell: it would count as occupied for ever."""
+        empty = volumetric.Occluders(np.zeros((0, 3)), np.zeros(0), self._table)
+        seen = self._fixed.copy()
+        for rays in self._rays:
+            depth, hit = volumetric.cast(rays, empty)
+            seen |= volumetric.view(rays, depth, hit, self._grid, DEPTH_TOLERANCE)[0]
+        if not seen.all():
+            unseen = self._grid.centres(np.flatnonzero(~seen))
+            raise CellModelError(
+                f"safety.sensor: {len(unseen)} of the monitored space's {self._grid.size} "
+                f"voxels lie outside every unit's view (e.g. around "
+                f"{np.round(unseen[0], 2).tolist()} m) and would count as occupied for ever: "
+                "aim the units (`safety.sensor.units`) at them or shrink `safety.sensor.space`"
+            )
 
     @property
     def grid(self) -> volumetric.VoxelGrid:
