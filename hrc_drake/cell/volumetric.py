@@ -5,8 +5,9 @@ origin and measures, per ray, the depth of the first surface it meets. The monit
 grid of voxels (`VoxelGrid`). A voxel is *seen free* when some unit's ray passes through it short
 of that ray's depth; every other voxel of the monitored space is *unknown* (occupied, hidden
 behind something, or outside every unit's field), and unknown counts as occupied, as a safety
-sensor treats what it cannot see (Veo FreeMove; `shared/reference/safety-and-devices.md`).
-A voxel a ray ends in (a hit) is occupied whatever other rays saw of it.
+sensor treats what it cannot see (Veo FreeMove; `shared/reference/safety-and-devices.md`),
+where a person could have come (`dilate`: volume seen empty a frame ago, far from anything
+possibly occupied, is not). Where a ray met something, the point it met stands for it.
 
 Unknown volume is *explained*, and not a person, where the robot's own shapes (posed from its
 encoders, grown by `margin`) or a fixed object (the table, the tray, the plate, the bins) hold
@@ -257,7 +258,7 @@ def cover(shapes, spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         points.append(local @ shapes.R_BC[m].T + shapes.p_BC[m])
         radius = float(np.hypot(across, half_step)) + float(shapes.round[m])
         radii.append(np.full(count, radius))
-    body, order = np.concatenate(bodies), None
+    body = np.concatenate(bodies)
     order = np.argsort(body, kind="stable")  # by body: each body's spheres together
     return body[order], np.concatenate(points)[order], np.concatenate(radii)[order]
 

@@ -108,7 +108,8 @@ class SafetySensorConfig:
         space: [[x, y, z], [x, y, z]], the monitored space's lower and upper corners [m].
         voxel: the edge of the monitored space's voxels [m].
         margin: m round the robot's shapes (posed from its encoders) within which unseen volume
-            is the robot's (its shadow and the sensor's noise): the function is blind there.
+            is the robot's (the depth's noise, the encoders', the shapes' chains of spheres):
+            the function is blind there.
         head_above: m over the table above which seen volume may be a head (no contact
             permitted); below, the torso's limits (the standing operator's head is higher).
         performance_level: the performance level the safety function is taken to meet.

@@ -5,9 +5,10 @@ in place of any body tracker (`hrc_drake.cell.volumetric` is the geometry).
 Each frame meets what is there: the simulated person's body, the arm (its shapes posed at the
 arm's state, with the part its gripper's opening says it holds) and the table. A frame taken at
 t reaches the output at t + `response_time` − 1/`frame_rate` (the unit's response time spans its
-frame). The output (`safety_sensor.body`) is the volume no unit saw free, less what the robot's
-shapes from its encoders (grown by `margin`) and the fixed objects explain, as body spheres at
-rest; `safety_sensor.ok` is 0 while some unit's newest frame is older than its response time
+frame). The output (`safety_sensor.body`) is the volume no unit saw free and a person could
+have come to (`SafetySensor`), less what the robot's shapes from its encoders (grown by
+`margin`) and the fixed objects explain, with the points the rays met, as body spheres at
+rest. `safety_sensor.ok` is 0 while some unit's newest frame is older than its response time
 (a unit that stopped sending, or the `safety_sensor.silent` input: a fault), which the safety
 function takes as a safeguard stop.
 
@@ -31,8 +32,9 @@ from hrc_drake.cell.robot_envelope import RobotEnvelope, primitive
 from hrc_drake.cell.ssm import NEAR_SPEED
 from hrc_drake.cell.station.safety_function import payload
 from hrc_drake.cell_models import TABLE_HALF, TABLE_POSITION, CellModelError
-from hrc_drake.robot_names import UR3_JOINTS
+from hrc_drake.robot_names import GRIPPER, UR3, UR3_JOINTS
 from hrc_drake.scenario.safety import SafetySensorConfig
+from hrc_drake.workpiece_sdf import PLATE, TRAY
 
 _N = len(UR3_JOINTS)
 # The robot's shapes as chains of spheres this far apart, for the rays and the mask (our
@@ -76,9 +78,9 @@ def fixed_objects(plant, scene_graph, instances, grid: volumetric.VoxelGrid, bin
                 X_GC, half, disc, rounding = primitive(inspector.GetShape(geometry))
                 X_WC = X_WB @ inspector.GetPoseInFrame(geometry) @ X_GC
                 low, high = _aabb(X_WC, half + np.array([disc, disc, 0.0]) + rounding)
-                if name in ("base_plate", "tray"):
+                if name in (PLATE, TRAY):
                     boxes.append((low, high))
-                elif name not in ("ur3", "rg2"):
+                elif name not in (UR3, GRIPPER):
                     tallest = max(tallest, float(np.max(high - low)))
     boxes = [(low, high + np.array([0.0, 0.0, tallest])) for low, high in boxes]
     for item in bins:
@@ -241,7 +243,7 @@ class SafetySensor(LeafSystem):
         free, points = volumetric.view(rays, depth, hit, self._grid, DEPTH_TOLERANCE)
         return Frame(context.get_time(), free, points, q, opening)
 
-    def _robot(self, q: np.ndarray, opening: float) -> tuple[np.ndarray, np.ndarray]:
+    def _robot(self, q: np.ndarray, opening: float) -> tuple[np.ndarray, np.ndarray, tuple]:
         """The robot's cover spheres (world centres, radii, and their groups by body) at `q`
         and `opening`, with the part the opening says it holds."""
         carrying = payload(opening, self._widths)
@@ -313,7 +315,7 @@ def add_safety_sensor(builder, plant, scene_graph, instances, scenario, frames, 
         SafetySensor(config, RobotEnvelope(frames.design), frames.widths, fixed, grid, _table()),
     )
     function = builder.GetSubsystemByName("safety_function")
-    arm = plant.get_state_output_port(plant.GetModelInstanceByName("ur3"))
+    arm = plant.get_state_output_port(plant.GetModelInstanceByName(UR3))
     builder.Connect(arm, sensor.GetInputPort("ur3.state"))
     gripper = builder.GetSubsystemByName("rg2_measure").get_output_port(0)
     builder.Connect(gripper, sensor.GetInputPort("rg2.state"))
