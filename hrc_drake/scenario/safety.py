@@ -53,8 +53,8 @@ class SafetyFunctionConfig:
 @dataclass
 class SensorUnitConfig:
     """One unit of the safety-rated sensor (`safety.sensor.units`): a 3D time-of-flight safety
-    camera mounted over the desk. The defaults are SICK's safeVisionary2
-    (`shared/reference/safety-and-devices.md`).
+    camera mounted over the desk. The field of view, reach, frame rate and response time are
+    SICK safeVisionary2's (`shared/reference/safety-and-devices.md`).
 
     Attributes:
         name: the unit's name (a fault names it; the events say it).
@@ -67,7 +67,9 @@ class SensorUnitConfig:
         response_time: s from the scene to the unit's output, its frame period included; a
             frame older than this is no frame (a safeguard stop).
         detection: the detection capability [m]: anything this wide is seen (the twin spaces
-            its rays for it at the monitored space's far end).
+            its rays for it at the monitored space's far end). 0.07 is our choice, under the
+            person model's thinnest part (the forearm, 0.08 m); SICK states hand and arm
+            resolutions whose figures the reference does not give.
     """
 
     name: str = "overhead"
