@@ -25,7 +25,7 @@ import statistics
 import sys
 from pathlib import Path
 
-from cell_pool import desk_run, publish, run_pool
+from cell_pool import desk_run, error_lines, publish, run_pool
 
 POPULATIONS = ("follows", "habitual", "mistake-prone", "change-of-mind")
 INTERACTIONS = ("anticipate", "wait")
@@ -105,9 +105,7 @@ def report(runs: list[dict], seeds: int, wall: float, lean: bool) -> str:
         f"{sum(r['job'][3] != OFF for r in runs)} runs.",
         "",
     ]
-    errors = [r for r in runs if r["error"]]
-    if errors:
-        lines += ["## Errors", "", *(f"- {r['job']}: {r['error']}" for r in errors), ""]
+    lines += error_lines(runs)
     return "\n".join(lines)
 
 

@@ -26,7 +26,7 @@ import sys
 import time
 from pathlib import Path
 
-from cell_pool import desk_run, pooled_loop, publish, run_pool
+from cell_pool import desk_run, error_lines, pooled_loop, publish, run_pool
 
 SETTINGS = {
     "today (the body itself, tracked)": "{safety: {separation: predictive}}",
@@ -144,7 +144,8 @@ def report(runs: list[dict], seeds: int, wall: float, lean: bool) -> str:
             )
     if any(r["job"][1] in CATALOGUE for r in runs):
         lines += catalogue_table(runs)
-    return "\n".join(lines) + "\n"
+    errors = error_lines(runs)
+    return "\n".join([*lines, *([""] if errors else []), *errors]) + "\n"
 
 
 def main(argv=None) -> int:

@@ -31,7 +31,7 @@ import statistics
 import sys
 from pathlib import Path
 
-from cell_pool import pooled_loop, publish, run_pool
+from cell_pool import error_lines, pooled_loop, publish, run_pool
 
 POPULATIONS = ("follows", "habitual", "mistake-prone", "change-of-mind")
 INTERACTIONS = ("anticipate", "wait")
@@ -314,9 +314,7 @@ def report(runs: list[dict], args, wall: float) -> str:
             f"{sum(r['violations'] for r in pr)}.",
             "",
         ]
-    errors = [r for r in runs if r["error"]]
-    if errors:
-        lines += ["## Errors", "", *(f"- {r['job']}: {r['error']}" for r in errors), ""]
+    lines += error_lines(runs)
     return "\n".join(lines)
 
 

@@ -40,6 +40,15 @@ def desk_run(population: str, interaction: str, seed: int, setting: str, lean: b
     return pooled_loop(scenario, scenario.assembly).run()
 
 
+def error_lines(runs: list[dict]) -> list[str]:
+    """A report's "Errors" section: each run (a dict with its `job` and `error`) that ended in
+    an error, none if none did."""
+    errors = [r for r in runs if r.get("error")]
+    if not errors:
+        return []
+    return ["## Errors", "", *(f"- {r['job']}: {r['error']}" for r in errors), ""]
+
+
 def publish(text: str, report, lean: bool) -> None:
     """Print a benchmark's report; unless it ran `lean` (a quick look), also write it to the
     `report` path (atomically)."""

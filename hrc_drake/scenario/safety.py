@@ -127,6 +127,11 @@ class SafetySensorConfig:
     head_above: float = 0.64
     performance_level: str = "d"
 
+    @property
+    def response_time(self) -> float:
+        """The slowest unit's response time [s]: how late the sensor's reading may be."""
+        return max(u.response_time for u in self.units)
+
 
 @dataclass
 class SafetyConfig:

@@ -491,7 +491,7 @@ def _safety_check(loop: ClosedLoop) -> SafetyCheck | None:
     body = sensor_models(setup.scenario.sensors).get(PORTS["body"])
     response = 0.0 if body is None else body.stale_after
     if config.sensor.enabled:
-        response = max([response, *(u.response_time for u in config.sensor.units)])
+        response = max(response, config.sensor.response_time)
     return check_separation(
         sampler.trace.samples,
         RobotEnvelope(setup.design),

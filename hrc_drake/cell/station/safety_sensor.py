@@ -172,7 +172,7 @@ class SafetySensor(LeafSystem):
             "safety_sensor.ok", BasicVector(1), self._calc_ok, prerequisites_of_calc=tickets
         )
         period = 1.0 / self._units[0].frame_rate
-        self._latency = max(u.response_time for u in self._units) - period
+        self._latency = config.response_time - period
         self.DeclareInitializationUnrestrictedUpdateEvent(self._power_on)
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._take)
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, self._latency, self._deliver)
