@@ -13,8 +13,10 @@ the body region permits, contacts beyond its force), the seconds in each of the 
 modes, and whether every run ended terminal.
 
 Full settings (5 s holds). Usage:
-``python benchmarks/bench_safety_populations.py [--seeds 1] [--workers 2] [--lean]`` (with
-``--lean`` the report is printed, not written).
+``python benchmarks/bench_safety_populations.py [--seeds 1] [--workers 2] [--lean] [--sensor]``
+(with ``--lean`` the report is printed, not written; with ``--sensor`` the function reads the
+safety-rated sensor, against monitoring off and today's default, into
+``reports/safety_populations_sensor.md``).
 """
 
 from __future__ import annotations
@@ -40,13 +42,32 @@ CONFIGURATIONS = {
     "monitoring alone, unseen person": f"{{safety: {{separation: reactive}}, {UNSEEN}}}",
     "predictive, unseen person": f"{{safety: {{separation: predictive}}, {UNSEEN}}}",
 }
+TODAY = "predictive, tracked"  # the default scenario's settings
+SENSOR = "sensor: {enabled: true}"
+# With `--sensor`: the safety function reads the safety-rated sensor (`safety.sensor`), against
+# monitoring off and today's default. The function then takes constant speeds whatever
+# `human_speed` says, so tracked and constant are one configuration.
+SENSOR_CONFIGURATIONS = {
+    OFF: CONFIGURATIONS[OFF],
+    TODAY: CONFIGURATIONS[TODAY],
+    "monitoring alone, sensor": f"{{safety: {{separation: reactive, {SENSOR}}}}}",
+    "predictive, sensor": f"{{safety: {{separation: predictive, {SENSOR}}}}}",
+    "monitoring alone, unseen person, sensor": (
+        f"{{safety: {{separation: reactive, {SENSOR}}}, {UNSEEN}}}"
+    ),
+    "predictive, unseen person, sensor": (
+        f"{{safety: {{separation: predictive, {SENSOR}}}, {UNSEEN}}}"
+    ),
+}
 REPORT = Path(__file__).parent / "reports" / "safety_populations.md"
+SENSOR_REPORT = Path(__file__).parent / "reports" / "safety_populations_sensor.md"
 
 
 def one_run(job: tuple) -> dict:
     """One run of (population, interaction, seed, configuration, lean): its figures."""
     population, interaction, seed, configuration, lean = job
-    result = desk_run(population, interaction, seed, CONFIGURATIONS[configuration], lean)
+    text = {**CONFIGURATIONS, **SENSOR_CONFIGURATIONS}[configuration]
+    result = desk_run(population, interaction, seed, text, lean)
     check, function = result.safety_check, result.safety_function
     return {
         "job": job,
@@ -61,17 +82,19 @@ def one_run(job: tuple) -> dict:
     }
 
 
-def rows(runs: list[dict]) -> list[str]:
-    """One row per population and configuration (means over interaction modes and seeds)."""
+def rows(runs: list[dict], configurations: dict) -> list[str]:
+    """One row per population and configuration (means over interaction modes and seeds); the
+    time also as a ratio to today's default (`TODAY`)."""
     lines = [
-        "| population | configuration | time [s] | ÷ monitoring off | steps inside S_p | "
-        "beyond ISO/TS 15066 | body contacts | normal / reduced / stopped [s] | terminal |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| population | configuration | time [s] | ÷ monitoring off | ÷ today | steps inside S_p "
+        "| beyond ISO/TS 15066 | body contacts | normal / reduced / stopped [s] | terminal |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for population in POPULATIONS:
         mine = [r for r in runs if r["job"][0] == population]
         off = statistics.fmean(r["seconds"] for r in mine if r["job"][3] == OFF)
-        for configuration in CONFIGURATIONS:
+        today = statistics.fmean(r["seconds"] for r in mine if r["job"][3] == TODAY)
+        for configuration in configurations:
             these = [r for r in mine if r["job"][3] == configuration]
             if not these:
                 continue
@@ -80,6 +103,7 @@ def rows(runs: list[dict]) -> list[str]:
             stopped = statistics.fmean(r["stopped"] for r in these)
             lines.append(
                 f"| {population} | {configuration} | {seconds:.2f} | {seconds / off:.3f} | "
+                f"{seconds / today:.3f} | "
                 f"{sum(r['inside'] for r in these)} | {sum(r['beyond'] for r in these)} | "
                 f"{sum(r['contacts'] for r in these)} | {seconds - reduced - stopped:.1f} / "
                 f"{reduced:.1f} / {stopped:.1f} | "
@@ -88,18 +112,21 @@ def rows(runs: list[dict]) -> list[str]:
     return lines
 
 
-def report(runs: list[dict], seeds: int, wall: float, lean: bool) -> str:
+def report(runs: list[dict], seeds: int, wall: float, lean: bool, sensor: bool = False) -> str:
     """The markdown report."""
     beyond = sum(r["beyond"] for r in runs if r["job"][3] != OFF)
+    configurations = SENSOR_CONFIGURATIONS if sensor else CONFIGURATIONS
     lines = [
-        "# The shared desk's safety across populations and settings",
+        "# The shared desk's safety across populations and settings"
+        + (", with the safety-rated sensor" if sensor else ""),
         "",
         f"`python benchmarks/bench_safety_populations.py --seeds {seeds}`"
+        f"{' --sensor' if sensor else ''}"
         f"{' --lean' if lean else ''}: {len(runs)} runs in {wall / 60:.1f} min on "
         f"{platform.machine()}; `shared-desk`, operator seeds 0–{seeds - 1}, both interaction "
         "modes (means over them).",
         "",
-        *rows(runs),
+        *rows(runs, configurations),
         "",
         f"With any monitoring: {beyond} step(s) or contact(s) beyond ISO/TS 15066 in "
         f"{sum(r['job'][3] != OFF for r in runs)} runs.",
@@ -115,16 +142,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, default=1, help="operator seeds per population")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--lean", action="store_true", help="0.5 s holds: a quick look")
+    parser.add_argument(
+        "--sensor", action="store_true", help="the function reads the safety-rated sensor"
+    )
     args = parser.parse_args(argv)
+    configurations = SENSOR_CONFIGURATIONS if args.sensor else CONFIGURATIONS
     jobs = [
         (p, i, seed, c, args.lean)
         for p in POPULATIONS
         for i in INTERACTIONS
         for seed in range(args.seeds)
-        for c in CONFIGURATIONS
+        for c in configurations
     ]
     runs, wall = run_pool(one_run, jobs, args.workers)
-    publish(report(runs, args.seeds, wall, args.lean), REPORT, args.lean)
+    target = SENSOR_REPORT if args.sensor else REPORT
+    publish(report(runs, args.seeds, wall, args.lean, args.sensor), target, args.lean)
     return 0
 
 

@@ -11,6 +11,7 @@ from hrc_drake.hri.faults import FaultError, SafetySensorSilent, check_faults
 from hrc_drake.robot_names import UR3_JOINTS, UR3_VELOCITY_LIMITS
 from hrc_drake.scenario.safety import (
     HumanSpeed,
+    RobotLimitsConfig,
     SafetyConfig,
     SafetyFunctionConfig,
     SafetySensorConfig,
@@ -131,6 +132,7 @@ def check_scenario(scenario: Scenario, source: str) -> Scenario:
     _check_body(scenario, fail)
     _check_separation(scenario.safety, fail)
     _check_safety_sensor(scenario.safety.sensor, fail, scenario.faults)
+    _check_robot_limits(scenario.safety.limits, fail)
     _check_interaction(scenario.interaction, fail)
     try:
         scenario.drivers.check("drivers")
@@ -291,6 +293,25 @@ def _check_safety_function(function: SafetyFunctionConfig, fail) -> None:
     for key in ("resume_clearance", "reduced_band"):
         if getattr(function, key) < 0:
             raise fail(f"safety.function.{key}", f"give metres >= 0, got {getattr(function, key)}")
+
+
+def _check_robot_limits(limits: RobotLimitsConfig, fail) -> None:
+    """The UR's limit sets: speeds it can keep, the reduced set no looser than the normal."""
+    for name in ("normal", "reduced"):
+        for key in ("tool_speed", "elbow_speed"):
+            value = getattr(getattr(limits, name), key)
+            if not value > 0:
+                raise fail(f"safety.limits.{name}.{key}", f"give m/s > 0, got {value}")
+    for key in ("tool_speed", "elbow_speed"):
+        normal, reduced = getattr(limits.normal, key), getattr(limits.reduced, key)
+        if reduced > normal:
+            raise fail(
+                f"safety.limits.reduced.{key}",
+                f"{reduced} is above the normal set's {normal}: a reduced limit is no looser",
+            )
+    for key in ("tolerance", "detection_time", "transition"):
+        if getattr(limits, key) < 0:
+            raise fail(f"safety.limits.{key}", f"give a value >= 0, got {getattr(limits, key)}")
 
 
 def _check_safety_sensor(sensor: SafetySensorConfig, fail, faults=()) -> None:

@@ -51,6 +51,60 @@ class SafetyFunctionConfig:
 
 
 @dataclass
+class LimitSetConfig:
+    """One of the UR's safety limit sets (`safety.limits.normal`, `safety.limits.reduced`): the
+    speeds its safety system allows, measured from the joint encoders.
+
+    Attributes:
+        tool_speed: m/s at the tool flange and at the TCP.
+        elbow_speed: m/s at the elbow.
+    """
+
+    tool_speed: float = 1.5
+    elbow_speed: float = 1.5
+
+
+@dataclass
+class ReducedLimitSetConfig(LimitSetConfig):
+    """The reduced limit set (`safety.limits.reduced`): ISO 10218-1's reduced speed, 0.25 m/s
+    (`shared/reference/ur3-rg2.md`), at the tool; the elbow's is our choice, the same."""
+
+    tool_speed: float = 0.25
+    elbow_speed: float = 0.25
+
+
+@dataclass
+class RobotLimitsConfig:
+    """The UR's own safety limits (`safety.limits`; `hrc_drake.cell.robot_limits`): the
+    normal set, and the reduced set that binds in reduced mode (the safety sensor's warning
+    field, `safety.function.reduced_band`, or the `sim.safety.reduced` input). Its path control
+    slows a command that would break the set in force; a measured speed over a limit by more
+    than `tolerance` for `detection_time` is a protective stop. UR's presets are not in the
+    reference: the normal set (1.5 m/s) is our choice, above anything the cell's plans command,
+    and a risk assessment sets both.
+
+    Attributes:
+        enabled: the station enforces the limits (off: neither the cap nor the stop).
+        normal: the normal limit set (`LimitSetConfig`).
+        reduced: the reduced limit set; no limit above the normal set's.
+        tolerance: m/s a measured speed may exceed its limit by (a UR e-Series speed limit's
+            tolerance, 50 mm/s: its user manual's table of safety functions).
+        detection_time: s a limit stays broken before the stop (a UR CB3's worst-case
+            detection time for the TCP speed, 250 ms; the e-Series figure is not in the
+            reference).
+        transition: s after reduced mode begins during which the stop still judges by the
+            normal set, while the arm slows to the reduced one (our choice).
+    """
+
+    enabled: bool = True
+    normal: LimitSetConfig = field(default_factory=LimitSetConfig)
+    reduced: ReducedLimitSetConfig = field(default_factory=ReducedLimitSetConfig)
+    tolerance: float = 0.05
+    detection_time: float = 0.25
+    transition: float = 0.5
+
+
+@dataclass
 class SensorUnitConfig:
     """One unit of the safety-rated sensor (`safety.sensor.units`): a 3D time-of-flight safety
     camera mounted over the desk. The field of view, reach, frame rate and response time are
@@ -178,6 +232,7 @@ class SafetyConfig:
         sensor: the safety-rated sensor the function reads (`SafetySensorConfig`); with it,
             the function takes ISO 13855's constant speeds (it measures none) and adds the
             slowest unit's response time to T_r.
+        limits: the UR's own safety limits the station enforces (`RobotLimitsConfig`).
     """
 
     enabled: bool = True
@@ -197,10 +252,14 @@ class SafetyConfig:
     forecast_spread: float = 1.0
     function: SafetyFunctionConfig = field(default_factory=SafetyFunctionConfig)
     sensor: SafetySensorConfig = field(default_factory=SafetySensorConfig)
+    limits: RobotLimitsConfig = field(default_factory=RobotLimitsConfig)
 
 
 __all__ = [
     "HumanSpeed",
+    "LimitSetConfig",
+    "ReducedLimitSetConfig",
+    "RobotLimitsConfig",
     "SafetyConfig",
     "SafetyFunctionConfig",
     "SafetySensorConfig",

@@ -38,6 +38,7 @@ from hrc_drake.cell.controller.supervisor import (
 from hrc_drake.cell.person import desk_of
 from hrc_drake.cell.ports import BodySpheres
 from hrc_drake.cell.robot_envelope import RobotEnvelope
+from hrc_drake.cell.robot_limits import PlanLimits
 from hrc_drake.cell.separation_pipeline import (
     FORECAST_POSES_KEPT,
     SeparationPipeline,
@@ -245,8 +246,11 @@ def make_controller(
         else None
     )
     clear = keep_clear_settings(scenario, design, pipeline, options)
+    envelope = pipeline.envelope if pipeline is not None else RobotEnvelope(design)
+    within = PlanLimits(envelope, scenario.safety.limits)
     supervisor = builder.AddNamedSystem(
-        "supervisor", Supervisor(space, policy, plans, home, opening, limits, on_task, clear)
+        "supervisor",
+        Supervisor(space, policy, plans, home, opening, limits, on_task, clear, within),
     )
     for name in (*MEASURED, *LINK_READINGS):
         if name != "operator.body":
@@ -255,33 +259,38 @@ def make_controller(
         builder.ExportOutput(supervisor.GetOutputPort(name), name)
     monitor = None
     if scenario.body.enabled:
-        monitor = builder.AddNamedSystem(
-            "separation_monitor",
-            ControllerSeparationMonitor(
-                design,
-                planning_settings(scenario.safety),
-                options.joint_acceleration_limit,
-                scenario.run.period,
-                pipeline,
-                body_age(scenario),
-            ),
-        )
-        builder.ConnectInput("ur3.state_estimated", monitor.GetInputPort("ur3.state_estimated"))
-        builder.ConnectInput("rg2.state_measured", monitor.GetInputPort("rg2.state_measured"))
-        memory = builder.AddNamedSystem(
-            "body_memory", BodyMemory(scenario.run.period, planning_settings(scenario.safety))
-        )
-        builder.ExportInput(memory.GetInputPort("tracked"), "operator.body")
-        body = memory.GetOutputPort("operator.body")
-        builder.Connect(body, monitor.GetInputPort("operator.body"))
-        builder.Connect(body, supervisor.GetInputPort("operator.body"))
-        builder.Connect(supervisor.GetOutputPort("intent"), monitor.GetInputPort("intent"))
-        builder.Connect(
-            monitor.GetOutputPort("speed_limit"), supervisor.GetInputPort("speed_limit")
-        )
+        monitor = _add_monitor(builder, scenario, design, options, pipeline, supervisor)
     diagram = builder.Build()
     diagram.set_name("cell_controller")
     return Controller(diagram, supervisor, monitor)
+
+
+def _add_monitor(builder, scenario: Scenario, design, options, pipeline, supervisor):
+    """The separation monitor (returned) and the body memory before it and the Supervisor, on
+    the controller's `pipeline`; the monitor's speed limit into the Supervisor."""
+    monitor = builder.AddNamedSystem(
+        "separation_monitor",
+        ControllerSeparationMonitor(
+            design,
+            planning_settings(scenario.safety),
+            options.joint_acceleration_limit,
+            scenario.run.period,
+            pipeline,
+            body_age(scenario),
+        ),
+    )
+    builder.ConnectInput("ur3.state_estimated", monitor.GetInputPort("ur3.state_estimated"))
+    builder.ConnectInput("rg2.state_measured", monitor.GetInputPort("rg2.state_measured"))
+    memory = builder.AddNamedSystem(
+        "body_memory", BodyMemory(scenario.run.period, planning_settings(scenario.safety))
+    )
+    builder.ExportInput(memory.GetInputPort("tracked"), "operator.body")
+    body = memory.GetOutputPort("operator.body")
+    builder.Connect(body, monitor.GetInputPort("operator.body"))
+    builder.Connect(body, supervisor.GetInputPort("operator.body"))
+    builder.Connect(supervisor.GetOutputPort("intent"), monitor.GetInputPort("intent"))
+    builder.Connect(monitor.GetOutputPort("speed_limit"), supervisor.GetInputPort("speed_limit"))
+    return monitor
 
 
 def connect_controller(builder: DiagramBuilder, station, controller) -> None:

@@ -82,7 +82,7 @@ from hrc_drake.cell.controller.supervisor_state import (
     TaskInFlight,
     TaskRecord,
 )
-from hrc_drake.cell.ports import CellConfiguration, PartStatus
+from hrc_drake.cell.ports import CellConfiguration, PartStatus, SafetyMode
 from hrc_drake.hri.messages import Prompt, PromptKind
 from hrc_drake.motion.plan import Plan
 from hrc_drake.motion.plan_request import PlanFailure
@@ -109,6 +109,8 @@ class Supervisor(LeafSystem):
     reading is stale: the plan stops on its path; unconnected, never).
     Output ports: `ur3.position` (6), `ur3.velocity` (6), `rg2.opening` (1), `rg2.force` (1),
     `hri.prompt` (Prompt), `intent` (MotionIntent), `status` (SupervisorStatus).
+    `robot_limits(q, qdot, reduced)`, if given, is the speed scale at which the plan keeps
+    within the UR's limit set in force (`hrc_drake.cell.robot_limits.PlanLimits`).
     `policy` needs `next_task(state)` and `matches(spec)` (a `Policy`, or a decider wrapped by
     `hrc_drake.cell.run.evaluate.DeciderPolicy`), and may offer `predicted_tasks(state)` (most
     likely first) for planning ahead; `on_task(record)`, if given, hears every task as the cell
@@ -125,8 +127,10 @@ class Supervisor(LeafSystem):
         limits: SupervisorLimits | None = None,
         on_task: Callable[[TaskRecord], None] | None = None,
         keep_clear: KeepClearSettings | None = None,
+        robot_limits: Callable[[np.ndarray, np.ndarray, bool], float] | None = None,
     ):
         super().__init__()
+        self._robot_limits = robot_limits
         policy.matches(space.spec)
         self._space, self._policy = space, policy
         self._limits = limits if limits is not None else SupervisorLimits()
@@ -231,7 +235,7 @@ class Supervisor(LeafSystem):
         status = self._status(context)
         now = context.get_time()
         cell = Readings(self._inputs, context)
-        limit = cell.speed_limit()
+        limit = min(cell.speed_limit(), self._within_robot_limits(status, cell, now))
         stop, stale = cell.stop(), cell.stale()
         status = self._recovery.note_stop(status, stop, now, cell.safety_mode())
         if stop or stale or self._anticipation.stopping_to_turn(status, now):
@@ -249,6 +253,18 @@ class Supervisor(LeafSystem):
             else:
                 status = self._recovery.stop(status, cell, now, err)
         state.get_mutable_abstract_state(self._status_index).set_value(status)
+
+    def _within_robot_limits(self, s: SupervisorStatus, cell: Readings, now: float) -> float:
+        """The speed scale at which the plan keeps within the UR's limit set in force (reduced
+        while the robot reports reduced mode), by the controller's own robot model; inf
+        without limits or a plan under way."""
+        plan = s.clock.plan
+        if self._robot_limits is None or s.mode != Mode.EXECUTE or plan is None:
+            return float("inf")
+        tau = min(s.plan_time(now), plan.duration)
+        q = plan.trajectory.value(tau).ravel()
+        qdot = plan.trajectory.EvalDerivative(tau, 1).ravel()
+        return self._robot_limits(q, qdot, cell.safety_mode() == SafetyMode.REDUCED)
 
     def _step(self, status: SupervisorStatus, cell: Readings, now: float) -> SupervisorStatus:
         if status.turn.awaiting and status.mode in (Mode.PLAN, Mode.BLOCKED, Mode.EXECUTE):

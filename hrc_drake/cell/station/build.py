@@ -220,8 +220,8 @@ def _add_arm(
     """`ur3.position` and `ur3.velocity` into the arm's servo through the safety function
     (returned; its measurements are connected once the station has them,
     `_connect_safety_function`); `ur3.state_estimated`, `ur3.tcp_force` (the wrist load,
-    `hrc_drake.cell.station.wrist`), `safety.stop` and `safety.mode` out, `safety.unlock` and
-    `ur3.command_stale` in."""
+    `hrc_drake.cell.station.wrist`), `safety.stop` and `safety.mode` out, `safety.unlock`,
+    `ur3.command_stale` and `sim.safety.reduced` in."""
     function = builder.AddNamedSystem(
         "safety_function",
         SafetyFunction(
@@ -238,6 +238,9 @@ def _add_arm(
     builder.Connect(plant.get_state_output_port(ur3), function.GetInputPort("ur3.state"))
     for name in ("ur3.position", "ur3.velocity", "safety.unlock"):
         builder.ExportInput(function.GetInputPort(name), name)
+    # The UR's configurable reduced-mode input, wired by the cell's integrator, not the
+    # controller (a test sets it); unconnected, off.
+    builder.ExportInput(function.GetInputPort("safety.reduced"), "sim.safety.reduced")
     # The real-time link's watchdog (`hrc_drake.cell.link.realtime_server`); unconnected, never.
     builder.ExportInput(function.GetInputPort("command_stale"), "ur3.command_stale")
     # What the servo follows (the command, or the function's brake or blend): RTDE's target_q

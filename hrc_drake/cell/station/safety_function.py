@@ -33,7 +33,13 @@ It acts through the robot's stop, by gating the arm's command between the contro
 - **No fresh safety sensor frame** (the `sensor_ok` input off: a unit of the safety-rated
   sensor sent no frame within its response time, `hrc_drake.cell.station.safety_sensor`): the
   same, held while the input is off.
-- **Reduced**: nothing stopped, a body sphere within `reduced_band` of S_p.
+- **Reduced**: nothing stopped, a body sphere within `reduced_band` of S_p (the safety sensor's
+  warning field), or the `safety.reduced` input on.
+- **The UR's limits** (`safety.limits`, `hrc_drake.cell.robot_limits`): the tool's
+  and the elbow's speeds, measured from the encoders, against the normal set, or in reduced
+  mode the reduced set. A command that would break the set in force is capped (its path
+  control); a speed over its limit by the tolerance for the detection time is a protective
+  stop (cause `robot limit`), unlocked as any other.
 
 After a stop the command reaches the servo through a blend from the held posture, no faster than
 `RESUME_SPEED`, so an arm whose controller went on commanding elsewhere does not jump. While the
@@ -53,6 +59,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 from hrc_drake.cell.contact_limits import REGIONS, region_rows
 from hrc_drake.cell.ports import NOBODY, BodySpheres, SafetyMode
 from hrc_drake.cell.robot_envelope import RobotEnvelope
+from hrc_drake.cell.robot_limits import LimitPoints, active_limits, exceeded
 from hrc_drake.cell.separation_pipeline import (
     SeparationPipeline,
     pipeline_of,
@@ -66,6 +73,7 @@ from hrc_drake.cell.ssm import (
     separation_constant,
     stopping_time,
 )
+from hrc_drake.cell.station.safety_motion import Blend, Brake, Cap, chase
 from hrc_drake.robot_names import UR3_JOINTS
 from hrc_drake.scenario.safety import SafetyConfig
 
@@ -106,6 +114,7 @@ class StopCause(enum.StrEnum):
     EXTERNAL = "external input"  # protective stop: the robot's protective-stop input
     STALE_COMMAND = "no fresh command"  # safeguard stop: the commands stopped coming
     STALE_SENSOR = "no fresh safety sensor frame"  # safeguard stop: a unit stopped sending
+    LIMIT = "robot limit"  # protective stop: the measured arm broke the UR's limit set
 
 
 # The causes of a safeguard stop, which clears by itself; the others are protective stops.
@@ -207,47 +216,6 @@ def _nearby(robot, v, body: BodySpheres, config: SafetyConfig, period: float, t_
 
 
 @dataclass(frozen=True)
-class Brake:
-    """A stop from joint positions `q` and velocities `v` at time `start`: every joint
-    decelerates together, the fastest at `deceleration` [rad/s²], to a standstill."""
-
-    start: float
-    q: np.ndarray
-    v: np.ndarray
-    deceleration: float
-
-    def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """(q, v) of the stop at time `t`."""
-        length = stopping_time(self.v, self.deceleration)
-        tau = min(max(t - self.start, 0.0), length)
-        if length <= 0.0:
-            return self.q, np.zeros(_N)
-        q = self.q + self.v * tau - self.v * tau * tau / (2.0 * length)
-        return q, self.v * (1.0 - tau / length)
-
-    def __deepcopy__(self, memo) -> Brake:
-        return self  # immutable once made
-
-
-@dataclass(frozen=True)
-class Blend:
-    """Back from the held posture `q` to the command, over `duration` s from `start`."""
-
-    start: float
-    q: np.ndarray
-    duration: float
-
-    def of(self, t: float, q_cmd: np.ndarray, v_cmd: np.ndarray):
-        """(q, v) of the blend at `t` toward the command `q_cmd`, `v_cmd` (a smoothstep)."""
-        x = min(max((t - self.start) / self.duration, 0.0), 1.0)
-        w, rate = x * x * (3 - 2 * x), 6 * x * (1 - x) / self.duration
-        return self.q + w * (q_cmd - self.q), w * v_cmd + rate * (q_cmd - self.q)
-
-    def __deepcopy__(self, memo) -> Blend:
-        return self
-
-
-@dataclass(frozen=True)
 class SafetyFunctionLog:
     """What the safety function did over a run (`simulate --json` `safety.function`)."""
 
@@ -256,6 +224,7 @@ class SafetyFunctionLog:
     unlocks: int = 0
     stopped_time: float = 0.0  # s the function held or braked the arm
     reduced_time: float = 0.0  # s in the reduced mode
+    capped_time: float = 0.0  # s the path control held the arm below its command's speed
     events: tuple[str, ...] = ()
 
     def to_json(self) -> dict:
@@ -266,6 +235,7 @@ class SafetyFunctionLog:
             "unlocks": self.unlocks,
             "stopped_time": round(self.stopped_time, 3),
             "reduced_time": round(self.reduced_time, 3),
+            "capped_time": round(self.capped_time, 3),
             "events": list(self.events),
         }
 
@@ -279,7 +249,9 @@ class SafetyFunctionLog:
 @dataclass(frozen=True)
 class SafetyFunctionState:
     """The function's state: its mode, why and since when it stopped, the brake it follows, the
-    blend back to the command, when a protective stop's cause cleared, and its log."""
+    blend back to the command, when a protective stop's cause cleared, the UR's limits (the
+    path control's cap, since when a limit has been broken, since when reduced mode held), and
+    its log."""
 
     mode: SafetyMode = SafetyMode.NORMAL
     cause: StopCause | None = None
@@ -287,22 +259,25 @@ class SafetyFunctionState:
     brake: Brake | None = None
     blend: Blend | None = None
     cleared_at: float | None = None  # when the stop's cause cleared (None: it has not)
+    cap: Cap | None = None
+    over_since: float | None = None
+    reduced_since: float = 0.0
     log: SafetyFunctionLog = SafetyFunctionLog()
 
     def __deepcopy__(self, memo) -> SafetyFunctionState:
         return self
 
 
-def _stop(state: SafetyFunctionState, cause: StopCause, brake: Brake, now: float):
-    """`state` stopped for `cause` at `now`, braking by `brake` (an arm already braking keeps
-    its brake; a protective stop overrides a safeguard stop)."""
+def _stop(state: SafetyFunctionState, cause: StopCause, brake: Brake, now: float, why: str = ""):
+    """`state` stopped for `cause` (in words, `why`) at `now`, braking by `brake` (an arm
+    already braking keeps its brake; a protective stop overrides a safeguard stop)."""
     protective = cause not in SAFEGUARD_CAUSES
     log = state.log
     log = replace(
         log,
         safeguard_stops=log.safeguard_stops + int(not protective),
         protective_stops=log.protective_stops + int(protective),
-        events=(*log.events, f"{now:.2f}: {_words(cause)}"),
+        events=(*log.events, f"{now:.2f}: {_words(cause)}{why and ': ' + why}"),
     )
     return replace(
         state,
@@ -312,6 +287,7 @@ def _stop(state: SafetyFunctionState, cause: StopCause, brake: Brake, now: float
         brake=state.brake if state.mode.stopped else brake,
         blend=None,
         cleared_at=None,
+        cap=None,
         log=log,
     )
 
@@ -322,6 +298,18 @@ def _words(cause: StopCause) -> str:
     if cause in (StopCause.STALE_COMMAND, StopCause.STALE_SENSOR):
         return f"safeguard stop: {cause.value}"
     return f"protective stop: {cause.value}"
+
+
+def _timed(state: SafetyFunctionState, period: float) -> SafetyFunctionLog:
+    """`state`'s log with the last period counted to its mode, and to the cap if it held."""
+    log = state.log
+    if state.mode.stopped:
+        log = replace(log, stopped_time=log.stopped_time + period)
+    elif state.mode == SafetyMode.REDUCED:
+        log = replace(log, reduced_time=log.reduced_time + period)
+    if state.cap is not None:
+        log = replace(log, capped_time=log.capped_time + period)
+    return log
 
 
 def step(
@@ -336,20 +324,17 @@ def step(
     simulated_unlock: bool = True,
     stale: bool = False,
     blind: bool = False,
+    limit: str | None = None,
+    reduced: bool = False,
 ) -> SafetyFunctionState:
     """One period of the function (see the module docstring): the next state from the
     separation `verdict`, the `external` protective-stop input, the `unlock` input, the
-    `stale` command input, the `blind` input (the safety sensor's frames stopped coming) and
-    the `brake` the arm would follow if it stopped now; with
-    `simulated_unlock` the simulated operator also unlocks, `safety.function.unlock_delay`
-    after the cause clears."""
+    `stale` command input, the `blind` input (the safety sensor's frames stopped coming), the
+    UR's `limit` broken (its words; None: none), the `reduced` input and the `brake` the arm
+    would follow if it stopped now; with `simulated_unlock` the simulated operator also
+    unlocks, `safety.function.unlock_delay` after the cause clears."""
     function = config.function
-    log = state.log
-    if state.mode.stopped:
-        log = replace(log, stopped_time=log.stopped_time + period)
-    elif state.mode == SafetyMode.REDUCED:
-        log = replace(log, reduced_time=log.reduced_time + period)
-    state = replace(state, log=log)
+    state = replace(state, log=_timed(state, period))
     if external:
         if state.cause != StopCause.EXTERNAL:
             state = _stop(state, StopCause.EXTERNAL, brake, now)
@@ -361,6 +346,8 @@ def step(
         # Held, whatever stopped it: a protective stop is not unlocked meanwhile.
         stopped = state.mode == SafetyMode.SAFEGUARD_STOP
         return replace(state, cleared_at=None) if stopped else state
+    if limit is not None and state.mode != SafetyMode.PROTECTIVE_STOP:
+        return _stop(state, StopCause.LIMIT, brake, now, limit)
     if verdict.contact and verdict.moving and state.mode != SafetyMode.PROTECTIVE_STOP:
         return _stop(state, StopCause.CONTACT, brake, now)
     if state.mode == SafetyMode.PROTECTIVE_STOP:
@@ -376,15 +363,17 @@ def step(
         return state
     if function.enabled and verdict.moving and verdict.margin < 0.0:
         return _stop(state, StopCause.SEPARATION, brake, now)
-    reduced = function.enabled and verdict.reduced
-    return replace(state, mode=SafetyMode.REDUCED if reduced else SafetyMode.NORMAL)
+    reduced = reduced or (function.enabled and verdict.reduced)
+    since = state.reduced_since if state.mode == SafetyMode.REDUCED else now
+    mode = SafetyMode.REDUCED if reduced else SafetyMode.NORMAL
+    return replace(state, mode=mode, reduced_since=since)
 
 
 def _unlocked(state, verdict: SeparationVerdict, unlock: bool, now: float, delay: float):
     """A protective stop after its external cause is off: it waits for its cause to clear (a
     contact: the separation clear), then for the unlock, never within UNLOCK_WAIT."""
     cleared = state.cleared_at
-    if cleared is None and (state.cause == StopCause.EXTERNAL or verdict.clear):
+    if cleared is None and (state.cause in (StopCause.EXTERNAL, StopCause.LIMIT) or verdict.clear):
         state = replace(state, cleared_at=now)
         cleared = now
     if cleared is None or now < state.since + UNLOCK_WAIT - 1e-9:
@@ -421,7 +410,7 @@ class SafetyFunction(LeafSystem):
     protective stop; connected, a person unlocks there and only there; unconnected, the
     simulated operator does), `command_stale` (1 while the arm's commands have stopped coming;
     unconnected, never), `sensor_ok` (0 while the safety sensor's frames are stale;
-    unconnected, always 1).
+    unconnected, always 1), `safety.reduced` (1: the UR's reduced-mode input; unconnected, 0).
     Output ports: `desired_state` (12, for the arm's servo), `safety.stop` (1), `safety.mode`
     (1, the `SafetyMode` code). Updated every `period`."""
 
@@ -435,6 +424,7 @@ class SafetyFunction(LeafSystem):
     ):
         super().__init__()
         self._pipeline, self._config, self._widths = pipeline_of(envelope), config, dict(widths)
+        self._points = LimitPoints(self._pipeline.envelope)
         self._acc, self._period = joint_acceleration, period
         self._position = self.DeclareVectorInputPort("ur3.position", _N)
         self._velocity = self.DeclareVectorInputPort("ur3.velocity", _N)
@@ -445,6 +435,7 @@ class SafetyFunction(LeafSystem):
         self._unlock = self.DeclareVectorInputPort("safety.unlock", 1)
         self._stale = self.DeclareVectorInputPort("command_stale", 1)
         self._sensor_ok = self.DeclareVectorInputPort("sensor_ok", 1)
+        self._reduced = self.DeclareVectorInputPort("safety.reduced", 1)
         self._state = self.DeclareAbstractState(AbstractValue.Make(SafetyFunctionState()))
         command = {self._position.ticket(), self._velocity.ticket()}
         ticket = {self.abstract_state_ticket(self._state), self.time_ticket()}
@@ -466,14 +457,19 @@ class SafetyFunction(LeafSystem):
         """The function's state in this system's `context`."""
         return context.get_abstract_state(self._state).get_value()
 
+    def _command(self, context, state: SafetyFunctionState, now: float):
+        """The controller's command, through the blend back to it after a stop."""
+        q, v = self._position.Eval(context), self._velocity.Eval(context)
+        return (q, v) if state.blend is None else state.blend.of(now, q, v)
+
     def _calc_desired(self, context, output) -> None:
         state, now = self.state(context), context.get_time()
         if state.brake is not None:
             q, v = state.brake.at(now)
+        elif state.cap is not None:
+            q, v = state.cap.at(now)
         else:
-            q, v = self._position.Eval(context), self._velocity.Eval(context)
-            if state.blend is not None:
-                q, v = state.blend.of(now, q, v)
+            q, v = self._command(context, state, now)
         output.SetFromVector(np.concatenate([q, v]))
 
     def _calc_stop(self, context, output) -> None:
@@ -504,6 +500,7 @@ class SafetyFunction(LeafSystem):
         now = context.get_time()
         stale = self._stale.HasValue(context) and self._stale.Eval(context)[0] > 0.5
         blind = self._sensor_ok.HasValue(context) and self._sensor_ok.Eval(context)[0] < 0.5
+        over_since, broken = self._watch(self.state(context), q, v, opening, now)
         new = step(
             self.state(context),
             verdict,
@@ -516,6 +513,8 @@ class SafetyFunction(LeafSystem):
             simulated_unlock=not pendant,
             stale=stale,
             blind=blind,
+            limit=broken,
+            reduced=self._reduced.HasValue(context) and self._reduced.Eval(context)[0] > 0.5,
         )
         if new.blend is not None and new.blend.start == now:
             # The smoothstep's peak rate is 1.5 times its mean.
@@ -525,7 +524,38 @@ class SafetyFunction(LeafSystem):
             )
         elif new.blend is not None and now >= new.blend.start + new.blend.duration:
             new = replace(new, blend=None)
+        new = self._path_control(context, replace(new, over_since=over_since), opening, now)
         state.get_mutable_abstract_state(self._state).set_value(new)
+
+    def _watch(self, state: SafetyFunctionState, q, v, opening: float, now: float):
+        """(since when a UR limit has been broken, None: it is not; the words of a limit broken
+        for its detection time, None: none), judging the measured arm by the normal set until
+        reduced mode has held for its transition, then by the reduced set."""
+        limits = self._config.limits
+        if not limits.enabled or state.mode.stopped:
+            return None, None
+        settled = now >= state.reduced_since + limits.transition - 1e-9
+        judged = active_limits(limits, state.mode == SafetyMode.REDUCED and settled)
+        words = exceeded(self._points.reading(q, v, opening), judged, limits.tolerance)
+        if words is None:
+            return None, None
+        since = now if state.over_since is None else state.over_since
+        return since, (words if now >= since + limits.detection_time - 1e-9 else None)
+
+    def _path_control(self, context, state: SafetyFunctionState, opening: float, now: float):
+        """`state` with the cap the UR's path control lays on the command under the limit set
+        in force (None: the command keeps within it)."""
+        limits = self._config.limits
+        if not limits.enabled or state.brake is not None:
+            return replace(state, cap=None)
+        active = active_limits(limits, state.mode == SafetyMode.REDUCED)
+
+        def scale(q, v) -> float:
+            return self._points.scale(q, v, opening, active)
+
+        q_cmd, v_cmd = self._command(context, state, now)
+        cap = chase(state.cap, q_cmd, v_cmd, now, self._period, scale)
+        return replace(state, cap=cap)
 
 
 __all__ = [
