@@ -226,7 +226,7 @@ def test_station_record_round_trips_through_the_report():
             Injection("grip-lost", 1, 1.0, 2.5300000000000002, 2.01, None, True),
             Injection("pushed", 3),
         ),
-        SafetyFunctionLog(1, 2, 2, 10.5, 0.25, ("1.00: protective stop: external input",)),
+        SafetyFunctionLog(1, 2, 2, 10.5, 0.25, 0.125, ("1.00: protective stop: external input",)),
     )
     text = lm.session_message(5, "report", {"sim_time": 9.0, "exchanges": 900, **record.to_json()})
     report = json.loads(lm.lcmt_station_session.decode(text.encode()).text)

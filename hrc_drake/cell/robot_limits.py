@@ -34,20 +34,26 @@ FLANGE = "tool0"
 # the gripper and a held part add under 0.25 m): a joint speed times it bounds the speed it
 # gives any point, so a slow arm needs no kinematics.
 REACH = 0.8  # m
+# A UR e-Series momentum limit's tolerance (its user manual's table of safety functions; a CB3's
+# trueness is the same figure, `shared/reference/safety-and-devices.md` gives its detection time).
+MOMENTUM_TOLERANCE = 3.0  # kg m/s
 
 
 @dataclass(frozen=True)
 class LimitReading:
-    """The speeds a UR's safety system limits [m/s]: the tool's (the faster of the flange and
-    the TCP) and the elbow's."""
+    """What a UR's safety system limits: the tool's speed (the faster of the flange and the TCP)
+    and the elbow's [m/s], and the arm's momentum [kg m/s]."""
 
     tool: float = 0.0
     elbow: float = 0.0
+    momentum: float = 0.0
 
 
 class LimitPoints:
-    """The velocity of the tool flange, the TCP and the elbow per unit of each joint's speed,
-    from `envelope`'s kinematics (the payload rides at the TCP, so the tool's points cover it)."""
+    """The velocity of the tool flange, the TCP and the elbow, and the arm's momentum, per unit
+    of each joint's speed, from `envelope`'s kinematics and masses. The payload rides at the
+    TCP, so the tool's points cover its speed; its momentum is not counted (a part weighs under
+    a tenth of the arm and gripper)."""
 
     def __init__(self, envelope: RobotEnvelope):
         plant, context = envelope.plant, envelope.context
@@ -66,55 +72,67 @@ class LimitPoints:
             for f in tool
         ]
         self._points.append((2, np.zeros(3)))
+        self._masses = _link_masses(envelope)
+        self.mass = float(sum(m for _, m, _ in self._masses))
 
     def maps(self, q: np.ndarray, opening: float | None) -> np.ndarray:
-        """(3, 3, 6): the flange's, the TCP's and the elbow's velocity per joint speed at `q`."""
+        """(4, 3, 6): the flange's, the TCP's and the elbow's velocity, and the arm's momentum,
+        per joint speed at `q`."""
         R_WB, p_WB = self._envelope.pose(q, opening)
         columns = self._envelope.link_velocities(R_WB, p_WB, np.eye(len(self._rows)))
-        maps = []
-        for link, point in self._points:
+
+        def velocity(link: int, point: np.ndarray) -> np.ndarray:
             row = self._rows[link]
             p_W = R_WB[row] @ point + p_WB[row]
             omega, v0 = columns[:, link, 0], columns[:, link, 1]
-            maps.append((v0 + np.cross(omega, p_W)).T)
+            return (v0 + np.cross(omega, p_W)).T
+
+        maps = [velocity(link, point) for link, point in self._points]
+        maps.append(sum(mass * velocity(link, com) for link, mass, com in self._masses))
         return np.array(maps)
 
     def reading(self, q, v, opening: float | None) -> LimitReading:
-        """The speeds at joint positions `q` and speeds `v` (none computed for an arm too slow
-        to move any point faster than `REACH` times its joints' speeds: a bound)."""
-        bound = REACH * float(np.abs(v).sum())
-        if bound == 0.0:
+        """The speeds and the momentum at joint positions `q` and speeds `v` (zero at rest)."""
+        if not np.any(v):
             return LimitReading()
-        speeds = np.linalg.norm(self.maps(q, opening) @ np.asarray(v, dtype=float), axis=1)
-        return LimitReading(tool=float(speeds[:2].max()), elbow=float(speeds[2]))
+        values = np.linalg.norm(self.maps(q, opening) @ np.asarray(v, dtype=float), axis=1)
+        return LimitReading(
+            tool=float(values[:2].max()), elbow=float(values[2]), momentum=float(values[3])
+        )
 
     def scale(self, q, v, opening: float | None, limits: LimitSetConfig) -> float:
         """The factor the joint speeds `v` at `q` may grow by (below 1: must shrink by) before
-        a limit of `limits` binds; inf for an arm at rest. A bound first: a slow arm is far
-        from every limit without its kinematics."""
-        v = np.asarray(v, dtype=float)
-        least = min(limits.tool_speed, limits.elbow_speed)
-        bound = REACH * float(np.abs(v).sum())
+        a limit of `limits` binds; inf for an arm at rest. `v` may be rows of joint speeds (a
+        plan's ahead, at `q`'s kinematics): the least factor of them. A bound first: a slow
+        arm is far from every limit without its kinematics."""
+        rows = np.atleast_2d(np.asarray(v, dtype=float))
+        bound = REACH * float(np.abs(rows).sum(axis=1).max(initial=0.0))
         if bound == 0.0:
             return float("inf")
+        least = min(limits.tool_speed, limits.elbow_speed, limits.momentum / self.mass)
         if bound <= least:
             return least / bound  # a lower bound of the factor, and already over 1
-        reading = self.reading(q, v, opening)
-        return min(
-            limits.tool_speed / max(reading.tool, 1e-12),
-            limits.elbow_speed / max(reading.elbow, 1e-12),
+        values = np.linalg.norm(np.einsum("mij,kj->kmi", self.maps(q, opening), rows), axis=2)
+        tool, elbow, momentum = values[:, :2].max(axis=1), values[:, 2], values[:, 3]
+        return float(
+            min(
+                limits.tool_speed / max(tool.max(), 1e-12),
+                limits.elbow_speed / max(elbow.max(), 1e-12),
+                limits.momentum / max(momentum.max(), 1e-12),
+            )
         )
 
 
-# The controller keeps its command this far under the limits, so that the station's cap, which
+# Where a limit binds, the controller keeps this far under it, so that the station's cap, which
 # binds at the limit itself, is not set off by round-off (our choice).
-PLAN_MARGIN = 0.99
+PLAN_MARGIN = 0.999
 
 
 class PlanLimits:
     """The controller's reading of the limits the station enforces: the speed scale a plan may
-    run at, at joint positions `q` and the plan's joint speeds `qdot` (at scale 1), under the
-    set in force (`reduced`: the robot reports reduced mode); inf where nothing binds."""
+    run at, at joint positions `q` and the plan's joint speeds `qdot` at scale 1 (rows: now and
+    ahead), under the set in force (`reduced`: the robot reports reduced mode); inf where
+    nothing binds."""
 
     def __init__(self, envelope: RobotEnvelope, config: RobotLimitsConfig):
         self._points, self._config = LimitPoints(envelope), config
@@ -123,7 +141,8 @@ class PlanLimits:
         if not self._config.enabled:
             return float("inf")
         limits = active_limits(self._config, reduced)
-        return PLAN_MARGIN * self._points.scale(q, qdot, None, limits)
+        scale = self._points.scale(q, qdot, None, limits)
+        return scale if scale >= 1.0 else PLAN_MARGIN * scale
 
 
 def active_limits(config: RobotLimitsConfig, reduced: bool) -> LimitSetConfig:
@@ -132,18 +151,43 @@ def active_limits(config: RobotLimitsConfig, reduced: bool) -> LimitSetConfig:
 
 
 def exceeded(reading: LimitReading, limits: LimitSetConfig, tolerance: float) -> str | None:
-    """Words naming the limit `reading` breaks by more than `tolerance` (None: none)."""
-    for name, value, limit in (
-        ("tool speed", reading.tool, limits.tool_speed),
-        ("elbow speed", reading.elbow, limits.elbow_speed),
+    """Words naming the limit `reading` breaks by more than its tolerance (None: none): the
+    speeds' `tolerance` [m/s], the momentum's `MOMENTUM_TOLERANCE`."""
+    for name, value, limit, slack, unit in (
+        ("tool speed", reading.tool, limits.tool_speed, tolerance, "m/s"),
+        ("elbow speed", reading.elbow, limits.elbow_speed, tolerance, "m/s"),
+        ("momentum", reading.momentum, limits.momentum, MOMENTUM_TOLERANCE, "kg m/s"),
     ):
-        if value > limit + tolerance:
-            return f"{name} {value:.2f} m/s over its limit {limit:.2f} m/s"
+        if value > limit + slack:
+            return f"{name} {value:.2f} {unit} over its limit {limit:.2f} {unit}"
     return None
+
+
+def _link_masses(envelope: RobotEnvelope) -> list[tuple[int, float, np.ndarray]]:
+    """(link row, mass [kg], centre of mass in the link's frame) of each moving arm link with
+    what is welded to it (the gripper rides on the last), from the plant's default inertias and
+    the gripper's default opening."""
+    plant, context = envelope.plant, envelope.context
+    models = (plant.GetModelInstanceByName(UR3), plant.GetModelInstanceByName(GRIPPER))
+    sums: dict[int, list] = {}
+    for model in models:
+        for index in plant.GetBodyIndices(model):
+            body = plant.get_body(index)
+            link, mass = envelope.link_of(body), float(body.default_mass())
+            if link == len(envelope.links) or not mass > 0:
+                continue  # the fixed base, or a massless frame
+            frame = envelope.links[link].body_frame()
+            X_LB = plant.CalcRelativeTransform(context, frame, body.body_frame())
+            moment = mass * (X_LB @ body.default_com())
+            total = sums.setdefault(link, [0.0, np.zeros(3)])
+            total[0] += mass
+            total[1] = total[1] + moment
+    return [(link, m, first / m) for link, (m, first) in sorted(sums.items())]
 
 
 __all__ = [
     "FLANGE",
+    "MOMENTUM_TOLERANCE",
     "PLAN_MARGIN",
     "REACH",
     "LimitPoints",

@@ -297,12 +297,13 @@ def _check_safety_function(function: SafetyFunctionConfig, fail) -> None:
 
 def _check_robot_limits(limits: RobotLimitsConfig, fail) -> None:
     """The UR's limit sets: speeds it can keep, the reduced set no looser than the normal."""
+    keys = ("tool_speed", "elbow_speed", "momentum")
     for name in ("normal", "reduced"):
-        for key in ("tool_speed", "elbow_speed"):
+        for key in keys:
             value = getattr(getattr(limits, name), key)
             if not value > 0:
-                raise fail(f"safety.limits.{name}.{key}", f"give m/s > 0, got {value}")
-    for key in ("tool_speed", "elbow_speed"):
+                raise fail(f"safety.limits.{name}.{key}", f"give a limit > 0, got {value}")
+    for key in keys:
         normal, reduced = getattr(limits.normal, key), getattr(limits.reduced, key)
         if reduced > normal:
             raise fail(

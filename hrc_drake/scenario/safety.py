@@ -58,19 +58,23 @@ class LimitSetConfig:
     Attributes:
         tool_speed: m/s at the tool flange and at the TCP.
         elbow_speed: m/s at the elbow.
+        momentum: kg m/s of the arm and its gripper.
     """
 
     tool_speed: float = 1.5
     elbow_speed: float = 1.5
+    momentum: float = 25.0
 
 
 @dataclass
 class ReducedLimitSetConfig(LimitSetConfig):
     """The reduced limit set (`safety.limits.reduced`): ISO 10218-1's reduced speed, 0.25 m/s
-    (`shared/reference/ur3-rg2.md`), at the tool; the elbow's is our choice, the same."""
+    (`shared/reference/ur3-rg2.md`), at the tool; the elbow's is our choice, the same, and the
+    momentum's too."""
 
     tool_speed: float = 0.25
     elbow_speed: float = 0.25
+    momentum: float = 10.0
 
 
 @dataclass
@@ -80,15 +84,16 @@ class RobotLimitsConfig:
     field, `safety.function.reduced_band`, or the `sim.safety.reduced` input). Its path control
     slows a command that would break the set in force; a measured speed over a limit by more
     than `tolerance` for `detection_time` is a protective stop. UR's presets are not in the
-    reference: the normal set (1.5 m/s) is our choice, above anything the cell's plans command,
-    and a risk assessment sets both.
+    reference: the normal set (1.5 m/s, 25 kg m/s) and the reduced set's momentum (10 kg m/s) are
+    our choice, above anything the cell's plans command, and a risk assessment sets both.
 
     Attributes:
         enabled: the station enforces the limits (off: neither the cap nor the stop).
         normal: the normal limit set (`LimitSetConfig`).
         reduced: the reduced limit set; no limit above the normal set's.
         tolerance: m/s a measured speed may exceed its limit by (a UR e-Series speed limit's
-            tolerance, 50 mm/s: its user manual's table of safety functions).
+            tolerance, 50 mm/s: its user manual's table of safety functions; the momentum's
+            is its 3 kg m/s).
         detection_time: s a limit stays broken before the stop (a UR CB3's worst-case
             detection time for the TCP speed, 250 ms; the e-Series figure is not in the
             reference).

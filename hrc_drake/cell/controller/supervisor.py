@@ -263,8 +263,9 @@ class Supervisor(LeafSystem):
             return float("inf")
         tau = min(s.plan_time(now), plan.duration)
         q = plan.trajectory.value(tau).ravel()
-        qdot = plan.trajectory.EvalDerivative(tau, 1).ravel()
-        return self._robot_limits(q, qdot, cell.safety_mode() == SafetyMode.REDUCED)
+        # As far ahead as the monitor looks: a plan that speeds up meanwhile would break them.
+        ahead = plan_velocities(plan.trajectory, tau, plan.duration, self._limits.look_ahead)
+        return self._robot_limits(q, ahead, cell.safety_mode() == SafetyMode.REDUCED)
 
     def _step(self, status: SupervisorStatus, cell: Readings, now: float) -> SupervisorStatus:
         if status.turn.awaiting and status.mode in (Mode.PLAN, Mode.BLOCKED, Mode.EXECUTE):
