@@ -8,7 +8,7 @@ and the TCP), not from the function's own figures."""
 import numpy as np
 import pytest
 from pydrake.multibody.tree import JacobianWrtVariable
-from test_safety_function import PERIOD, Cell
+from test_safety_function import PERIOD, Cell, _tcp
 
 from hrc_drake.cell.ports import SafetyMode
 from hrc_drake.cell.robot_envelope import RobotEnvelope
@@ -208,6 +208,8 @@ def test_the_limits_read_the_tool_and_the_elbow():
         ("{reduced: {momentum: 30}}", r"safety\.limits\.reduced\.momentum.*above"),
         ("{reduced: {elbow_speed: 2.0}}", r"safety\.limits\.reduced\.elbow_speed.*above"),
         ("{detection_time: -1}", r"safety\.limits\.detection_time.*>= 0"),
+        ("{reduced_plane: {normal: [0, 0, 0]}}", r"reduced_plane\.normal.*nonzero"),
+        ("{reduced_plane: {point: [0, 1]}}", r"reduced_plane\.point.*\[x, y, z\]"),
     ],
 )
 def test_bad_limits_are_refused(text, match):
@@ -231,3 +233,29 @@ def test_the_controller_slows_its_plan_within_the_limits_so_the_cap_seldom_binds
     assert planned.safety_function.reduced_time > 10.0
     assert planned.safety_function.capped_time < 0.1
     assert unplanned.safety_function.capped_time > 1.0
+
+
+def test_past_the_trigger_plane_the_reduced_limits_bind():
+    """A trigger plane half way along the base's turn: the tool moves at 0.43 m/s in normal
+    mode, then, the TCP past the plane, the robot is in reduced mode by itself and the tool
+    keeps to 0.25 m/s."""
+    probe = Cell(["{body: {enabled: false}}"], BASE_TURN, speed=1.5)
+    start = _tcp(probe.station, probe.q0)
+    middle = _tcp(probe.station, probe.q0 + 0.5 * np.asarray(BASE_TURN))
+    normal = middle - _tcp(probe.station, probe.q0 + 0.4 * np.asarray(BASE_TURN))
+    plane = f"{{point: {middle.tolist()}, normal: {normal.tolist()}}}"
+    cell = Cell(
+        ["{body: {enabled: false}}", f"{{safety: {{limits: {{reduced_plane: {plane}}}}}}}"],
+        BASE_TURN,
+        speed=1.5,
+    )
+    assert np.dot(start - middle, normal) < 0  # it starts on the normal side
+    cell.advance_to(3.0)
+    times, speeds = _tool_speeds(cell)
+    crossed = next(k for k, mode in enumerate(cell.modes) if mode == SafetyMode.REDUCED)
+    assert all(mode == SafetyMode.NORMAL for mode in cell.modes[:crossed])
+    assert all(mode == SafetyMode.REDUCED for mode in cell.modes[crossed:])
+    at = cell.samples[crossed].time
+    assert speeds[times < at - PERIOD].max() > 0.4
+    assert speeds[times > at + DETECTION].max() <= REDUCED + 0.01
+    assert cell.samples[-1].q[0] - cell.q0[0] == pytest.approx(0.9, abs=0.005)

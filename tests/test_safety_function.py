@@ -80,6 +80,23 @@ def test_the_separation_falling_short_while_moving_is_a_safeguard_stop_that_clea
     assert state.blend is not None and state.log.safeguard_stops == 1
 
 
+def test_a_safeguard_stop_with_a_manual_reset_waits_for_the_reset_once_clear():
+    """`safeguard_reset: manual`: clear, the stop holds past the restart delay until the reset
+    (the unlock input), and without one until the simulated operator's reset."""
+    manual = SafetyConfig(function=SafetyFunctionConfig(safeguard_reset="manual", unlock_delay=2.0))
+    stopped, _ = _run(SafetyFunctionState(), [SHORT], config=manual)
+    state, _ = _run(stopped, [STILL] * 50, config=manual, start=PERIOD)  # 1 s: clear, held
+    assert state.mode == SafetyMode.SAFEGUARD_STOP
+    reset, _ = _run(state, [STILL], unlock=True, config=manual, start=51 * PERIOD)
+    assert reset.mode == SafetyMode.NORMAL and reset.log.events[-1].endswith("reset: resumes")
+    # Nobody at the reset: the simulated operator resets 2 s after the stop cleared.
+    state, seen = _run(state, [STILL] * 100, config=manual, start=51 * PERIOD)
+    resumed = next(k for k, s in enumerate(seen) if s.mode == SafetyMode.NORMAL)
+    assert (51 + resumed) * PERIOD == pytest.approx(PERIOD + 2.0, abs=2 * PERIOD)
+    with pytest.raises(ScenarioError, match=r"safety\.function\.safeguard_reset.*auto or manual"):
+        load_cell_scenario("row1-optimal", "{safety: {function: {safeguard_reset: later}}}")
+
+
 def test_commands_that_stop_coming_are_a_safeguard_stop_held_until_they_come_again():
     """The real-time link's watchdog: the arm brakes at once and holds while the commands are
     stale, however still it stands; RESTART_DELAY after fresh ones it resumes by itself."""

@@ -75,6 +75,12 @@ class LimitPoints:
         self._masses = _link_masses(envelope)
         self.mass = float(sum(m for _, m, _ in self._masses))
 
+    def tcp(self, q: np.ndarray, opening: float | None) -> np.ndarray:
+        """The TCP's position in world at `q`."""
+        R_WB, p_WB = self._envelope.pose(q, opening)
+        link, point = self._points[1]
+        return R_WB[self._rows[link]] @ point + p_WB[self._rows[link]]
+
     def maps(self, q: np.ndarray, opening: float | None) -> np.ndarray:
         """(4, 3, 6): the flange's, the TCP's and the elbow's velocity, and the arm's momentum,
         per joint speed at `q`."""
@@ -145,6 +151,14 @@ class PlanLimits:
         return scale if scale >= 1.0 else PLAN_MARGIN * scale
 
 
+def beyond_plane(config: RobotLimitsConfig, tcp: np.ndarray) -> bool:
+    """Whether the TCP at `tcp` lies past the reduced-mode trigger plane (none: never)."""
+    plane = config.reduced_plane
+    if plane is None:
+        return False
+    return float(np.dot(np.asarray(tcp) - plane.point, plane.normal)) > 0.0
+
+
 def active_limits(config: RobotLimitsConfig, reduced: bool) -> LimitSetConfig:
     """The limit set in force: the reduced set in reduced mode, else the normal set."""
     return config.reduced if reduced else config.normal
@@ -194,5 +208,6 @@ __all__ = [
     "LimitReading",
     "PlanLimits",
     "active_limits",
+    "beyond_plane",
     "exceeded",
 ]

@@ -12,6 +12,7 @@ from hrc_drake.robot_names import UR3_JOINTS, UR3_VELOCITY_LIMITS
 from hrc_drake.scenario.safety import (
     HumanSpeed,
     RobotLimitsConfig,
+    SafeguardReset,
     SafetyConfig,
     SafetyFunctionConfig,
     SafetySensorConfig,
@@ -290,6 +291,12 @@ HUMAN_SPEEDS = tuple(m.value for m in HumanSpeed)
 
 def _check_safety_function(function: SafetyFunctionConfig, fail) -> None:
     """The station's safety function: distances it can keep."""
+    resets = tuple(r.value for r in SafeguardReset)
+    if function.safeguard_reset not in resets:
+        raise fail(
+            "safety.function.safeguard_reset",
+            f"give {' or '.join(resets)}, got {function.safeguard_reset!r}",
+        )
     for key in ("resume_clearance", "reduced_band"):
         if getattr(function, key) < 0:
             raise fail(f"safety.function.{key}", f"give metres >= 0, got {getattr(function, key)}")
@@ -313,6 +320,14 @@ def _check_robot_limits(limits: RobotLimitsConfig, fail) -> None:
     for key in ("tolerance", "detection_time", "transition"):
         if getattr(limits, key) < 0:
             raise fail(f"safety.limits.{key}", f"give a value >= 0, got {getattr(limits, key)}")
+    plane = limits.reduced_plane
+    if plane is not None:
+        for key in ("point", "normal"):
+            value = getattr(plane, key)
+            if len(value) != 3 or not all(math.isfinite(x) for x in value):
+                raise fail(f"safety.limits.reduced_plane.{key}", f"give [x, y, z], got {value}")
+        if not np.linalg.norm(plane.normal) > 0:
+            raise fail("safety.limits.reduced_plane.normal", "give a nonzero normal")
 
 
 def _check_safety_sensor(sensor: SafetySensorConfig, fail, faults=()) -> None:

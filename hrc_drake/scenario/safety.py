@@ -21,6 +21,13 @@ class HumanSpeed(StrEnum):
     CONSTANT = "constant"  # ISO 13855's 1.6 m/s (2.0 m/s within 0.5 m) throughout
 
 
+class SafeguardReset(StrEnum):
+    """`safety.function.safeguard_reset`: how a safeguard stop ends once its cause has cleared."""
+
+    AUTO = "auto"  # by itself, after the restart delay
+    MANUAL = "manual"  # at a reset (the unlock input, or the simulated operator)
+
+
 class Timing(StrEnum):
     """`safety.timing`: how predictive separation times the plan around the forecast."""
 
@@ -42,12 +49,16 @@ class SafetyFunctionConfig:
         unlock_delay: s after a protective stop's cause clears until the simulated operator
             presses unlock (negative: never); with the station's `safety.unlock` input
             connected (a pendant's button, `--live`), only that input unlocks.
+        safeguard_reset: how a safeguard stop ends once clear: `auto` (by itself, as a UR's
+            safeguard stop input without a reset input) or `manual` (at a reset: the unlock
+            input, or the simulated operator `unlock_delay` s after it cleared).
     """
 
     enabled: bool = True
     resume_clearance: float = 0.05
     reduced_band: float = 0.15
     unlock_delay: float = 1.0
+    safeguard_reset: str = SafeguardReset.AUTO.value
 
 
 @dataclass
@@ -78,6 +89,20 @@ class ReducedLimitSetConfig(LimitSetConfig):
 
 
 @dataclass
+class TriggerPlaneConfig:
+    """A UR's "trigger reduced mode" plane (`safety.limits.reduced_plane`): while the TCP lies
+    on the side `normal` points to, the reduced limits bind.
+
+    Attributes:
+        point: [x, y, z] of a point of the plane in world [m].
+        normal: [x, y, z], the plane's normal, toward its reduced side.
+    """
+
+    point: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    normal: list[float] = field(default_factory=lambda: [1.0, 0.0, 0.0])
+
+
+@dataclass
 class RobotLimitsConfig:
     """The UR's own safety limits (`safety.limits`; `hrc_drake.cell.robot_limits`): the
     normal set, and the reduced set that binds in reduced mode (the safety sensor's warning
@@ -99,6 +124,8 @@ class RobotLimitsConfig:
             reference).
         transition: s after reduced mode begins during which the stop still judges by the
             normal set, while the arm slows to the reduced one (our choice).
+        reduced_plane: a plane past which the TCP puts the robot in reduced mode
+            (`TriggerPlaneConfig`; none by default).
     """
 
     enabled: bool = True
@@ -107,6 +134,7 @@ class RobotLimitsConfig:
     tolerance: float = 0.05
     detection_time: float = 0.25
     transition: float = 0.5
+    reduced_plane: TriggerPlaneConfig | None = None
 
 
 @dataclass
@@ -265,10 +293,12 @@ __all__ = [
     "LimitSetConfig",
     "ReducedLimitSetConfig",
     "RobotLimitsConfig",
+    "SafeguardReset",
     "SafetyConfig",
     "SafetyFunctionConfig",
     "SafetySensorConfig",
     "SensorUnitConfig",
     "Separation",
     "Timing",
+    "TriggerPlaneConfig",
 ]

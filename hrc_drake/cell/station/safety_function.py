@@ -20,7 +20,8 @@ It acts through the robot's stop, by gating the arm's command between the contro
   its current direction of motion at the joint acceleration limit, every joint together, and
   holds there; once it has stood still, or every body sphere has been `resume_clearance` beyond
   the S_p of an arm at rest, for `RESTART_DELAY`, it resumes by itself (an arm at rest is
-  within the contact speed: it may go on, slowly, while the person stays near).
+  within the contact speed: it may go on, slowly, while the person stays near); with
+  `safety.function.safeguard_reset: manual`, once clear, at a reset instead.
 - **Protective stop** (the external protective-stop input, or a robot shape touching the body
   while moving toward it faster than the contact speed, or touching the head): the same brake,
   then it holds until the cause has cleared and someone unlocks — the `safety.unlock` input (a
@@ -59,7 +60,6 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 from hrc_drake.cell.contact_limits import REGIONS, region_rows
 from hrc_drake.cell.ports import NOBODY, BodySpheres, SafetyMode
 from hrc_drake.cell.robot_envelope import RobotEnvelope
-from hrc_drake.cell.robot_limits import LimitPoints, active_limits, exceeded
 from hrc_drake.cell.separation_pipeline import (
     SeparationPipeline,
     pipeline_of,
@@ -73,9 +73,10 @@ from hrc_drake.cell.ssm import (
     separation_constant,
     stopping_time,
 )
-from hrc_drake.cell.station.safety_motion import Blend, Brake, Cap, chase
+from hrc_drake.cell.station.safety_motion import Blend, Brake, Cap
+from hrc_drake.cell.station.ur_limits import UrLimits
 from hrc_drake.robot_names import UR3_JOINTS
-from hrc_drake.scenario.safety import SafetyConfig
+from hrc_drake.scenario.safety import SafeguardReset, SafetyConfig
 
 # A UR does not unlock a protective stop within 5 s of it (its dashboard server answers "Cannot
 # unlock protective stop until 5s after occurrence").
@@ -354,19 +355,30 @@ def step(
         delay = function.unlock_delay if simulated_unlock else -1.0
         return _unlocked(state, verdict, unlock, now, delay)
     if state.mode == SafetyMode.SAFEGUARD_STOP:
-        if verdict.moving and not verdict.clear:
-            return replace(state, cleared_at=None)
-        if state.cleared_at is None:
-            return replace(state, cleared_at=now)
-        if now >= state.cleared_at + RESTART_DELAY - 1e-9:
-            return _resumed(state, now, "safeguard stop cleared")
-        return state
+        delay = function.unlock_delay if simulated_unlock else -1.0
+        return _safeguarded(state, verdict, unlock, now, function.safeguard_reset, delay)
     if function.enabled and verdict.moving and verdict.margin < 0.0:
         return _stop(state, StopCause.SEPARATION, brake, now)
     reduced = reduced or (function.enabled and verdict.reduced)
     since = state.reduced_since if state.mode == SafetyMode.REDUCED else now
     mode = SafetyMode.REDUCED if reduced else SafetyMode.NORMAL
     return replace(state, mode=mode, reduced_since=since)
+
+
+def _safeguarded(state, verdict: SeparationVerdict, unlock: bool, now: float, reset, delay):
+    """A safeguard stop: held while the arm moves inside S_p; once clear, it resumes by itself
+    after `RESTART_DELAY` (`reset` auto), or at the `unlock` input or the simulated operator's
+    reset `delay` s after it cleared (manual; a negative delay: never)."""
+    if verdict.moving and not verdict.clear:
+        return replace(state, cleared_at=None)
+    if state.cleared_at is None:
+        return replace(state, cleared_at=now)
+    if reset == SafeguardReset.MANUAL:
+        operator = delay >= 0 and now >= state.cleared_at + delay - 1e-9
+        return _resumed(state, now, "safeguard stop reset") if unlock or operator else state
+    if now >= state.cleared_at + RESTART_DELAY - 1e-9:
+        return _resumed(state, now, "safeguard stop cleared")
+    return state
 
 
 def _unlocked(state, verdict: SeparationVerdict, unlock: bool, now: float, delay: float):
@@ -424,7 +436,7 @@ class SafetyFunction(LeafSystem):
     ):
         super().__init__()
         self._pipeline, self._config, self._widths = pipeline_of(envelope), config, dict(widths)
-        self._points = LimitPoints(self._pipeline.envelope)
+        self._ur = UrLimits(self._pipeline.envelope, config.limits, period)
         self._acc, self._period = joint_acceleration, period
         self._position = self.DeclareVectorInputPort("ur3.position", _N)
         self._velocity = self.DeclareVectorInputPort("ur3.velocity", _N)
@@ -500,7 +512,8 @@ class SafetyFunction(LeafSystem):
         now = context.get_time()
         stale = self._stale.HasValue(context) and self._stale.Eval(context)[0] > 0.5
         blind = self._sensor_ok.HasValue(context) and self._sensor_ok.Eval(context)[0] < 0.5
-        over_since, broken = self._watch(self.state(context), q, v, opening, now)
+        over_since, broken = self._ur.watch(self.state(context), q, v, opening, now)
+        reduced = self._reduced.HasValue(context) and self._reduced.Eval(context)[0] > 0.5
         new = step(
             self.state(context),
             verdict,
@@ -514,7 +527,7 @@ class SafetyFunction(LeafSystem):
             stale=stale,
             blind=blind,
             limit=broken,
-            reduced=self._reduced.HasValue(context) and self._reduced.Eval(context)[0] > 0.5,
+            reduced=reduced or self._ur.triggered(q, opening),
         )
         if new.blend is not None and new.blend.start == now:
             # The smoothstep's peak rate is 1.5 times its mean.
@@ -524,38 +537,13 @@ class SafetyFunction(LeafSystem):
             )
         elif new.blend is not None and now >= new.blend.start + new.blend.duration:
             new = replace(new, blend=None)
-        new = self._path_control(context, replace(new, over_since=over_since), opening, now)
-        state.get_mutable_abstract_state(self._state).set_value(new)
-
-    def _watch(self, state: SafetyFunctionState, q, v, opening: float, now: float):
-        """(since when a UR limit has been broken, None: it is not; the words of a limit broken
-        for its detection time, None: none), judging the measured arm by the normal set until
-        reduced mode has held for its transition, then by the reduced set."""
-        limits = self._config.limits
-        if not limits.enabled or state.mode.stopped:
-            return None, None
-        settled = now >= state.reduced_since + limits.transition - 1e-9
-        judged = active_limits(limits, state.mode == SafetyMode.REDUCED and settled)
-        words = exceeded(self._points.reading(q, v, opening), judged, limits.tolerance)
-        if words is None:
-            return None, None
-        since = now if state.over_since is None else state.over_since
-        return since, (words if now >= since + limits.detection_time - 1e-9 else None)
-
-    def _path_control(self, context, state: SafetyFunctionState, opening: float, now: float):
-        """`state` with the cap the UR's path control lays on the command under the limit set
-        in force (None: the command keeps within it)."""
-        limits = self._config.limits
-        if not limits.enabled or state.brake is not None:
-            return replace(state, cap=None)
-        active = active_limits(limits, state.mode == SafetyMode.REDUCED)
-
-        def scale(q, v) -> float:
-            return self._points.scale(q, v, opening, active)
-
-        q_cmd, v_cmd = self._command(context, state, now)
-        cap = chase(state.cap, q_cmd, v_cmd, now, self._period, scale)
-        return replace(state, cap=cap)
+        cap = None
+        if new.brake is None:  # the path control caps the command the servo would follow
+            q_cmd, v_cmd = self._command(context, new, now)
+            cap = self._ur.cap(new.cap, new.mode == SafetyMode.REDUCED, q_cmd, v_cmd, opening, now)
+        state.get_mutable_abstract_state(self._state).set_value(
+            replace(new, over_since=over_since, cap=cap)
+        )
 
 
 __all__ = [
