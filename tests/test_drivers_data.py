@@ -55,7 +55,7 @@ def test_real_drivers_take_their_settings_defaults_from_the_drivers():
     )
     assert drivers.rg2.settings() == Rg2Settings("box", unit=66)
     # Left out, a value is the driver's own default (stated once, in hrc_drake.drivers.settings).
-    assert UrRtde(host="h").settings() == Ur3RtdeSettings.cb3("h")
+    assert UrRtde(host="h").settings() == Ur3RtdeSettings.e_series("h")
     assert Rg2Modbus(host="h").settings() == Rg2Settings("h")
 
 

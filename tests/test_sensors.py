@@ -167,7 +167,7 @@ def test_the_presets_and_their_overrides_parse():
         "operator.body",
     }
     assert realistic["ur3.state_estimated"] == REALISTIC["ur3"]
-    assert realistic["ur3.state_estimated"].rate == 125.0
+    assert realistic["ur3.state_estimated"].rate == 500.0
     assert realistic["operator.body"].latency == 0.075
     text = "{sensors: {preset: realistic, body: {latency: 0.09, dropout: 0.0}}}"
     body = sensor_models(load_scenario("row1-optimal", text).sensors)["operator.body"]

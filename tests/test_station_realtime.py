@@ -72,19 +72,19 @@ def _udpm_url() -> str:
 
 # --- the rules, on synthetic stamps -----------------------------------------------------------
 def test_a_reading_is_stale_past_three_periods_and_50_ms():
-    """The arm at 125 Hz is stale past 74 ms, the body at 30 Hz past 150 ms (both paced at 1;
-    at pace 2 the periods count half); nothing else stops the robot."""
+    """The arm at RTDE's 500 Hz is stale past 56 ms, the body at 30 Hz past 150 ms (both paced
+    at 1; at pace 2 the periods count half); nothing else stops the robot."""
     rates = channel_rates(Scenario())
-    assert stale_after(rates["UR3_STATUS"], 1.0) == pytest.approx(0.074)
+    assert stale_after(rates["UR3_STATUS"], 1.0) == pytest.approx(0.056)
     assert stale_after(rates["OPERATOR_BODY"], 1.0) == pytest.approx(0.15)
-    assert stale_after(rates["UR3_STATUS"], 2.0) == pytest.approx(0.062)
+    assert stale_after(rates["UR3_STATUS"], 2.0) == pytest.approx(0.053)
     now = 1_700_000_000_000_000
-    fresh = {"UR3_STATUS": now - 73 * MS, "OPERATOR_BODY": now - 149 * MS, "RG2_STATUS": 0}
+    fresh = {"UR3_STATUS": now - 55 * MS, "OPERATOR_BODY": now - 149 * MS, "RG2_STATUS": 0}
     assert not judge(fresh, now, rates, 1.0).any
-    late = {**fresh, "UR3_STATUS": now - 75 * MS}
+    late = {**fresh, "UR3_STATUS": now - 57 * MS}
     judged = judge(late, now, rates, 1.0)
     assert [c for c, _, _ in judged.stale] == ["UR3_STATUS"]
-    assert judged.words() == "UR3_STATUS 0.075 s old (bound 0.074 s)"
+    assert judged.words() == "UR3_STATUS 0.057 s old (bound 0.056 s)"
     both = {**late, "OPERATOR_BODY": now - 151 * MS}
     assert [c for c, _, _ in judge(both, now, rates, 1.0).stale] == ["UR3_STATUS", "OPERATOR_BODY"]
     # A stamp from a clock a little ahead is not negative age.
@@ -122,7 +122,7 @@ def test_rates_come_from_the_sensors_section_where_it_states_them():
         "row1-optimal", "{sensors: {preset: realistic, body: {rate: 15}, rg2: {rate: 50}}}"
     )
     rates = channel_rates(scenario)
-    assert (rates["OPERATOR_BODY"], rates["RG2_STATUS"], rates["UR3_STATUS"]) == (15, 50, 125)
+    assert (rates["OPERATOR_BODY"], rates["RG2_STATUS"], rates["UR3_STATUS"]) == (15, 50, 500)
     scenario = load_cell_scenario(
         "row1-optimal",
         "{sensors: {preset: realistic, configuration: camera, wrench: {rate: 250}}}",

@@ -47,16 +47,17 @@ class Rg2Settings:
 
 @dataclass(frozen=True)
 class Ur3RtdeSettings:
-    """How the driver talks to one UR3. `frequency` is RTDE's rate [Hz] (125 on a CB3, 500 on
-    an e-Series: `cb3(host)`, `e_series(host)`); `servo_time` is `servoJ`'s `time` [s], one
-    period; `lookahead_time` [s] (0.03–0.2) and `gain` (100–2000) are `servoj`'s. The commands'
-    joints may move at most at `velocity_limits` [rad/s] (the UR3's, `UR3_JOINTS` order).
+    """How the driver talks to one UR3. `frequency` is RTDE's rate [Hz] (500 on an e-Series,
+    the cell's UR3e, by default; 125 on a CB3: `e_series(host)`, `cb3(host)`); `servo_time` is
+    `servoJ`'s `time` [s], one period; `lookahead_time` [s] (0.03–0.2) and `gain` (100–2000)
+    are `servoj`'s. The commands' joints may move at most at `velocity_limits` [rad/s] (the
+    UR3's, `UR3_JOINTS` order).
     `servo_speed` and `servo_acceleration` fill `servoJ`'s speed and acceleration, which
     ur_rtde 1.6 does not use; `stop_deceleration` [m/s², the tool's] is `servoStop`'s."""
 
     host: str
-    frequency: float = CB3_FREQUENCY
-    servo_time: float = 1 / CB3_FREQUENCY
+    frequency: float = E_SERIES_FREQUENCY
+    servo_time: float = 1 / E_SERIES_FREQUENCY
     lookahead_time: float = 0.1
     gain: float = 300.0
     velocity_limits: tuple[float, ...] = UR3_VELOCITY_LIMITS

@@ -49,7 +49,7 @@ class UrRtde:
 
     Attributes:
         host: the controller's address (RTDE on its port 30004).
-        frequency: RTDE's rate [Hz]: 125 on a CB3, 500 on an e-Series.
+        frequency: RTDE's rate [Hz]: 500 on an e-Series (the cell's UR3e), 125 on a CB3.
         lookahead_time: `servoJ`'s lookahead [s], 0.03-0.2.
         gain: `servoJ`'s proportional gain, 100-2000.
     """

@@ -107,17 +107,18 @@ class SensorModel:
 
 # The `realistic` preset, the one statement of its figures (docs/station.md cites them):
 REALISTIC = {
-    # UR3 (CB3): RTDE streams `actual_q`/`actual_qd` at 125 Hz (RTDE guide; docs/hardware.md,
-    # "UR3: RTDE"); latency one RTDE period (our assumption: the controller's cycle). Joint
+    # UR3e: RTDE streams `actual_q`/`actual_qd` at 500 Hz on an e-Series (RTDE guide;
+    # docs/hardware.md, "UR3: RTDE"); latency one RTDE period (our assumption: the controller's
+    # cycle). Sampled from the plant's 10 ms step, the samples between two steps repeat. Joint
     # encoder step 1e-4 rad (*assumption*: the class of UR's absolute encoders; UR publishes
     # the arm's ±0.1 mm repeatability, not the step). Velocity noise 1e-3 rad/s and no lost
     # samples on the wired RTDE link (*assumptions*).
     "ur3": SensorModel(
-        rate=125.0,
-        latency=0.008,
+        rate=500.0,
+        latency=0.002,
         rate_noise=1e-3,
         quantum=1e-4,
-        max_latency=0.008,
+        max_latency=0.002,
         seed_offset=1,
     ),
     # RG2: the width register counts 1/10 mm (docs/hardware.md's register map, register 267),
@@ -148,17 +149,16 @@ REALISTIC = {
     ),
     # The wrist load (`ur3.tcp_force`): a UR e-Series's force/torque sensor in the tool flange,
     # RTDE's `actual_TCP_force`, zeroed before a guarded move as a UR program does with
-    # `zero_ftsensor()` (so no bias is modelled). Sampled with the arm's state, 125 Hz and one
-    # period late (an e-Series streams RTDE at 500 Hz: the 10 ms plant step could not tell the
-    # two apart); 1 N and 0.05 N·m of noise (*assumption*: of the order of the precision UR
+    # `zero_ftsensor()` (so no bias is modelled). Sampled with the arm's state, at RTDE's 500 Hz
+    # and one period late; 1 N and 0.05 N·m of noise (*assumption*: of the order of the precision UR
     # states for the UR3e's sensor, a few newtons; a CB3 estimates the load from its joint
     # currents, about ±10 N, too coarse for the guarded descent's 8 N, docs/station.md).
     "wrench": SensorModel(
-        rate=125.0,
-        latency=0.008,
+        rate=500.0,
+        latency=0.002,
         noise=1.0,
         rate_noise=0.05,
-        max_latency=0.008,
+        max_latency=0.002,
         seed_offset=5,  # 4 is the camera's
     ),
 }

@@ -30,15 +30,15 @@ stamps' interval, at its own simulated pace, so that the arm follows the command
 its commanded speed instead of jumping to where the controller has got to meanwhile.
 
 **Rates.** `channel_rates`: the measured channels at their devices' rates, from the scenario's
-`sensors:` section where it states one (`hrc_drake.scenario.sensors`: `ur3` 125 Hz, `rg2`
-25 Hz, `body` 30 Hz, `wrench` 125 Hz under `realistic`; the camera of `configuration: camera` at its
+`sensors:` section where it states one (`hrc_drake.scenario.sensors`: `ur3` 500 Hz, `rg2`
+25 Hz, `body` 30 Hz, `wrench` 500 Hz under `realistic`; the camera of `configuration: camera` at its
 own rate), else the same devices' figures stated once here
 (`DEVICE_RATES`); the commands at the controller's rate (1 / `run.period`: 50 Hz).
 
 **Staleness.** A reading is stale when it is older than `STALE_PERIODS` of its channel's
 periods plus the latency bound its sensor model states (`channel_latencies`: a reading is
 stamped when it was measured), in wall time (over the pace), plus `STALE_MARGIN`
-(`stale_after`): under `ideal`, 74 ms for the arm at 125 Hz, 150 ms for the body at 30 Hz;
+(`stale_after`): under `ideal`, 56 ms for the arm at 500 Hz, 150 ms for the body at 30 Hz;
 under `realistic`, the body's 100 ms of latency makes it 250 ms; the arm's command at 50 Hz
 110 ms. What stops on it:
 
@@ -79,14 +79,14 @@ STALE_PERIODS = 3  # periods of its channel a reading may be old before it is st
 STALE_MARGIN = 0.05  # s: a message's trip and the reader's own period, on top
 SILENCE = 2.0  # s without a newer message on a channel: the other side is gone
 
-# The devices' rates where the scenario's `sensors:` does not state them [Hz]: the UR3's RTDE on
-# a CB3, the RG2 driver's Modbus poll (docs/hardware.md), a body tracker at about 30 Hz (issue
-# 31); a camera's configuration and the operator's interface at a few tens of hertz (our
+# The devices' rates where the scenario's `sensors:` does not state them [Hz]: the UR3e's RTDE
+# (an e-Series), the RG2 driver's Modbus poll (docs/hardware.md), a body tracker at about 30 Hz
+# (issue 31); a camera's configuration and the operator's interface at a few tens of hertz (our
 # choice). The simulation's touching pairs go at the controller's rate, as the run's collision
 # watch reads them.
 DEVICE_RATES = {
-    "UR3_STATUS": 125.0,
-    "UR3_TCP_FORCE": 125.0,
+    "UR3_STATUS": 500.0,
+    "UR3_TCP_FORCE": 500.0,
     "RG2_STATUS": 25.0,
     "CELL_CONFIGURATION": 20.0,
     "OPERATOR_BODY": 30.0,
