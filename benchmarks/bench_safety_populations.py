@@ -120,9 +120,9 @@ def report(runs: list[dict], seeds: int, wall: float, lean: bool, sensor: bool =
         "# The shared desk's safety across populations and settings"
         + (", with the safety-rated sensor" if sensor else ""),
         "",
-        f"`python benchmarks/bench_safety_populations.py --seeds {seeds}`"
+        f"`python benchmarks/bench_safety_populations.py --seeds {seeds}"
         f"{' --sensor' if sensor else ''}"
-        f"{' --lean' if lean else ''}: {len(runs)} runs in {wall / 60:.1f} min on "
+        f"{' --lean' if lean else ''}`: {len(runs)} runs in {wall / 60:.1f} min on "
         f"{platform.machine()}; `shared-desk`, operator seeds 0–{seeds - 1}, both interaction "
         "modes (means over them).",
         "",

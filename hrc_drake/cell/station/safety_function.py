@@ -35,12 +35,12 @@ It acts through the robot's stop, by gating the arm's command between the contro
   sensor sent no frame within its response time, `hrc_drake.cell.station.safety_sensor`): the
   same, held while the input is off.
 - **Reduced**: nothing stopped, a body sphere within `reduced_band` of S_p (the safety sensor's
-  warning field), or the `safety.reduced` input on.
-- **The UR's limits** (`safety.limits`, `hrc_drake.cell.robot_limits`): the tool's
-  and the elbow's speeds, measured from the encoders, against the normal set, or in reduced
-  mode the reduced set. A command that would break the set in force is capped (its path
-  control); a speed over its limit by the tolerance for the detection time is a protective
-  stop (cause `robot limit`), unlocked as any other.
+  warning field), the `safety.reduced` input on, or the TCP past `safety.limits.reduced_plane`.
+- **The UR's limits** (`safety.limits`, `hrc_drake.cell.station.ur_limits`): the tool's and the
+  elbow's speeds and the arm's momentum, measured from the encoders, against the normal set, or
+  in reduced mode the reduced set. A command that would break the set in force is capped (its
+  path control); a value over its limit by its tolerance for the detection time is a
+  protective stop (cause `robot limit`), unlocked as any other.
 
 After a stop the command reaches the servo through a blend from the held posture, no faster than
 `RESUME_SPEED`, so an arm whose controller went on commanding elsewhere does not jump. While the
