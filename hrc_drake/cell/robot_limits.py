@@ -72,8 +72,15 @@ class LimitPoints:
             for f in tool
         ]
         self._points.append((2, np.zeros(3)))
-        self._masses = _link_masses(envelope)
-        self.mass = float(sum(m for _, m, _ in self._masses))
+        masses = _link_masses(envelope)
+        self.mass = float(sum(m for _, m, _ in masses))
+        # Every point at once: the flange, the TCP, the elbow, then each link's centre of mass
+        # (weighted by its mass, summed: the momentum), as (link rows, points in link frames).
+        points = [*self._points, *((link, com) for link, _, com in masses)]
+        self._links = np.array([link for link, _ in points])
+        self._local = np.array([point for _, point in points])
+        self._weights = np.array([m for _, m, _ in masses])
+        self._kept: tuple = (None, None)  # ((q's bytes, opening), maps) `maps` last gave
 
     def tcp(self, q: np.ndarray, opening: float | None) -> np.ndarray:
         """The TCP's position in world at `q`."""
@@ -83,19 +90,21 @@ class LimitPoints:
 
     def maps(self, q: np.ndarray, opening: float | None) -> np.ndarray:
         """(4, 3, 6): the flange's, the TCP's and the elbow's velocity, and the arm's momentum,
-        per joint speed at `q`."""
+        per joint speed at `q` (kept for the next call at the same `q` and `opening`)."""
+        key = (np.asarray(q, dtype=float).tobytes(), opening)
+        if key == self._kept[0]:
+            return self._kept[1]
         R_WB, p_WB = self._envelope.pose(q, opening)
         columns = self._envelope.link_velocities(R_WB, p_WB, np.eye(len(self._rows)))
-
-        def velocity(link: int, point: np.ndarray) -> np.ndarray:
-            row = self._rows[link]
-            p_W = R_WB[row] @ point + p_WB[row]
-            omega, v0 = columns[:, link, 0], columns[:, link, 1]
-            return (v0 + np.cross(omega, p_W)).T
-
-        maps = [velocity(link, point) for link, point in self._points]
-        maps.append(sum(mass * velocity(link, com) for link, mass, com in self._masses))
-        return np.array(maps)
+        rows = np.asarray(self._rows)[self._links]
+        p_W = np.einsum("kij,kj->ki", R_WB[rows], self._local) + p_WB[rows]  # (k, 3)
+        omega, v0 = columns[:, self._links, 0], columns[:, self._links, 1]  # (6, k, 3)
+        velocity = v0 + _cross(omega, p_W[None])  # (6, k, 3): per joint speed
+        momentum = np.einsum("k,jki->ji", self._weights, velocity[:, 3:])
+        maps = np.concatenate([velocity[:, :3], momentum[:, None]], axis=1).transpose(1, 2, 0)
+        maps.flags.writeable = False  # kept for the next call
+        self._kept = (key, maps)
+        return maps
 
     def reading(self, q, v, opening: float | None) -> LimitReading:
         """The speeds and the momentum at joint positions `q` and speeds `v` (zero at rest)."""
@@ -157,6 +166,11 @@ def beyond_plane(config: RobotLimitsConfig, tcp: np.ndarray) -> bool:
     if plane is None:
         return False
     return float(np.dot(np.asarray(tcp) - plane.point, plane.normal)) > 0.0
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a × b over the last axis (np.cross costs more than the rest of `maps`)."""
+    return a[..., [1, 2, 0]] * b[..., [2, 0, 1]] - a[..., [2, 0, 1]] * b[..., [1, 2, 0]]
 
 
 def active_limits(config: RobotLimitsConfig, reduced: bool) -> LimitSetConfig:

@@ -540,7 +540,8 @@ class SafetyFunction(LeafSystem):
         cap = None
         if new.brake is None:  # the path control caps the command the servo would follow
             q_cmd, v_cmd = self._command(context, new, now)
-            cap = self._ur.cap(new.cap, new.mode == SafetyMode.REDUCED, q_cmd, v_cmd, opening, now)
+            reduced = new.mode == SafetyMode.REDUCED
+            cap = self._ur.cap(new.cap, reduced, q_cmd, v_cmd, q, opening, now)
         state.get_mutable_abstract_state(self._state).set_value(
             replace(new, over_since=over_since, cap=cap)
         )

@@ -29,6 +29,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem, OutputPort
 
 from hrc_drake.cell.ports import NOBODY, BodySpheres
+from hrc_drake.cell.scenario import plant_step
 from hrc_drake.scenario.sensors import SensorModel, sensor_models
 
 # Times within this of each other are the same instant (periodic event times are sums of
@@ -231,6 +232,12 @@ def export_measured(
         if truth is not None:
             builder.ExportOutput(truth, f"sim.{name}")
         return
+    # The simulated plant keeps its step: a device faster than it (RTDE's 500 Hz over the 10 ms
+    # step) would read one state several times, stamped as if newer. It samples once a step,
+    # with its own latency; its stated rate is the real-time link's (`cell.link.realtime`).
+    step = plant_step(scenario)
+    if model.rate * step > 1.0:
+        model = dataclasses.replace(model, rate=1.0 / step)
     if name == "operator.body":
         sensor = SampledBody(model, seed)
     else:

@@ -43,14 +43,16 @@ class UrLimits:
         since = now if state.over_since is None else state.over_since
         return since, (words if now >= since + config.detection_time - 1e-9 else None)
 
-    def cap(self, cap: Cap | None, reduced: bool, q_cmd, v_cmd, opening, now: float):
+    def cap(self, cap: Cap | None, reduced: bool, q_cmd, v_cmd, q, opening, now: float):
         """The path control's cap for the next period on the command (`q_cmd`, `v_cmd`) under
-        the set in force (None: the command keeps within it)."""
+        the set in force (None: the command keeps within it), its speeds judged by the
+        kinematics of the measured arm at `q` (the servo's target lies within millimetres of
+        it, and the watch has posed it already)."""
         if not self._config.enabled:
             return None
         active = active_limits(self._config, reduced)
 
-        def scale(q, v) -> float:
+        def scale(_, v) -> float:
             return self._points.scale(q, v, opening, active)
 
         return chase(cap, q_cmd, v_cmd, now, self._period, scale)
