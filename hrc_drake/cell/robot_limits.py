@@ -1,17 +1,18 @@
-"""The UR's own safety limits: the speeds its safety system measures on the arm and the limit set
-in force (normal or reduced). The station enforces them (its path control's cap on a command
-that would break the set, and the protective stop when the measured arm breaks it all the
-same); the controller plans within them (`PlanLimits`), so the cap seldom has to bind.
+"""The UR's own safety limits: what its safety system measures on the arm (the tool's and the
+elbow's speeds, the arm's momentum) and the limit set in force (normal or reduced). The station
+enforces them (its path control's cap on a command that would break the set, and the
+protective stop when the measured arm breaks it all the same); the controller plans within
+them (`PlanLimits`), so the cap seldom has to bind.
 
-A UR's safety system measures the tool's speed (at the tool flange and the TCP) and the elbow's
-from its joint encoders, against the limit set of its safety mode: the normal set, or the reduced
-set while a configurable input or a trigger plane says so (`shared/reference/
-safety-and-devices.md`). Its path control slows a motion that would break the active set; a
-limit broken all the same, by more than the function's tolerance for longer than its detection
-time, is a Stop Category 0 and a protective stop. The station does the same
+A UR's safety system measures the tool's speed (at the tool flange and the TCP), the elbow's
+and the momentum from its joint encoders, against the limit set of its safety mode: the normal
+set, or the reduced set while a configurable input or a trigger plane says so
+(`shared/reference/safety-and-devices.md`). Its path control slows a motion that would break
+the active set; a limit broken all the same, by more than the function's tolerance for longer
+than its detection time, is a Stop Category 0 and a protective stop. The station does the same
 (`hrc_drake.cell.station.safety_function`): reduced mode comes from the safety sensor's warning
-field, the function's `reduced` (a person within `safety.function.reduced_band` of S_p), or the
-station's `sim.safety.reduced` input.
+field, the function's `reduced` (a person within `safety.function.reduced_band` of S_p), the
+TCP past `safety.limits.reduced_plane`, or the station's `sim.safety.reduced` input.
 
 `LimitPoints` gives the points' velocities from the joints' (a side's own robot model,
 `RobotEnvelope`); the path control's target is `hrc_drake.cell.station.safety_motion.Cap`.
