@@ -145,7 +145,7 @@ def test_the_cap_chases_the_command_no_faster_than_the_limits_and_lets_it_go():
     """A command at twice what the limits allow: the target moves at the allowed speed, falls
     behind, and once the command stops it catches up and lets go."""
 
-    def scale(q, v):
+    def scale(v):
         speed = float(np.abs(v).max())
         return np.inf if speed == 0 else 1.0 / speed  # at most 1 rad/s
 

@@ -306,7 +306,7 @@ class RobotEnvelope:
         R, p = R_WB[self._link_rows], p_WB[self._link_rows]
         axis = np.einsum("lij,lj->li", R, self._axes)
         origin = np.einsum("lij,lj->li", R, self._points) + p
-        columns = np.concatenate([axis, _cross(origin, axis)], axis=1)  # (L, 6)
+        columns = np.concatenate([axis, cross(origin, axis)], axis=1)  # (L, 6)
         out = np.zeros((len(velocities), len(self.links) + 1, 2, 3))
         out[:, :-1] = np.cumsum(columns[None] * velocities[:, :, None], axis=1).reshape(
             len(velocities), len(self.links), 2, 3
@@ -314,7 +314,7 @@ class RobotEnvelope:
         return out
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a × b over the last axis (np.cross costs more than the rest of a step here)."""
     return a[..., _YZX] * b[..., _ZXY] - a[..., _ZXY] * b[..., _YZX]
 
@@ -398,6 +398,7 @@ __all__ = [
     "Pairs",
     "Primitives",
     "RobotEnvelope",
+    "cross",
     "nearest_points",
     "nearest_to_posed",
     "posed_shapes",

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hrc_drake.cell.robot_envelope import RobotEnvelope
+from hrc_drake.cell.robot_envelope import RobotEnvelope, cross
 from hrc_drake.motion.scene import TCP
 from hrc_drake.robot_names import GRIPPER, UR3
 from hrc_drake.scenario.safety import LimitSetConfig, RobotLimitsConfig
@@ -100,7 +100,7 @@ class LimitPoints:
         rows = np.asarray(self._rows)[self._links]
         p_W = np.einsum("kij,kj->ki", R_WB[rows], self._local) + p_WB[rows]  # (k, 3)
         omega, v0 = columns[:, self._links, 0], columns[:, self._links, 1]  # (6, k, 3)
-        velocity = v0 + _cross(omega, p_W[None])  # (6, k, 3): per joint speed
+        velocity = v0 + cross(omega, p_W[None])  # (6, k, 3): per joint speed
         momentum = np.einsum("k,jki->ji", self._weights, velocity[:, 3:])
         maps = np.concatenate([velocity[:, :3], momentum[:, None]], axis=1).transpose(1, 2, 0)
         maps.flags.writeable = False  # kept for the next call
@@ -167,11 +167,6 @@ def beyond_plane(config: RobotLimitsConfig, tcp: np.ndarray) -> bool:
     if plane is None:
         return False
     return float(np.dot(np.asarray(tcp) - plane.point, plane.normal)) > 0.0
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a × b over the last axis (np.cross costs more than the rest of `maps`)."""
-    return a[..., [1, 2, 0]] * b[..., [2, 0, 1]] - a[..., [2, 0, 1]] * b[..., [1, 2, 0]]
 
 
 def active_limits(config: RobotLimitsConfig, reduced: bool) -> LimitSetConfig:

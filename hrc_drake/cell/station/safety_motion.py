@@ -85,20 +85,21 @@ def chase(
     scale,
 ) -> Cap | None:
     """The cap for the next `period` from `now`, toward the command (`q_cmd`, `v_cmd`), given
-    `scale(q, v)` (`LimitPoints.scale` under the active limits); None while the command keeps
-    within the limits and the target is on it."""
+    `scale(v)`, the factor joint speeds `v` may grow by under the active limits
+    (`LimitPoints.scale` at the arm's pose); None while the command keeps within the limits and
+    the target is on it."""
     if cap is None:
-        factor = scale(q_cmd, v_cmd)
+        factor = scale(v_cmd)
         if factor >= 1.0:
             return None
         return Cap(now, np.array(q_cmd), np.array(v_cmd) * factor)
     q, _ = cap.at(now)
     behind = q_cmd - q
-    if np.abs(behind).max(initial=0.0) <= CAUGHT_UP and scale(q_cmd, v_cmd) >= 1.0:
+    if np.abs(behind).max(initial=0.0) <= CAUGHT_UP and scale(v_cmd) >= 1.0:
         return None
     # Toward where the command will be a period on, no faster than the limits allow.
     wanted = v_cmd + behind / period
-    return Cap(now, q, wanted * min(1.0, scale(q, wanted)))
+    return Cap(now, q, wanted * min(1.0, scale(wanted)))
 
 
 __all__ = ["CAUGHT_UP", "Blend", "Brake", "Cap", "chase"]

@@ -52,7 +52,7 @@ class UrLimits:
             return None
         active = active_limits(self._config, reduced)
 
-        def scale(_, v) -> float:
+        def scale(v) -> float:
             return self._points.scale(q, v, opening, active)
 
         return chase(cap, q_cmd, v_cmd, now, self._period, scale)
